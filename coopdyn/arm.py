@@ -1,0 +1,238 @@
+"""Arms: a URDF (or an example-robot-data name), a base pose, a tip frame, locked joints.
+
+An :class:`Arm` is a description only; :func:`load_arm` turns it into a Pinocchio model whose
+joint and frame names are prefixed with ``"<arm name>/"`` so that several arms, even of the
+same robot, can be merged into one scene model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from . import _validate
+from .errors import ModelLoadError, SceneError, did_you_mean
+
+#: Tool frames of well-known example-robot-data arms, used when ``tip_frame`` is not given.
+DEFAULT_TIP_FRAMES: dict[str, str] = {
+    "panda": "panda_hand_tcp",
+    "ur3": "tool0",
+    "ur5": "tool0",
+    "ur10": "tool0",
+}
+
+#: Joints locked by default for well-known arms ("model no more than a scene needs").
+DEFAULT_LOCKED_JOINTS: dict[str, tuple[str, ...]] = {
+    "panda": ("panda_finger_joint1", "panda_finger_joint2"),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Arm:
+    """One manipulator of the scene.
+
+    Attributes:
+        name: unique name of the arm in the scene; its joints and frames are prefixed ``name/``.
+        robot: path to a URDF file, or an example-robot-data robot name (``"panda"``, ``"ur5"``).
+        tip_frame: frame of the URDF where the interconnection attaches (the tool frame). Known
+            robots have a default (Panda: ``panda_hand_tcp``).
+        base: pose of the arm's root in the world: ``pin.SE3``, 4x4 matrix or translation [m].
+        q0: initial configuration of the unlocked joints, shape (nq_arm,) [rad or m]. Default:
+            the robot's reference posture (SRDF ``default``) or its neutral configuration.
+        locked_joints: joints removed from the model, held at their ``q0``/reference value; a
+            mapping gives the value explicitly. ``None`` uses the robot's default (Panda: fingers).
+        joint_damping: viscous joint friction ``τ_f = -d q̇`` [N·m·s/rad or N·s/m]: a scalar, one
+            value per unlocked joint, or ``"urdf"`` for the URDF ``<dynamics damping>`` values.
+        mass_overrides: mapping ``joint name -> total mass [kg]`` of the body that joint carries;
+            that body's spatial inertia is scaled to the new mass (centre of mass kept).
+    """
+
+    name: str
+    robot: str | os.PathLike[str]
+    tip_frame: str | None = None
+    base: Any = None
+    q0: Any = None
+    locked_joints: Sequence[str] | Mapping[str, float] | None = None
+    joint_damping: float | Sequence[float] | str = 0.0
+    mass_overrides: Mapping[str, float] = field(default_factory=dict)
+
+    def replace(self, **changes: Any) -> Arm:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True, eq=False)
+class LoadedArm:
+    """An arm turned into a prefixed, reduced Pinocchio model (internal to scene building)."""
+
+    spec: Arm
+    model: pin.Model
+    q0: np.ndarray
+    tip_frame: str
+    base: pin.SE3
+    damping: np.ndarray
+
+
+def _robot_name(robot: str | os.PathLike[str]) -> str | None:
+    text = os.fspath(robot)
+    if text.endswith(".urdf") or os.sep in text or Path(text).exists():
+        return None
+    return text
+
+
+def _load_urdf(robot: str | os.PathLike[str]) -> tuple[pin.Model, np.ndarray | None]:
+    """Load the kinematic/inertial model and, where one exists, the reference posture."""
+    name = _robot_name(robot)
+    if name is None:
+        path = Path(os.fspath(robot))
+        if not path.is_file():
+            raise ModelLoadError(f"URDF file not found: {path}. Give an existing .urdf path or an example-robot-data name.")
+        try:
+            return pin.buildModelFromUrdf(str(path)), None
+        except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError with XML details
+            raise ModelLoadError(f"could not parse URDF {path}: {exc}") from exc
+    try:
+        from example_robot_data import robots_loader
+    except ImportError as exc:  # pragma: no cover - a dependency of coopdyn
+        raise ModelLoadError(
+            "loading robots by name needs example-robot-data: pip install example-robot-data example-robot-data-loaders"
+        ) from exc
+    loader = robots_loader.ROBOTS.get(name)
+    if loader is None:
+        raise ModelLoadError(
+            f"unknown robot {name!r}: not a URDF path and not an example-robot-data name."
+            + did_you_mean(name, robots_loader.ROBOTS)
+        )
+    if not loader.urdf_filename:
+        raise ModelLoadError(f"example-robot-data robot {name!r} has no URDF (only SDF); give a URDF path instead")
+    rel = os.path.join(loader.path, loader.urdf_subpath, loader.urdf_filename)
+    root = robots_loader.getModelPath(rel)
+    model = pin.buildModelFromUrdf(os.path.join(root, rel))
+    q_ref = None
+    if loader.srdf_filename:
+        srdf = os.path.join(root, loader.path, loader.srdf_subpath, loader.srdf_filename)
+        pin.loadReferenceConfigurations(model, srdf, False)
+        if "default" in model.referenceConfigurations:
+            q_ref = np.array(model.referenceConfigurations["default"], dtype=float)
+    return model, q_ref
+
+
+def _joint_id(model: pin.Model, joint: str, what: str) -> int:
+    if not model.existJointName(joint):
+        names = list(model.names)[1:]
+        raise SceneError(f"{what}: no joint named {joint!r}.{did_you_mean(joint, names)} Joints: {names}")
+    return int(model.getJointId(joint))
+
+
+def load_arm(arm: Arm) -> LoadedArm:
+    """Load, reduce, re-inertia and prefix the model of ``arm``."""
+    if not isinstance(arm.name, str) or not arm.name or "/" in arm.name:
+        raise SceneError(f"arm name must be a non-empty string without '/', got {arm.name!r}")
+    model, q_ref = _load_urdf(arm.robot)
+    if model.nq == 0:
+        raise ModelLoadError(f"arm {arm.name!r}: the URDF {arm.robot} has no movable joint")
+    q_full = pin.neutral(model) if q_ref is None else q_ref
+    what = f"arm {arm.name!r}"
+
+    # Locked joints: remove them from the model, held at their value.
+    robot_name = _robot_name(arm.robot)
+    locked = arm.locked_joints
+    if locked is None:
+        locked = DEFAULT_LOCKED_JOINTS.get(robot_name or "", ())
+    if isinstance(locked, str):
+        raise SceneError(f"{what}: locked_joints must be a list of joint names, not a string {locked!r}")
+    lock_ids = [_joint_id(model, j, f"{what}, locked_joints") for j in locked]
+    if isinstance(locked, Mapping):
+        q_full = q_full.copy()
+        for j, jid in zip(locked, lock_ids, strict=True):
+            if model.joints[jid].nq != 1:
+                raise SceneError(f"{what}: locked joint {j!r} is not a 1-DOF joint; give it without a value")
+            q_full[model.joints[jid].idx_q] = float(_validate.finite_array(locked[j], f"{what}, locked value of {j!r}", ()))
+    full_model = model
+    if lock_ids:
+        model = pin.buildReducedModel(full_model, lock_ids, q_full)
+    q_default = _reduced_configuration(full_model, model, q_full)
+
+    # Mass overrides (e.g. a slider of a different mass).
+    for joint, mass in arm.mass_overrides.items():
+        jid = _joint_id(model, joint, f"{what}, mass_overrides")
+        m_new = _validate.positive(mass, f"{what}, mass_overrides[{joint!r}]", "kg")
+        inertia = model.inertias[jid]
+        if inertia.mass <= 0.0:
+            model.inertias[jid] = pin.Inertia(m_new, np.zeros(3), np.zeros((3, 3)))
+        else:
+            scale = m_new / inertia.mass
+            model.inertias[jid] = pin.Inertia(m_new, inertia.lever.copy(), inertia.inertia * scale)
+
+    tip = arm.tip_frame or DEFAULT_TIP_FRAMES.get(robot_name or "")
+    if tip is None:
+        frames = [f.name for f in model.frames][-5:]
+        raise SceneError(
+            f"{what}: give tip_frame (the tool frame the interconnection attaches to); last frames of the model: {frames}"
+        )
+    if not model.existFrame(tip):
+        names = [f.name for f in model.frames]
+        raise SceneError(f"{what}: no frame named {tip!r} in the model.{did_you_mean(tip, names)}")
+
+    if arm.q0 is not None:
+        q0 = _validate.finite_array(arm.q0, f"{what}, q0", (model.nq,))
+    else:
+        q0 = q_default
+    _check_limits(model, q0, what)
+
+    damping = _damping(arm, model, what)
+    base = pin.SE3.Identity() if arm.base is None else _validate.se3(arm.base, f"{what}, base")
+
+    # Prefix joint and frame names so that several arms merge into one model.
+    for i in range(1, model.njoints):
+        model.names[i] = f"{arm.name}/{model.names[i]}"
+    for frame in model.frames:
+        frame.name = f"{arm.name}/{frame.name}"
+    return LoadedArm(spec=arm, model=model, q0=q0, tip_frame=f"{arm.name}/{tip}", base=base, damping=damping)
+
+
+def _reduced_configuration(full: pin.Model, reduced: pin.Model, q_full: np.ndarray) -> np.ndarray:
+    """The configuration ``q_full`` of ``full`` restricted to the joints kept in ``reduced``."""
+    q = np.empty(reduced.nq)
+    for jid in range(1, reduced.njoints):
+        jf = full.joints[full.getJointId(reduced.names[jid])]
+        jr = reduced.joints[jid]
+        q[jr.idx_q : jr.idx_q + jr.nq] = q_full[jf.idx_q : jf.idx_q + jf.nq]
+    return q
+
+
+def _check_limits(model: pin.Model, q: np.ndarray, what: str) -> None:
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    for jid in range(1, model.njoints):
+        j = model.joints[jid]
+        if j.nq != 1 or j.nv != 1:
+            continue
+        i = j.idx_q
+        if lo[i] < hi[i] and not (lo[i] - 1e-9 <= q[i] <= hi[i] + 1e-9):
+            raise SceneError(
+                f"{what}: q0 of joint {model.names[jid]!r} is {q[i]:.6g}, outside its limits [{lo[i]:.6g}, {hi[i]:.6g}]"
+            )
+
+
+def _damping(arm: Arm, model: pin.Model, what: str) -> np.ndarray:
+    if isinstance(arm.joint_damping, str):
+        if arm.joint_damping != "urdf":
+            raise SceneError(f"{what}: joint_damping must be a number, one number per joint or 'urdf', got {arm.joint_damping!r}")
+        return np.array(model.damping, dtype=float)
+    d = _validate.finite_array(arm.joint_damping, f"{what}, joint_damping")
+    if d.ndim == 0:
+        d = np.full(model.nv, float(d))
+    if d.shape != (model.nv,):
+        raise SceneError(
+            f"{what}: joint_damping must be a scalar or have {model.nv} entries (one per unlocked joint), got shape {d.shape}"
+        )
+    if np.any(d < 0.0):
+        raise SceneError(f"{what}: joint_damping must be >= 0 [N·m·s/rad], got {d.tolist()}")
+    return d

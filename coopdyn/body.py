@@ -1,0 +1,95 @@
+"""The held object: a rigid body on its own root joint."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from . import _validate
+from .errors import SceneError
+
+#: Root joints an object may have, and the Pinocchio joint each one builds.
+OBJECT_JOINTS = ("freeflyer", "prismatic", "planar")
+
+_AXES = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]), "z": np.array([0.0, 0.0, 1.0])}
+
+
+def axis_vector(axis: str | Sequence[float], name: str) -> np.ndarray:
+    """A unit 3-vector from ``"x"``, ``"y"``, ``"z"`` or any non-zero 3-vector."""
+    if isinstance(axis, str):
+        if axis not in _AXES:
+            raise SceneError(f"{name} must be 'x', 'y', 'z' or a 3-vector, got {axis!r}")
+        return _AXES[axis].copy()
+    vec = _validate.finite_array(axis, name, (3,))
+    norm = float(np.linalg.norm(vec))
+    if norm == 0.0:
+        raise SceneError(f"{name} must be a non-zero 3-vector")
+    return vec / norm
+
+
+@dataclass(frozen=True, eq=False)
+class RigidObject:
+    """The object the arms hold.
+
+    Attributes:
+        mass: mass [kg], > 0.
+        inertia: rotational inertia about the centre of mass in the object frame, (3, 3) [kg·m²];
+            symmetric, positive definite, principal moments obeying the triangle inequality.
+        pose: initial pose of the object frame in the world (``pin.SE3``, 4x4 or translation [m]).
+        com: centre of mass in the object frame, (3,) [m].
+        joint: ``"freeflyer"`` (6 DOF, default), ``"prismatic"`` (1 DOF along ``axis``) or
+            ``"planar"`` (3 DOF: x, y and rotation about z of the initial object frame).
+        axis: slide axis of a prismatic object, in the object frame (``"x"``/``"y"``/``"z"`` or 3-vector).
+        name: name of the object's joint and body frame.
+    """
+
+    mass: float
+    inertia: Any
+    pose: Any = None
+    com: Any = (0.0, 0.0, 0.0)
+    joint: str = "freeflyer"
+    axis: str | Sequence[float] = "z"
+    name: str = "object"
+
+    @classmethod
+    def box(cls, mass: float, size: Sequence[float], **kwargs: Any) -> RigidObject:
+        """A homogeneous box of ``mass`` [kg] and edge lengths ``size`` = (x, y, z) [m]."""
+        m = _validate.positive(mass, "box mass", "kg")
+        s = _validate.finite_array(size, "box size", (3,))
+        if np.any(s <= 0.0):
+            raise SceneError(f"box size must be three positive edge lengths [m], got {s.tolist()}")
+        x2, y2, z2 = s**2
+        inertia = m / 12.0 * np.diag([y2 + z2, x2 + z2, x2 + y2])
+        return cls(mass=m, inertia=inertia, **kwargs)
+
+    def spatial_inertia(self) -> pin.Inertia:
+        """The validated spatial inertia of the body, about the object frame origin."""
+        m = _validate.positive(self.mass, "object mass", "kg")
+        c = _validate.finite_array(self.com, "object com", (3,))
+        inertia = _validate.finite_array(self.inertia, "object inertia", (3, 3))
+        if np.max(np.abs(inertia - inertia.T)) > 1e-12 * max(1.0, float(np.max(np.abs(inertia)))):
+            raise SceneError("object inertia must be symmetric")
+        principal = np.linalg.eigvalsh(inertia)
+        if principal[0] <= 0.0:
+            raise SceneError(f"object inertia must be positive definite; principal moments {principal.tolist()} [kg·m²]")
+        a, b, c_ = principal
+        if a + b < c_ * (1.0 - 1e-9):
+            raise SceneError(
+                "object inertia violates the triangle inequality (no rigid body has it): principal moments "
+                f"{principal.tolist()} [kg·m²] need I1 + I2 >= I3"
+            )
+        return pin.Inertia(m, c, inertia)
+
+    def joint_model(self) -> pin.JointModel:
+        """The Pinocchio root joint of the object."""
+        if self.joint == "freeflyer":
+            return pin.JointModelFreeFlyer()
+        if self.joint == "prismatic":
+            return pin.JointModelPrismaticUnaligned(axis_vector(self.axis, "object axis"))
+        if self.joint == "planar":
+            return pin.JointModelPlanar()
+        raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {self.joint!r}")

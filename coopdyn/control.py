@@ -1,0 +1,40 @@
+"""Joint-space controllers: callables ``controller(t, q, v) -> τ`` for :func:`coopdyn.simulate`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from . import _validate
+from .errors import SceneError
+from .scene import Scene
+
+
+class GravityCompensationPD:
+    """``τ = g(q) + Kp (q_d − q) − Kd q̇`` on every arm joint.
+
+    ``g(q)`` is the arms' own gravity torque (the object hangs on the interconnections, which the
+    PD absorbs). Args:
+        scene: the scene.
+        kp: proportional gain [N·m/rad], scalar or (n_actuated,).
+        kd: derivative gain [N·m·s/rad], scalar or (n_actuated,).
+        q_des: desired arm configuration (n_actuated,) for 1-DOF joints; default the scene's q0.
+    """
+
+    def __init__(self, scene: Scene, kp: Any = 50.0, kd: Any = 5.0, q_des: Any = None) -> None:
+        n = scene.n_actuated
+        self.scene = scene
+        self.kp = np.broadcast_to(_validate.finite_array(kp, "kp"), (n,)).copy()
+        self.kd = np.broadcast_to(_validate.finite_array(kd, "kd"), (n,)).copy()
+        self._q_index = np.concatenate([a.q_index for a in scene.arms])
+        if self._q_index.size != n:
+            raise SceneError("GravityCompensationPD needs arms made of 1-DOF joints (nq = nv)")
+        default = scene.q0[self._q_index]
+        self.q_des = default if q_des is None else _validate.finite_array(q_des, "q_des", (n,))
+        self._data = scene.model.createData()
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        g = pin.computeGeneralizedGravity(self.scene.model, self._data, q)[self.scene.actuated]
+        return g + self.kp * (self.q_des - q[self._q_index]) - self.kd * v[self.scene.actuated]

@@ -1,0 +1,156 @@
+"""The right-hand side of the cooperative system and its readouts.
+
+Arm and object equations (DESIGN §1–§2), all in one merged model::
+
+    H(q) q̈ + h(q, q̇) = S τ − B q̇ + Σ_i (J_Gᵢᵀ G_f_G + J_Tᵢᵀ T_f_T)
+
+with S selecting the arm joints, B the viscous joint damping, and the interconnection wrenches
+of :func:`coopdyn.interconnection.spring` entering ABA as external forces on the parent joints
+of the frames T and G.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from .interconnection import SpringState, spring
+from .scene import Scene
+
+LOCAL = pin.ReferenceFrame.LOCAL
+
+
+class Energy(NamedTuple):
+    """Energies of one state [J]."""
+
+    kinetic: Any  #: float, or (n,) along a trajectory
+    potential: Any  #: gravity, zero at the world origin
+    elastic: Any  #: Σ ½ eᵀ K e over the interconnections
+
+    @property
+    def total(self) -> Any:
+        """kinetic + potential + elastic [J]."""
+        return self.kinetic + self.potential + self.elastic
+
+
+class Dynamics:
+    """Scratch space and evaluation of the scene's dynamics (one instance per thread).
+
+    Args:
+        scene: the scene; not modified.
+    """
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        model = scene.model
+        self.model = model
+        self.data = model.createData()
+        self.fext = pin.StdVec_Force()
+        for _ in range(model.njoints):
+            self.fext.append(pin.Force.Zero())
+        frames = model.frames
+        # Per link: (T frame, G frame, T joint, G joint, jXf* of T, jXf* of G, K, D)
+        self._links = [
+            (
+                lk.tip_frame,
+                lk.grasp_frame,
+                frames[lk.tip_frame].parentJoint,
+                frames[lk.grasp_frame].parentJoint,
+                frames[lk.tip_frame].placement.toDualActionMatrix(),
+                frames[lk.grasp_frame].placement.toDualActionMatrix(),
+                lk.K,
+                lk.D,
+            )
+            for lk in scene.links
+        ]
+        self._joints = sorted({j for link in self._links for j in (link[2], link[3])})
+        self._F = np.zeros((model.njoints, 6))
+        self._hot = [
+            (t, g, jt, jg, Xg, K, D, frames[t].placement, bool(np.any(D))) for (t, g, jt, jg, _, Xg, K, D) in self._links
+        ]
+        self._damping = np.zeros(model.nv)
+        for arm in scene.arms:
+            self._damping[arm.v_index] = arm.damping
+        self._has_damping = bool(np.any(self._damping))
+        self._tau = np.zeros(model.nv)
+
+    # -- interconnections ---------------------------------------------------------------------
+    def _springs(self) -> list[SpringState]:
+        """Spring states after ``forwardKinematics(q, v)`` has run."""
+        model, data = self.model, self.data
+        out = []
+        for t_id, g_id, _, _, _, _, K, D in self._links:
+            oMT = pin.updateFramePlacement(model, data, t_id)
+            oMG = pin.updateFramePlacement(model, data, g_id)
+            T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
+            G_v_G = pin.getFrameVelocity(model, data, g_id, LOCAL).vector
+            out.append(spring(oMT, oMG, T_v_T, G_v_G, K, D))
+        return out
+
+    def springs(self, q: np.ndarray, v: np.ndarray) -> list[SpringState]:
+        """The state of every interconnection at (q, v), in scene order."""
+        pin.forwardKinematics(self.model, self.data, q, v)
+        return self._springs()
+
+    def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N].
+
+        This is the hot path: it evaluates the spring law of :func:`spring` inline, with
+        ``w = K e + D ė`` so that ``G_f_G = −Jlog6ᵀ w`` and ``T_f_T = T_M_G·Jlog6ᵀ w``.
+        """
+        model, data, F = self.model, self.data, self._F
+        pin.forwardKinematics(model, data, q, v)
+        F[self._joints] = 0.0
+        for t_id, g_id, j_t, j_g, X_g, K, D, jMT, has_d in self._hot:
+            oMT = pin.updateFramePlacement(model, data, t_id)
+            oMG = pin.updateFramePlacement(model, data, g_id)
+            T_M_G = oMT.actInv(oMG)
+            J = pin.Jlog6(T_M_G)
+            w = K @ pin.log6(T_M_G).vector
+            if has_d:
+                T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
+                G_v_G = pin.getFrameVelocity(model, data, g_id, LOCAL).vector
+                w += D @ (J @ (G_v_G - T_M_G.toActionMatrixInverse() @ T_v_T))
+            f = J.T @ w
+            F[j_g] -= X_g @ f
+            F[j_t] += (jMT * T_M_G).toDualActionMatrix() @ f
+        fext = self.fext
+        for j in self._joints:
+            fext[j].vector = F[j]
+        t = self._tau
+        t[self.scene.actuated] = tau
+        if self._has_damping:
+            t -= self._damping * v
+        return pin.aba(model, data, q, v, t, fext).copy()
+
+    def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Σ (J_Gᵀ G_f_G + J_Tᵀ T_f_T), the interconnections' generalized force (nv,)."""
+        model, data = self.model, self.data
+        states = self.springs(q, v)
+        pin.computeJointJacobians(model, data, q)
+        out = np.zeros(model.nv)
+        for (t_id, g_id, *_), s in zip(self._links, states, strict=True):
+            out += pin.getFrameJacobian(model, data, g_id, LOCAL).T @ s.G_f_G
+            out += pin.getFrameJacobian(model, data, t_id, LOCAL).T @ s.T_f_T
+        return out
+
+    # -- readouts -----------------------------------------------------------------------------
+    def elastic_energy(self, q: np.ndarray) -> np.ndarray:
+        """½ eᵀ K e of each interconnection (n_links,) [J]."""
+        states = self.springs(q, np.zeros(self.model.nv))
+        return np.array([0.5 * s.e @ lk.K @ s.e for s, lk in zip(states, self.scene.links, strict=True)])
+
+    def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
+        """Kinetic, gravity and elastic energy at (q, v) [J]."""
+        model, data = self.model, self.data
+        kinetic = float(pin.computeKineticEnergy(model, data, q, v))
+        potential = float(pin.computePotentialEnergy(model, data, q))
+        return Energy(kinetic, potential, float(np.sum(self.elastic_energy(q))))
+
+    def dissipation(self, q: np.ndarray, v: np.ndarray) -> float:
+        """Power dissipated by interconnection and joint damping [W] (≥ 0)."""
+        states = self.springs(q, v)
+        p = sum(float(s.e_dot @ lk.D @ s.e_dot) for s, lk in zip(states, self.scene.links, strict=True))
+        return p + float(v @ (self._damping * v))

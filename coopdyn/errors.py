@@ -1,0 +1,34 @@
+"""The exception hierarchy: every error coopdyn raises derives from :class:`CoopdynError`."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class CoopdynError(Exception):
+    """Root of every error raised by coopdyn."""
+
+
+class SceneError(CoopdynError, ValueError):
+    """A scene description (arm, object, interconnection, parameter) is invalid."""
+
+
+class ModelLoadError(SceneError):
+    """A robot model could not be found or parsed."""
+
+
+class SimulationError(CoopdynError, RuntimeError):
+    """A simulation was asked something invalid or could not proceed."""
+
+
+class ControllerError(SimulationError):
+    """A controller returned something that is not a finite torque vector of the right length."""
+
+
+def did_you_mean(name: str, candidates: Iterable[str], *, n: int = 3) -> str:
+    """Return ``" Did you mean 'a', 'b'?"`` for the closest candidates, or ``""``."""
+    close = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.5)
+    if not close:
+        return ""
+    return " Did you mean " + ", ".join(repr(c) for c in close) + "?"

@@ -1,0 +1,80 @@
+"""Inverse kinematics of one arm: damped least squares on SE(3), within joint limits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from .arm import Arm, load_arm
+from .errors import SceneError
+
+
+def solve_ik(
+    arm: Arm,
+    target: pin.SE3,
+    *,
+    q_init: np.ndarray | None = None,
+    tol: float = 1e-10,
+    max_iter: int = 2000,
+    damping: float = 1e-6,
+    posture_gain: float = 0.1,
+    max_step: float = 0.1,
+) -> np.ndarray:
+    """Joint configuration placing ``arm``'s tip frame at ``target`` (pose in the world).
+
+    Damped least squares (Levenberg–Marquardt) on the SE(3) error ``log6(oMtip⁻¹ · target)``,
+    projected onto the joint limits at every iteration; in the null space of the pose task the
+    solution is pulled towards the arm's reference posture, so redundant arms get a natural
+    configuration rather than one at their limits.
+
+    Args:
+        arm: the arm (its base pose, locked joints and tip frame are used).
+        target: desired world pose of the tip frame.
+        q_init: start configuration (nq_arm,); default the arm's ``q0``/reference posture.
+        tol: convergence threshold on ‖log6 error‖ [m, rad].
+        max_iter: iteration budget.
+        damping: Levenberg–Marquardt damping λ².
+        posture_gain: gain of the null-space pull towards the reference posture (0 to disable).
+        max_step: largest joint change per iteration [rad or m].
+
+    Raises:
+        SceneError: if the pose is not reached within the limits (unreachable or too far).
+    """
+    loaded = load_arm(arm)
+    model = loaded.model
+    data = model.createData()
+    frame = model.getFrameId(loaded.tip_frame)
+    base_target = loaded.base.actInv(target)
+    q_ref = loaded.q0.copy()
+    q = q_ref.copy() if q_init is None else np.array(q_init, dtype=float)
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    err = np.inf
+    eye6, eye_n = np.eye(6), np.eye(model.nv)
+    for _ in range(max_iter):
+        pin.framesForwardKinematics(model, data, q)
+        M = data.oMf[frame].actInv(base_target)
+        error = pin.log6(M).vector
+        err = float(np.linalg.norm(error))
+        if err < tol:
+            return q
+        # d error / dq = −Jlog6(M⁻¹) J for error = log6(M), M = oMtip⁻¹ · target
+        J = -pin.Jlog6(M.inverse()) @ pin.computeFrameJacobian(model, data, q, frame, pin.ReferenceFrame.LOCAL)
+        posture = posture_gain if err > 1e-3 else 0.0  # the last iterations polish the pose only
+        free = np.ones(model.nv, dtype=bool)
+        for _ in range(model.nv):  # joints at a limit that the step would push further are frozen
+            Jf = J * free
+            J_pinv = Jf.T @ np.linalg.inv(Jf @ Jf.T + damping * eye6)
+            # primary: the pose; secondary (null space): stay near the reference posture
+            dq = -J_pinv @ error + (eye_n - J_pinv @ Jf) @ (posture * pin.difference(model, q, q_ref) * free)
+            blocked = free & (((q <= lo + 1e-9) & (dq < 0.0)) | ((q >= hi - 1e-9) & (dq > 0.0)))
+            if not blocked.any():
+                break
+            free &= ~blocked
+        step = float(np.max(np.abs(dq)))
+        if step > max_step:  # small steps follow the error down instead of jumping to another branch
+            dq *= max_step / step
+        q = np.clip(pin.integrate(model, q, dq), lo, hi)
+    raise SceneError(
+        f"inverse kinematics of arm {arm.name!r} did not reach the target within the joint limits "
+        f"(remaining error {err:.3g} after {max_iter} iterations): the pose is unreachable or far from q_init"
+    )

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# One entry point that sets everything up on a fresh machine (python3 + the package index) and
+# runs a job:  bash run.sh demo   — the main job;   bash run.sh test — lint, types and tests.
+# Anything after the job name is passed on (e.g. bash run.sh test -k linear).
+set -euo pipefail
+cd "$(dirname "$0")"
+VENV=${COOPDYN_VENV:-.venv}
+PY=${PYTHON:-python3}
+
+setup() {
+  if [ ! -x "$VENV/bin/python" ]; then
+    echo "[run.sh] creating the virtual environment $VENV" >&2
+    if ! "$PY" -m venv "$VENV" 2>/dev/null; then
+      # Debian/Ubuntu python3 without the venv module: bootstrap virtualenv from the package index
+      rm -rf "$VENV"
+      "$PY" -m pip install --user --quiet virtualenv || { "$PY" -m ensurepip --user && "$PY" -m pip install --user --quiet virtualenv; }
+      "$PY" -m virtualenv --quiet "$VENV"
+    fi
+  fi
+  # (Re)install when pyproject.toml changed since the last install.
+  stamp="$VENV/.coopdyn-installed"
+  want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+  if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+    echo "[run.sh] installing coopdyn and its dependencies into $VENV" >&2
+    "$VENV/bin/python" -m pip install --quiet --upgrade pip
+    "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
+    echo "$want" > "$stamp"
+  fi
+}
+
+job=${1:-demo}
+shift || true
+setup
+case "$job" in
+  demo)
+    exec "$VENV/bin/coopdyn" book --out out "$@"
+    ;;
+  test)
+    "$VENV/bin/ruff" check coopdyn tests examples
+    "$VENV/bin/ruff" format --check coopdyn tests examples
+    "$VENV/bin/mypy"
+    exec "$VENV/bin/python" -m pytest "$@"
+    ;;
+  *)
+    echo "usage: bash run.sh [demo|test] [args...]" >&2
+    exit 2
+    ;;
+esac

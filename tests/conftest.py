@@ -1,0 +1,19 @@
+"""Shared fixtures: scenes are built once per session (building a Panda scene runs IK)."""
+
+from __future__ import annotations
+
+import pytest
+
+import coopdyn as cd
+
+
+@pytest.fixture(scope="session")
+def pandas() -> cd.Scene:
+    """Two Pandas facing each other holding a 2 kg box, k = 1e4 N/m, no damping anywhere."""
+    return cd.scenes.facing_arms("panda", stiffness=1e4)
+
+
+@pytest.fixture(scope="session")
+def book() -> cd.Scene:
+    """The book's linear system with the book's parameters."""
+    return cd.scenes.linear_book()

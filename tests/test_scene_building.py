@@ -1,0 +1,118 @@
+"""Scene building: the merged model, defaults, and the error a user gets on bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.resources import urdf_path
+
+
+def test_merged_model_of_two_pandas(pandas: cd.Scene) -> None:
+    """Fingers locked (7 + 7 joints), then a free-flying box: nq = 21, nv = 20."""
+    assert (pandas.nq, pandas.nv, pandas.n_actuated) == (21, 20, 14)
+    assert pandas.arms[0].joint_names[0] == "left/panda_joint1"
+    assert pandas.model.frames[pandas.arms[1].tip_frame].name == "right/panda_hand_tcp"
+    np.testing.assert_array_equal(pandas.actuated, np.arange(14))
+    np.testing.assert_array_equal(pandas.object_v, np.arange(14, 20))
+
+
+def test_facing_arms_is_mirror_symmetric(pandas: cd.Scene) -> None:
+    """Same joint configuration for both arms, tools on the box faces at y = ∓0.1 m."""
+    q_left, q_right = (pandas.q0[a.q_index] for a in pandas.arms)
+    np.testing.assert_array_equal(q_left, q_right)
+    data = pandas.model.createData()
+    pin.framesForwardKinematics(pandas.model, data, pandas.q0)
+    np.testing.assert_allclose(data.oMf[pandas.arms[0].tip_frame].translation, [0.0, -0.1, 0.7], atol=1e-9)
+    np.testing.assert_allclose(data.oMf[pandas.arms[1].tip_frame].translation, [0.0, 0.1, 0.7], atol=1e-9)
+
+
+def test_box_inertia() -> None:
+    box = cd.RigidObject.box(12.0, (1.0, 2.0, 3.0))
+    np.testing.assert_allclose(np.diag(box.inertia), [13.0, 10.0, 5.0])
+
+
+def test_stiffness_shorthands() -> None:
+    np.testing.assert_array_equal(cd.diagonal(1e4, [1.0, 2.0, 3.0]), np.diag([1e4, 1e4, 1e4, 1.0, 2.0, 3.0]))
+    K = cd.axial(5.0, "x")
+    assert K[0, 0] == 5.0 and np.count_nonzero(K) == 1
+
+
+def _one_slider(**ic: object) -> cd.Scene:
+    arm = cd.Arm("a", urdf_path("slider_z.urdf"), tip_frame="tip")
+    obj = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), joint="prismatic")
+    return cd.Scene([arm], obj, [cd.Interconnection("a", **ic)])  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"stiffness": np.diag([1.0, 2, 3, 4, 5, -6])}, r"stiffness must be positive semi-definite.*smallest eigenvalue is -6"),
+        ({"stiffness": np.triu(np.ones((6, 6)))}, r"stiffness must be symmetric"),
+        ({"stiffness": np.ones(5)}, r"stiffness must be a 6x6 matrix or a 6-vector diagonal"),
+        ({"stiffness": [np.nan] * 6}, r"stiffness must be finite"),
+        ({"stiffness": np.zeros(6)}, r"stiffness and damping are both zero"),
+    ],
+)
+def test_bad_interconnection_matrices(kwargs: dict[str, object], message: str) -> None:
+    with pytest.raises(cd.SceneError, match=message):
+        _one_slider(**kwargs)
+
+
+def test_unknown_robot_name_suggests_close_names() -> None:
+    with pytest.raises(cd.ModelLoadError, match=r"unknown robot 'pnada'.*Did you mean 'panda'"):
+        cd.Scene([cd.Arm("a", "pnada")], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+def test_missing_urdf_file() -> None:
+    with pytest.raises(cd.ModelLoadError, match=r"URDF file not found: /nowhere/arm.urdf"):
+        cd.Scene([cd.Arm("a", "/nowhere/arm.urdf")], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+def test_unknown_tip_frame_suggests_close_names() -> None:
+    arm = cd.Arm("a", "panda", tip_frame="panda_hand_tpc")
+    with pytest.raises(cd.SceneError, match=r"no frame named 'panda_hand_tpc'.*Did you mean 'panda_hand_tcp'"):
+        cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+def test_unknown_locked_joint_lists_the_joints() -> None:
+    arm = cd.Arm("a", "panda", locked_joints=["panda_finger_joint3"])
+    with pytest.raises(
+        cd.SceneError, match=r"no joint named 'panda_finger_joint3'. Did you mean 'panda_finger_joint2', 'panda_finger_joint1'"
+    ):
+        cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+def test_interconnection_to_unknown_arm() -> None:
+    arm = cd.Arm("left", urdf_path("slider_z.urdf"), tip_frame="tip")
+    with pytest.raises(cd.SceneError, match=r"names arm 'lft'.*Did you mean 'left'"):
+        cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("lft", np.ones(6))])
+
+
+def test_q0_outside_joint_limits() -> None:
+    arm = cd.Arm("a", "panda", q0=[0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0])  # joint 4 must be < -0.0698
+    with pytest.raises(cd.SceneError, match=r"q0 of joint 'panda_joint4' is 0.5, outside its limits"):
+        cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+@pytest.mark.parametrize(
+    ("obj", "message"),
+    [
+        (lambda: cd.RigidObject.box(0.0, (0.1, 0.1, 0.1)), r"box mass must be > 0 \[kg\]"),
+        (lambda: cd.RigidObject(1.0, np.diag([1.0, 1.0, 3.0])), r"violates the triangle inequality"),
+        (lambda: cd.RigidObject(1.0, np.diag([1.0, 1.0, -1.0])), r"must be positive definite"),
+        (lambda: cd.RigidObject(1.0, np.eye(3), joint="spherical"), r"object joint must be one of \('freeflyer'"),
+    ],
+)
+def test_bad_object(obj: object, message: str) -> None:
+    arm = cd.Arm("a", urdf_path("slider_z.urdf"), tip_frame="tip")
+    with pytest.raises(cd.SceneError, match=message):
+        cd.Scene([arm], obj(), [cd.Interconnection("a", np.ones(6))])  # type: ignore[operator]
+
+
+def test_duplicate_arm_names() -> None:
+    arm = cd.Arm("a", urdf_path("slider_z.urdf"), tip_frame="tip")
+    with pytest.raises(cd.SceneError, match=r"arm names must be unique, got \['a', 'a'\]"):
+        cd.Scene([arm, arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])

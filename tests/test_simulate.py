@@ -1,0 +1,77 @@
+"""coopdyn.simulate: what it returns and what it refuses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coopdyn as cd
+
+
+def test_result_shapes_and_saving(book: cd.Scene) -> None:
+    res = cd.simulate(book, 0.0105, dt=1e-3, save_every=4)
+    np.testing.assert_allclose(res.t, [0.0, 0.004, 0.008, 0.0105])  # last step shortened, final state kept
+    assert res.q.shape == (4, book.nq) and res.v.shape == (4, book.nv) and res.tau.shape == (4, 2)
+    assert res.wrench(1).shape == (4, 6) and res.deformation(0).shape == (4, 6)
+    assert res.n_rhs == 11 * 4
+    np.testing.assert_allclose(res.elastic_energy(0) + res.elastic_energy(1), res.energy().elastic)
+
+
+def test_symplectic_euler_is_first_order(book: cd.Scene) -> None:
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+    dts = np.array([4e-4, 2e-4, 1e-4])
+    errors = []
+    for dt in dts:
+        res = cd.simulate(book, 0.2, controller=ctrl, integrator="symplectic_euler", dt=dt)
+        exact = cd.reference.linear_book_exact(res.t, d1, d2)
+        errors.append(np.max(np.abs(cd.scenes.book_positions(res.q, book) - exact.Y)))
+    assert np.polyfit(np.log(dts), np.log(errors), 1)[0] == pytest.approx(1.0, abs=0.3)
+
+
+def test_rk4_keeps_fourth_order_on_a_free_flyer(pandas: cd.Scene) -> None:
+    """Two Pandas and a free-flying box (k = 1e4): the Lie-group chart keeps RK4 at order 4."""
+    rng = np.random.default_rng(3)
+    v0 = rng.normal(size=pandas.nv) * 0.5
+    ref = cd.simulate(pandas, 0.04, dt=2.5e-5, v0=v0)
+    dts = np.array([8e-4, 4e-4, 2e-4])
+    errors = []
+    for dt in dts:
+        res = cd.simulate(pandas, 0.04, dt=dt, v0=v0)
+        errors.append(np.max(np.abs(res.object_position()[-1] - ref.object_position()[-1])))
+    assert np.polyfit(np.log(dts), np.log(errors), 1)[0] == pytest.approx(4.0, abs=0.3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"dt": 0.0}, r"dt must be > 0 \[s\], got 0.0"),
+        ({"dt": float("nan")}, r"dt must be finite"),
+        ({"t_final": -1.0}, r"t_final must be >= 0 \[s\], got -1.0"),
+        ({"integrator": "rk45"}, r"unknown integrator 'rk45'; valid: \['rk4', 'symplectic_euler'\]"),
+        ({"save_every": 0}, r"save_every must be an integer >= 1"),
+        ({"q0": np.zeros(2)}, r"q must have shape \(3,\), got \(2,\)"),
+        ({"v0": [np.inf, 0, 0]}, r"q and v must be finite"),
+    ],
+)
+def test_bad_arguments(book: cd.Scene, kwargs: dict[str, object], message: str) -> None:
+    args: dict[str, object] = {"t_final": 0.01, "dt": 1e-3, **kwargs}
+    with pytest.raises(cd.CoopdynError, match=message):
+        cd.simulate(book, **args)  # type: ignore[arg-type]
+
+
+def test_controller_of_wrong_length(book: cd.Scene) -> None:
+    with pytest.raises(cd.ControllerError, match=r"returned shape \(3,\) at t = 0 s; it must return .* shape \(2,\)"):
+        cd.simulate(book, 0.01, controller=lambda t, q, v: np.zeros(3))
+
+
+def test_controller_returning_nan(book: cd.Scene) -> None:
+    with pytest.raises(cd.ControllerError, match=r"non-finite torques at t = 0.002 s \(entries \[1\]\)"):
+        cd.simulate(book, 0.01, controller=lambda t, q, v: np.array([0.0, np.nan if t > 0.0015 else 0.0]), dt=1e-3)
+
+
+def test_divergence_raises_instead_of_returning_nan() -> None:
+    """Symplectic Euler far beyond its stability limit (ω·dt ≫ 2) stops with an error."""
+    stiff = cd.scenes.linear_book(c_p=2e8, c_k=2e8, d_p=0.0, d_k=0.0)
+    with pytest.raises(cd.SimulationError, match=r"non-finite at t = .* with symplectic_euler at dt = 0.001 s"):
+        cd.simulate(stiff, 5.0, integrator="symplectic_euler", dt=1e-3)
