@@ -1,20 +1,26 @@
 """coopdyn: dynamics and control of multi-arm cooperating robots with elastic interconnections."""
 
-from . import reference, scenes
+from . import control, integrators, reference, scenes
 from .arm import Arm
 from .body import RigidObject
 from .dynamics import Dynamics, Energy
-from .errors import ControllerError, CoopdynError, ModelLoadError, SceneError, SimulationError
+from .errors import ControllerError, CoopdynError, DivergenceError, ModelLoadError, SceneError, SimulationError
 from .interconnection import Interconnection, axial, diagonal
+from .monitor import EnergyBalanceError, EnergyBalanceWarning
 from .scene import Scene
 from .simulate import Result, simulate
+from .stability import Advice, advise, measure_stable_dt
 
 __all__ = [
+    "Advice",
     "Arm",
     "ControllerError",
     "CoopdynError",
+    "DivergenceError",
     "Dynamics",
     "Energy",
+    "EnergyBalanceError",
+    "EnergyBalanceWarning",
     "Interconnection",
     "ModelLoadError",
     "Result",
@@ -22,8 +28,12 @@ __all__ = [
     "Scene",
     "SceneError",
     "SimulationError",
+    "advise",
     "axial",
+    "control",
     "diagonal",
+    "integrators",
+    "measure_stable_dt",
     "reference",
     "scenes",
     "simulate",

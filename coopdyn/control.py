@@ -35,6 +35,11 @@ class GravityCompensationPD:
         self.q_des = default if q_des is None else _validate.finite_array(q_des, "q_des", (n,))
         self._data = scene.model.createData()
 
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Kp, Kd) (n_actuated,) [N·m/rad], [N·m·s/rad]: the stiffness and damping the controller
+        adds to the joints, for implicit integrators and :func:`coopdyn.advise`."""
+        return self.kp, self.kd
+
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         g = pin.computeGeneralizedGravity(self.scene.model, self._data, q)[self.scene.actuated]
         return g + self.kp * (self.q_des - q[self._q_index]) - self.kd * v[self.scene.actuated]

@@ -75,6 +75,8 @@ class Dynamics:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
         self._tau = np.zeros(model.nv)
+        #: power dissipated [W] at the state of the last :meth:`acceleration` call
+        self.last_dissipation = 0.0
 
     # -- interconnections ---------------------------------------------------------------------
     def _springs(self) -> list[SpringState]:
@@ -103,6 +105,7 @@ class Dynamics:
         model, data, F = self.model, self.data, self._F
         pin.forwardKinematics(model, data, q, v)
         F[self._joints] = 0.0
+        p_diss = 0.0
         for t_id, g_id, j_t, j_g, X_g, K, D, jMT, has_d in self._hot:
             oMT = pin.updateFramePlacement(model, data, t_id)
             oMG = pin.updateFramePlacement(model, data, g_id)
@@ -112,7 +115,10 @@ class Dynamics:
             if has_d:
                 T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
                 G_v_G = pin.getFrameVelocity(model, data, g_id, LOCAL).vector
-                w += D @ (J @ (G_v_G - T_M_G.toActionMatrixInverse() @ T_v_T))
+                e_dot = J @ (G_v_G - T_M_G.toActionMatrixInverse() @ T_v_T)
+                D_e_dot = D @ e_dot
+                w += D_e_dot
+                p_diss += e_dot @ D_e_dot
             f = J.T @ w
             F[j_g] -= X_g @ f
             F[j_t] += (jMT * T_M_G).toDualActionMatrix() @ f
@@ -122,7 +128,10 @@ class Dynamics:
         t = self._tau
         t[self.scene.actuated] = tau
         if self._has_damping:
-            t -= self._damping * v
+            damping_force = self._damping * v
+            t -= damping_force
+            p_diss += damping_force @ v
+        self.last_dissipation = p_diss
         return pin.aba(model, data, q, v, t, fext).copy()
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -135,6 +144,35 @@ class Dynamics:
             out += pin.getFrameJacobian(model, data, g_id, LOCAL).T @ s.G_f_G
             out += pin.getFrameJacobian(model, data, t_id, LOCAL).T @ s.T_f_T
         return out
+
+    def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Mass matrix and the interconnections' stiffness and damping in joint space at (q, v).
+
+        With ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` (LOCAL frame Jacobians) and ``A = Jlog6(T_M_G) Jr``:
+        ``K̃ = Σ Aᵀ K A`` and ``D̃ = Σ Aᵀ D A + B`` (B: joint damping). This is the Gauss–Newton
+        part of the Hessian of the elastic energy (the force-proportional geometric stiffness is
+        left out), which is what linearly implicit methods need (DESIGN §2).
+
+        Returns:
+            (M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad].
+        """
+        model, data = self.model, self.data
+        pin.forwardKinematics(model, data, q, v)
+        pin.computeJointJacobians(model, data)
+        M = pin.crba(model, data, q).copy()
+        K_t = np.zeros((model.nv, model.nv))
+        D_t = np.diag(self._damping)
+        for t_id, g_id, *_, K, D in self._links:
+            oMT = pin.updateFramePlacement(model, data, t_id)
+            oMG = pin.updateFramePlacement(model, data, g_id)
+            T_M_G = oMT.actInv(oMG)
+            J_G = pin.getFrameJacobian(model, data, g_id, LOCAL)
+            J_T = pin.getFrameJacobian(model, data, t_id, LOCAL)
+            A = pin.Jlog6(T_M_G) @ (J_G - T_M_G.toActionMatrixInverse() @ J_T)
+            K_t += A.T @ K @ A
+            if D.any():
+                D_t += A.T @ D @ A
+        return M, K_t, D_t
 
     # -- readouts -----------------------------------------------------------------------------
     def elastic_energy(self, q: np.ndarray) -> np.ndarray:

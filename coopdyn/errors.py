@@ -22,6 +22,16 @@ class SimulationError(CoopdynError, RuntimeError):
     """A simulation was asked something invalid or could not proceed."""
 
 
+class DivergenceError(SimulationError):
+    """The simulation blew up. ``result`` holds the trajectory up to the failure and ``advice``
+    the stability analysis (:class:`coopdyn.stability.Advice`) at the last saved state."""
+
+    def __init__(self, message: str, *, result: object = None, advice: object = None) -> None:
+        super().__init__(message)
+        self.result = result
+        self.advice = advice
+
+
 class ControllerError(SimulationError):
     """A controller returned something that is not a finite torque vector of the right length."""
 

@@ -12,8 +12,9 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import Dynamics, Energy
-from .errors import SimulationError
-from .integrators import Controller, Integrator, System, get_integrator
+from .errors import DivergenceError, SimulationError
+from .integrators import AdaptiveIntegrator, Controller, Integrator, System, get_integrator
+from .monitor import EnergyMonitor
 from .scene import Scene
 
 
@@ -27,6 +28,8 @@ def simulate(
     q0: Any = None,
     v0: Any = None,
     progress: bool = False,
+    max_speed: float = 1e4,
+    energy_check: str = "warn",
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -37,16 +40,23 @@ def simulate(
             (``scene.n_actuated``) [N·m or N]; ``None`` applies none.
         integrator: a name from ``coopdyn.integrators.INTEGRATORS`` or an instance.
         dt: time step [s], > 0. The last step is shortened to end exactly at ``t_final``.
+            Adaptive methods (``dopri5``, ``ros2_adaptive``) choose their own steps and land on
+            the output grid ``k·dt·save_every``; ``dt`` is then also their first trial step.
         save_every: keep every k-th step (the initial and final states are always kept).
         q0, v0: initial state (nq,), (nv,); default ``scene.q0`` and ``scene.v0``.
         progress: show a progress bar.
+        max_speed: a joint velocity above this [rad/s or m/s] is taken as divergence.
+        energy_check: ``"warn"`` (default), ``"raise"`` or ``"off"``: the energy-balance monitor
+            (:class:`coopdyn.monitor.EnergyMonitor`), evaluated about every millisecond; not
+            run for ``exponential``, whose exact discretisation cannot go unstable.
 
     Returns:
-        the saved trajectory, with readouts (wrenches, deformations, energies).
+        the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
 
     Raises:
-        SimulationError: on invalid arguments, or when the state stops being finite.
-        ControllerError: when the controller output has the wrong length or is not finite.
+        DivergenceError: when the state stops being finite or exceeds ``max_speed``; it carries
+            the trajectory up to the failure and a stability diagnosis.
+        SimulationError: on invalid arguments. ControllerError: on a bad controller output.
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -58,42 +68,167 @@ def simulate(
         raise SimulationError(f"dt must be > 0 [s], got {dt}")
     if not isinstance(save_every, int | np.integer) or isinstance(save_every, bool) or save_every < 1:
         raise SimulationError(f"save_every must be an integer >= 1, got {save_every!r}")
+    if energy_check not in ("warn", "raise", "off"):
+        raise SimulationError(f"energy_check must be 'warn', 'raise' or 'off', got {energy_check!r}")
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
 
     system = System(Dynamics(scene), controller)
-    n_steps = max(0, math.ceil(t_final / dt - 1e-9))
-    saved = [k for k in range(0, n_steps, save_every)] + [n_steps]
-    n_saved = len(saved)
-    ts, qs, vs = np.empty(n_saved), np.empty((n_saved, scene.nq)), np.empty((n_saved, scene.nv))
-    taus = np.empty((n_saved, scene.n_actuated))
-
-    bar = _progress_bar(n_steps, method.name) if progress else None
+    run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
+    monitor = None
+    if energy_check != "off" and not getattr(method, "exact_discretisation", False):
+        monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(1e-3 / dt)), mode=energy_check)
+    bar = _progress_bar(t_final, method.name) if progress else None
     cpu0 = time.process_time()
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):  # a blow-up is reported as a DivergenceError
+            if method.adaptive:
+                _adaptive_loop(run, q, v, monitor, bar)
+            else:
+                _fixed_loop(run, q, v, monitor, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    run.cpu_time = time.process_time() - cpu0
+    return run.result()
+
+
+class _Run:
+    """Bookkeeping of one simulation: the output grid and what has been saved."""
+
+    def __init__(
+        self, scene: Scene, system: System, method: Integrator, dt: float, save_every: int, t_final: float, max_speed: float
+    ) -> None:
+        self.scene, self.system, self.method, self.dt, self.t_final = scene, system, method, dt, t_final
+        self.max_speed = max_speed
+        n_steps = max(0, math.ceil(t_final / dt - 1e-9))
+        self.n_steps = n_steps
+        self.save_steps = [*range(0, n_steps, save_every), n_steps]
+        self.save_times = [min(k * dt, t_final) for k in self.save_steps]
+        self.t: list[float] = []
+        self.q: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.tau: list[np.ndarray] = []
+        self.n_accepted = 0
+        self.n_rejected = 0
+        self.cpu_time = 0.0
+
+    def save(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        self.t.append(t)
+        self.q.append(q)
+        self.v.append(v)
+        self.tau.append(self.system.torque(t, q, v))
+
+    def check(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> None:
+        """Raise DivergenceError when (q, v) is not finite or too fast."""
+        if (not v.size or np.abs(v).max() <= self.max_speed) and math.isfinite(q.sum()):  # NaN fails both tests
+            return
+        from .stability import advise
+
+        what = (
+            "non-finite"
+            if not np.all(np.isfinite(v)) or not np.all(np.isfinite(q))
+            else f"faster than max_speed = {self.max_speed:g}"
+        )
+        try:
+            last_q, last_v = self.q[-1], self.v[-1]
+            advice = advise(self.scene, last_q, last_v, self.system.controller, dt=h)
+            diagnosis = (
+                f"ω_max = {advice.omega_max:.4g} rad/s, ω_max·dt = {advice.omega_max * h:.3g}; "
+                f"methods predicted stable at dt = {h:g} s: {advice.stable_at(h)}"
+            )
+        except Exception as exc:  # the diagnosis must never hide the divergence itself
+            advice, diagnosis = None, f"(no stability diagnosis: {exc})"
+        partial = self.result()
+        raise DivergenceError(
+            f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
+            f"{diagnosis}. The trajectory up to t = {partial.t[-1]:.6g} s is in this error's .result",
+            result=partial,
+            advice=advice,
+        )
+
+    def result(self) -> Result:
+        s = self.system
+        n = len(self.t)
+        return Result(
+            scene=self.scene,
+            t=np.array(self.t),
+            q=np.array(self.q).reshape(n, self.scene.nq),
+            v=np.array(self.v).reshape(n, self.scene.nv),
+            tau=np.array(self.tau).reshape(n, self.scene.n_actuated),
+            integrator=self.method.name,
+            dt=self.dt,
+            n_rhs=s.n_rhs,
+            cpu_time=self.cpu_time,
+            n_jac=s.n_jac,
+            n_factor=s.n_factor,
+            n_steps=self.n_accepted,
+            n_rejected=self.n_rejected,
+        )
+
+
+def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:
+    method, system, dt, n_steps = run.method, run.system, run.dt, run.n_steps
     t, i_save = 0.0, 0
-    with np.errstate(over="ignore", invalid="ignore"):  # a blow-up is reported below, as an error
-        for k in range(n_steps + 1):
-            if k == saved[i_save]:
-                ts[i_save], qs[i_save], vs[i_save] = t, q, v
-                taus[i_save] = system.torque(t, q, v)
-                i_save += 1
-            if k == n_steps:
-                break
-            h = min(dt, t_final - k * dt)
-            q, v = method.step(system, t, q, v, h)
-            t = t_final if k + 1 == n_steps else (k + 1) * dt
-            if not (np.all(np.isfinite(v)) and np.all(np.isfinite(q))):
-                raise SimulationError(
-                    f"the state became non-finite at t = {t:.6g} s with {method.name} at dt = {dt:g} s: the step is "
-                    "beyond the method's stability limit for this scene; reduce dt or choose another integrator"
-                )
-            if bar is not None and (k & 255) == 0:
-                bar.update(min(256, n_steps - bar.n))
-    cpu = time.process_time() - cpu0
+    for k in range(n_steps + 1):
+        if k == run.save_steps[i_save]:
+            run.save(t, q, v)
+            i_save += 1
+        if k == n_steps:
+            break
+        h = min(dt, run.t_final - k * dt)
+        if monitor is not None:
+            monitor.before_step(t, q, v)
+        q_new, v_new = method.step(system, t, q, v, h)
+        t_new = run.t_final if k + 1 == n_steps else (k + 1) * dt
+        run.check(t_new, q_new, v_new, h)
+        if monitor is not None:
+            monitor.after_step(t, q, v, h, t_new, q_new, v_new)
+        t, q, v = t_new, q_new, v_new
+        run.n_accepted += 1
+        if bar is not None and (k & 255) == 0:
+            bar.update(t - bar.n)
+    if monitor is not None:
+        monitor.finish(t, q, v)
     if bar is not None:
-        bar.update(n_steps - bar.n)
-        bar.close()
-    return Result(scene=scene, t=ts, q=qs, v=vs, tau=taus, integrator=method.name, dt=dt, n_rhs=system.n_rhs, cpu_time=cpu)
+        bar.update(run.t_final - bar.n)
+
+
+def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:
+    """Error-controlled steps that land exactly on the output times."""
+    method, system = run.method, run.system
+    assert isinstance(method, AdaptiveIntegrator)
+    t, h = 0.0, run.dt
+    run.save(t, q, v)
+    for t_out in run.save_times[1:]:
+        while t < t_out:
+            h_try = min(h, t_out - t)
+            if t + h_try * (1.0 + 1e-9) >= t_out:  # land exactly on the output time
+                h_try = t_out - t
+            if monitor is not None:
+                monitor.before_step(t, q, v)
+            out = method.attempt(system, t, q, v, h_try)
+            h = method.next_step(h_try, out.error)
+            if not (out.error <= 1.0):  # also rejects NaN
+                run.n_rejected += 1
+                if h < method.h_min or not np.isfinite(out.error):
+                    run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
+                    raise SimulationError(
+                        f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "
+                        f"the step fell below h_min = {method.h_min:g} s"
+                    )
+                continue
+            t_new = t_out if h_try == t_out - t else t + h_try
+            run.check(t_new, out.q, out.v, h_try)
+            if monitor is not None:
+                monitor.after_step(t, q, v, h_try, t_new, out.q, out.v)
+            t, q, v = t_new, out.q, out.v
+            run.n_accepted += 1
+        run.save(t, q, v)
+        if bar is not None:
+            bar.update(t - bar.n)
+    if monitor is not None:
+        monitor.finish(t, q, v)
 
 
 def _number(x: Any, name: str) -> float:
@@ -106,10 +241,12 @@ def _number(x: Any, name: str) -> float:
     return value
 
 
-def _progress_bar(total: int, desc: str) -> Any:
+def _progress_bar(t_final: float, desc: str) -> Any:
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="step", leave=False)
+    return tqdm(
+        total=t_final, desc=desc, unit="s", leave=False, bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s [{elapsed}<{remaining}]"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,8 +258,10 @@ class Result:
         t: sample times (n,) [s].
         q, v: configurations (n, nq) and velocities (n, nv).
         tau: controller output at the samples (n, n_actuated) [N·m or N].
-        integrator: name of the method; dt: its step [s].
+        integrator: name of the method; dt: its step (adaptive: output interval) [s].
         n_rhs: right-hand-side evaluations; cpu_time: CPU time of the integration loop [s].
+        n_jac, n_factor: Jacobian evaluations and factorisations (implicit methods).
+        n_steps, n_rejected: accepted and rejected steps.
     """
 
     scene: Scene
@@ -134,6 +273,10 @@ class Result:
     dt: float
     n_rhs: int
     cpu_time: float
+    n_jac: int = 0
+    n_factor: int = 0
+    n_steps: int = 0
+    n_rejected: int = 0
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @cached_property

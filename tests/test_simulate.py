@@ -48,7 +48,10 @@ def test_rk4_keeps_fourth_order_on_a_free_flyer(pandas: cd.Scene) -> None:
         ({"dt": 0.0}, r"dt must be > 0 \[s\], got 0.0"),
         ({"dt": float("nan")}, r"dt must be finite"),
         ({"t_final": -1.0}, r"t_final must be >= 0 \[s\], got -1.0"),
-        ({"integrator": "rk45"}, r"unknown integrator 'rk45'; valid: \['rk4', 'symplectic_euler'\]"),
+        (
+            {"integrator": "rk45"},
+            r"unknown integrator 'rk45'; valid: \['dopri5', 'exponential', 'implicit_euler', 'rk4', 'ros2',",
+        ),
         ({"save_every": 0}, r"save_every must be an integer >= 1"),
         ({"q0": np.zeros(2)}, r"q must have shape \(3,\), got \(2,\)"),
         ({"v0": [np.inf, 0, 0]}, r"q and v must be finite"),
@@ -70,8 +73,16 @@ def test_controller_returning_nan(book: cd.Scene) -> None:
         cd.simulate(book, 0.01, controller=lambda t, q, v: np.array([0.0, np.nan if t > 0.0015 else 0.0]), dt=1e-3)
 
 
+@pytest.mark.filterwarnings("ignore::coopdyn.EnergyBalanceWarning")  # it also breaks the energy balance first
 def test_divergence_raises_instead_of_returning_nan() -> None:
-    """Symplectic Euler far beyond its stability limit (ω·dt ≫ 2) stops with an error."""
+    """Symplectic Euler far beyond its stability limit stops with a diagnosis and the partial run."""
     stiff = cd.scenes.linear_book(c_p=2e8, c_k=2e8, d_p=0.0, d_k=0.0)
-    with pytest.raises(cd.SimulationError, match=r"non-finite at t = .* with symplectic_euler at dt = 0.001 s"):
+    with pytest.raises(cd.DivergenceError, match=r"diverged at t = .* with symplectic_euler at dt = 0.001 s") as info:
         cd.simulate(stiff, 5.0, integrator="symplectic_euler", dt=1e-3)
+    message = str(info.value)
+    assert (
+        "ω_max·dt = " in message
+        and "methods predicted stable at dt = 0.001 s: ['implicit_euler', 'ros2', 'exponential']" in message
+    )
+    partial = info.value.result
+    assert isinstance(partial, cd.Result) and 0 < partial.t[-1] < 5.0 and np.all(np.isfinite(partial.q))

@@ -1,0 +1,65 @@
+"""Integrators: one contract (:mod:`.base`), a registry of names, and the methods.
+
+============================  =====  ========  ===========================================
+name                          order  adaptive  per step
+============================  =====  ========  ===========================================
+``symplectic_euler``          1      no        1 RHS
+``rk4``                       4      no        4 RHS
+``dopri5``                    5(4)   yes       6 RHS (first same as last)
+``implicit_euler``            1      no        1 RHS, 1 Jacobian, 1 factorisation
+``ros2``                      2      no        2 RHS, 1 Jacobian, 1 factorisation
+``ros2_adaptive``             2(1)   yes       as ros2
+``exponential``               2*     no        1 matrix–vector product (linear scenes only)
+``scipy``                     —      inside    scipy ``solve_ivp`` per step (reference)
+============================  =====  ========  ===========================================
+
+(*) exact for a sampled (held) controller with ``Exponential(hold="zoh")``.
+"""
+
+from __future__ import annotations
+
+from ..errors import SimulationError
+from .base import AdaptiveIntegrator, Attempt, Controller, Integrator, System
+from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
+from .exponential import Exponential, LinearForm, linear_form, nonlinearity
+from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler
+from .scipy_reference import ScipyReference
+
+#: Name → integrator class. ``simulate(..., integrator=name)`` builds one with default settings.
+INTEGRATORS: dict[str, type[Integrator]] = {
+    cls.name: cls
+    for cls in (SymplecticEuler, RK4, DormandPrince, LinearlyImplicitEuler, ROS2, AdaptiveROS2, Exponential, ScipyReference)
+}
+
+
+def get_integrator(integrator: str | Integrator) -> Integrator:
+    """An integrator instance from a name in :data:`INTEGRATORS` or an instance."""
+    if isinstance(integrator, Integrator):
+        return integrator
+    if isinstance(integrator, str) and integrator in INTEGRATORS:
+        return INTEGRATORS[integrator]()
+    raise SimulationError(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)} or an Integrator instance")
+
+
+__all__ = [
+    "INTEGRATORS",
+    "RK4",
+    "ROS2",
+    "AdaptiveIntegrator",
+    "AdaptiveROS2",
+    "Attempt",
+    "ButcherTableau",
+    "Controller",
+    "DormandPrince",
+    "ExplicitRungeKutta",
+    "Exponential",
+    "Integrator",
+    "LinearForm",
+    "LinearlyImplicitEuler",
+    "ScipyReference",
+    "SymplecticEuler",
+    "System",
+    "get_integrator",
+    "linear_form",
+    "nonlinearity",
+]

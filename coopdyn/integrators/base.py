@@ -1,0 +1,210 @@
+"""The integrator contract: :class:`System` (the closed loop, with work counters) and
+:class:`Integrator` (configuration + a step function).
+
+A new method subclasses :class:`Integrator` (fixed step: implement ``step``) or
+:class:`AdaptiveIntegrator` (implement ``attempt``), gives itself a ``name`` and an ``order``,
+and, for :func:`coopdyn.advise`, a scalar ``stability_function`` R(z) (or overrides
+``spectral_radius``). Integrator objects hold settings only; everything that evolves is passed
+in and returned, and per-run scratch (factorisations, discretisations) lives in ``System.cache``.
+
+States are ``(q, v)`` on the configuration Lie group. Multi-stage methods build their stages in
+a local chart ``q = q₀ ⊕ δ`` around the step's start, where ``δ̇ = dIntegrate(q₀, δ)⁻¹ v``
+(DESIGN §2): the method then keeps its classical order on SE(3) free-flyers, which naive stages
+``q₀ ⊕ h Σ aᵢⱼ vⱼ`` do not.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from ..dynamics import Dynamics
+from ..errors import ControllerError
+
+Controller = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+class System:
+    """The closed loop ``q̈ = a(t, q, v)``: dynamics plus controller, with work counters.
+
+    Args:
+        dynamics: the scene dynamics.
+        controller: ``controller(t, q, v) -> τ`` (n_actuated,) [N·m or N]; ``None`` means τ = 0.
+            A controller with a method ``gains() -> (Kp, Kd)`` (each (n_actuated,) [N·m/rad],
+            [N·m·s/rad]) has its joint PD gains included in the implicit methods' Jacobian.
+
+    Attributes:
+        n_rhs, n_jac, n_factor: right-hand-side evaluations, Jacobian (stiffness) evaluations
+            and matrix factorisations so far.
+        cache: scratch for integrators (reset per run).
+    """
+
+    def __init__(self, dynamics: Dynamics, controller: Controller | None = None) -> None:
+        self.dynamics = dynamics
+        self.scene = dynamics.scene
+        self.model = dynamics.model
+        self.controller = controller
+        self.n_actuated = dynamics.scene.n_actuated
+        self._zero = np.zeros(self.n_actuated)
+        self.n_rhs = 0
+        self.n_jac = 0
+        self.n_factor = 0
+        self.cache: dict[Any, Any] = {}
+        self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self.model.joints[1:] if j.nv > 1]
+        self._first: tuple[np.ndarray, np.ndarray, float] | None = None
+        self._last: tuple[np.ndarray, np.ndarray, float] | None = None
+        self._previous_last: tuple[np.ndarray, np.ndarray, float] | None = None
+        gains = getattr(controller, "gains", None)
+        self._gains = gains() if callable(gains) else None
+
+    def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The controller output, checked: (n_actuated,) finite floats."""
+        if self.controller is None:
+            return self._zero
+        tau = np.asarray(self.controller(t, q, v), dtype=float)
+        if tau.shape != (self.n_actuated,):
+            raise ControllerError(
+                f"the controller returned shape {tau.shape} at t = {t:.6g} s; it must return one torque/force per "
+                f"arm joint, shape ({self.n_actuated},), in scene order"
+            )
+        if not math.isfinite(tau.sum()):  # one reduction; NaN and ±inf propagate into the sum
+            bad = np.flatnonzero(~np.isfinite(tau)).tolist()
+            raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")
+        return tau
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """q̈ (nv,) at (t, q, v); counts one right-hand-side evaluation and records the net power
+        ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
+        self.n_rhs += 1
+        tau = self.torque(t, q, v)
+        a = self.dynamics.acceleration(q, v, tau)
+        record = (q, v, float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
+        if self._first is None:
+            self._first = record
+        self._last = record
+        return a
+
+    def begin_step(self) -> None:
+        """Mark the start of a step (for :meth:`power_at`)."""
+        self._previous_last, self._first = self._last, None
+
+    def power_at(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
+        """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
+        reused from the step's own first evaluation there (or the previous step's last one, for
+        first-same-as-last methods), computed when no evaluation was made at that state."""
+        for record in (self._first, self._previous_last):
+            if record is not None and record[0] is q and record[1] is v:
+                return record[2]
+        tau = self.torque(t, q, v)
+        self.dynamics.acceleration(q, v, tau)
+        return float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation
+
+    def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains; counts one Jacobian."""
+        self.n_jac += 1
+        M, K, D = self.dynamics.stiffness(q, v)
+        if self._gains is not None:
+            act = self.scene.actuated
+            K[act, act] += self._gains[0]
+            D[act, act] += self._gains[1]
+        return M, K, D
+
+    def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ."""
+        if not self._chart:
+            return v
+        J = pin.dIntegrate(self.model, q0, delta, pin.ArgumentPosition.ARG1)
+        out = v.copy()
+        for s in self._chart:
+            out[s] = np.linalg.solve(J[s, s], v[s])
+        return out
+
+
+class Integrator(ABC):
+    """A one-step method for (q, v) on the configuration Lie group."""
+
+    name: ClassVar[str]
+    order: ClassVar[int]
+    adaptive: ClassVar[bool] = False
+    #: True when the method is unconditionally stable on the linearised problem.
+    a_stable: ClassVar[bool] = False
+
+    @abstractmethod
+    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """Advance from (t, q, v) by ``h`` [s]; return the new (q, v)."""
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        """R(z) of the method on y' = λy (z = hλ), elementwise. Needed by :func:`coopdyn.advise`."""
+        raise NotImplementedError(f"{self.name} has no scalar stability function")
+
+    def spectral_radius(self, A: np.ndarray, h: float) -> float:
+        """Spectral radius of one step applied to the linear system x' = A x, x = (q, v)."""
+        return float(np.max(np.abs(self.stability_function(h * np.linalg.eigvals(A)))))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class Attempt(NamedTuple):
+    """One attempted adaptive step."""
+
+    q: np.ndarray
+    v: np.ndarray
+    error: float  #: scaled error norm (accept when ≤ 1)
+    a_end: np.ndarray | None  #: q̈ at the end point when the method has it for free (FSAL)
+
+
+class AdaptiveIntegrator(Integrator):
+    """A method with an embedded error estimate; ``simulate`` controls its step.
+
+    Args:
+        rtol: relative tolerance. atol: absolute tolerance [m, rad, m/s, rad/s].
+        h_min: smallest step before the run is declared failed [s].
+    """
+
+    adaptive = True
+    #: order of the error estimate + 1 is the exponent of the step-size controller
+    error_order: ClassVar[int]
+
+    def __init__(self, rtol: float = 1e-6, atol: float = 1e-9, h_min: float = 1e-12) -> None:
+        from ..errors import SimulationError
+
+        for name, value in (("rtol", rtol), ("atol", atol), ("h_min", h_min)):
+            if not (np.isfinite(value) and value > 0.0):
+                raise SimulationError(f"{name} must be a positive number, got {value!r}")
+        self.rtol, self.atol, self.h_min = float(rtol), float(atol), float(h_min)
+
+    @abstractmethod
+    def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
+        """Try a step of ``h`` [s] from (t, q, v)."""
+
+    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        """A step of exactly ``h`` without error control."""
+        out = self.attempt(system, t, q, v, h)
+        return out.q, out.v
+
+    def error_norm(
+        self, system: System, e_delta: np.ndarray, e_v: np.ndarray, q0: np.ndarray, v0: np.ndarray, v1: np.ndarray
+    ) -> float:
+        """RMS of the embedded error scaled by ``atol + rtol·|y|`` (positions: ``q₀ ⊖ neutral``
+        in the tangent space; velocities: the larger of start and end)."""
+        neutral = system.cache.get("neutral")
+        if neutral is None:
+            neutral = system.cache["neutral"] = pin.neutral(system.model)
+        sc_d = self.atol + self.rtol * np.abs(pin.difference(system.model, neutral, q0))
+        sc_v = self.atol + self.rtol * np.maximum(np.abs(v0), np.abs(v1))
+        return float(np.sqrt((np.sum((e_delta / sc_d) ** 2) + np.sum((e_v / sc_v) ** 2)) / (2 * e_v.size)))
+
+    def next_step(self, h: float, error: float) -> float:
+        """Step-size controller: ``h·min(5, max(0.2, 0.9·err^(-1/(p+1))))``."""
+        if error == 0.0:
+            return 5.0 * h
+        return h * min(5.0, max(0.2, 0.9 * error ** (-1.0 / (self.error_order + 1))))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(rtol={self.rtol:g}, atol={self.atol:g})"

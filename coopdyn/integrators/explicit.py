@@ -1,0 +1,155 @@
+"""Explicit methods: symplectic Euler, Runge–Kutta from a Butcher tableau (RK4), and the
+adaptive Dormand–Prince 5(4) pair. Methods that differ only in coefficients differ only in data."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from .base import AdaptiveIntegrator, Attempt, Integrator, System
+
+
+class SymplecticEuler(Integrator):
+    """Semi-implicit Euler: ``v⁺ = v + h a(q, v)``, ``q⁺ = q ⊕ h v⁺``. First order, 1 RHS/step."""
+
+    name = "symplectic_euler"
+    order = 1
+
+    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        v_new = v + h * system.acceleration(t, q, v)
+        return pin.integrate(system.model, q, h * v_new), v_new
+
+    def spectral_radius(self, A: np.ndarray, h: float) -> float:
+        """The method is partitioned (no scalar R(z)): use its step matrix on x' = A x."""
+        n = A.shape[0] // 2
+        A_vq, A_vv = A[n:, :n], A[n:, n:]
+        eye = np.eye(n)
+        G = np.block([[eye + h * h * A_vq, h * (eye + h * A_vv)], [h * A_vq, eye + h * A_vv]])
+        return float(np.max(np.abs(np.linalg.eigvals(G))))
+
+
+@dataclass(frozen=True)
+class ButcherTableau:
+    """Coefficients of an explicit Runge–Kutta method (``b_hat``: embedded lower-order weights)."""
+
+    A: tuple[tuple[float, ...], ...]
+    b: tuple[float, ...]
+    c: tuple[float, ...]
+    b_hat: tuple[float, ...] | None = None
+
+
+def _combine(coefficients: tuple[float, ...], ks: list[np.ndarray]) -> np.ndarray:
+    """Σ cᵢ kᵢ over the non-zero coefficients."""
+    out = np.zeros_like(ks[0])
+    for c, k in zip(coefficients, ks, strict=False):
+        if c:
+            out += c * k
+    return out
+
+
+def _stages(
+    tab: ButcherTableau, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float, a0: np.ndarray | None = None
+) -> tuple[list[np.ndarray], list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Chart rates δ̇ᵢ and accelerations aᵢ of every stage, and (δ, q, v) of the last stage."""
+    kd: list[np.ndarray] = []
+    ka: list[np.ndarray] = []
+    last = (np.zeros_like(v), q, v)
+    for row, c in zip(tab.A, tab.c, strict=True):
+        if kd:
+            delta = h * _combine(row, kd)
+            v_s = v + h * _combine(row, ka)
+            q_s = pin.integrate(system.model, q, delta)
+            kd.append(system.chart_velocity(q, delta, v_s))
+            ka.append(system.acceleration(t + c * h, q_s, v_s))
+            last = (delta, q_s, v_s)
+        else:
+            kd.append(v)
+            ka.append(system.acceleration(t, q, v) if a0 is None else a0)
+    return kd, ka, last
+
+
+def _rk_stability(tab: ButcherTableau, z: np.ndarray, weights: tuple[float, ...]) -> np.ndarray:
+    """R(z) = 1 + z bᵀ (I − zA)⁻¹ 1 evaluated stage by stage (explicit: A strictly lower)."""
+    z = np.asarray(z, dtype=complex)
+    stages: list[np.ndarray] = []
+    for row in tab.A:
+        y = np.ones_like(z)
+        for a, k in zip(row, stages, strict=False):
+            y = y + a * z * k
+        stages.append(y)
+    out = np.ones_like(z)
+    for b, k in zip(weights, stages, strict=True):
+        out = out + b * z * k
+    return out
+
+
+class ExplicitRungeKutta(Integrator):
+    """An explicit Runge–Kutta method applied in the local chart around the step's start."""
+
+    tableau: ClassVar[ButcherTableau]
+
+    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        tab = self.tableau
+        kd, ka, _ = _stages(tab, system, t, q, v, h)
+        delta = h * _combine(tab.b, kd)
+        return pin.integrate(system.model, q, delta), v + h * _combine(tab.b, ka)
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        return _rk_stability(self.tableau, z, self.tableau.b)
+
+
+class RK4(ExplicitRungeKutta):
+    """The classical fourth-order Runge–Kutta method (Lie-group correct), 4 RHS/step."""
+
+    name = "rk4"
+    order = 4
+    tableau = ButcherTableau(
+        A=((), (0.5,), (0.0, 0.5), (0.0, 0.0, 1.0)),
+        b=(1 / 6, 1 / 3, 1 / 3, 1 / 6),
+        c=(0.0, 0.5, 0.5, 1.0),
+    )
+
+
+_DP_A = (
+    (),
+    (1 / 5,),
+    (3 / 40, 9 / 40),
+    (44 / 45, -56 / 15, 32 / 9),
+    (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+    (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+    (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84),
+)
+
+
+class DormandPrince(AdaptiveIntegrator):
+    """Dormand–Prince 5(4): adaptive, error-controlled, 6 RHS per step (first-same-as-last).
+
+    Args:
+        rtol, atol: tolerances of the embedded error estimate (see :class:`AdaptiveIntegrator`).
+    """
+
+    name = "dopri5"
+    order = 5
+    error_order = 4
+    tableau = ButcherTableau(
+        A=_DP_A,
+        b=(35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0),
+        c=(0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0),
+        b_hat=(5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40),
+    )
+
+    def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
+        tab = self.tableau
+        fsal = system.cache.get("fsal")
+        a0 = fsal[1] if fsal is not None and fsal[0] is q else None
+        kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the 5th-order solution
+        diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
+        err = self.error_norm(system, h * _combine(diff, kd), h * _combine(diff, ka), q, v, v_new)
+        system.cache["fsal"] = (q_new, ka[-1])
+        return Attempt(q_new, v_new, err, ka[-1])
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        return _rk_stability(self.tableau, z, self.tableau.b)

@@ -1,0 +1,108 @@
+"""The energy-balance monitor: the change of total energy must equal the work of the joint
+torques minus the energy dissipated by dampers. Growth that no input power explains means the
+integrator is unstable or too coarse for the scene — even when the trajectory looks plausible.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .errors import CoopdynError
+from .integrators import System
+
+
+class EnergyBalanceWarning(UserWarning):
+    """Total energy grew more than the net input work explains."""
+
+
+class EnergyBalanceError(CoopdynError, RuntimeError):
+    """Raised instead of :class:`EnergyBalanceWarning` with ``energy_check="raise"``."""
+
+
+class EnergyMonitor:
+    """Checks ``E(t) − E(0) ≤ W_in(t) − W_diss(t) + tolerance`` along a run.
+
+    The net power ``τ·q̇ − dissipation`` is taken at every step's start (reused from the
+    integrator's own evaluation there) and integrated by the third-order rule
+    ``h/12 (5 P₊ + 8 P − P₋)`` on equal steps (trapezoidal otherwise); the energy is evaluated
+    every ``every`` steps. The tolerance is ``rtol`` times the energy in play (the largest
+    kinetic + elastic energy seen, plus ∫|P| dt), plus the quadrature's own error estimate,
+    plus round-off.
+
+    Args:
+        system: the closed loop being integrated.
+        every: steps between energy evaluations.
+        rtol: relative tolerance (default 5 %).
+        mode: ``"warn"`` or ``"raise"``.
+    """
+
+    def __init__(
+        self, system: System, t: float, q: np.ndarray, v: np.ndarray, *, every: int, rtol: float = 0.05, mode: str = "warn"
+    ):
+        self.system, self.every, self.rtol, self.mode = system, max(1, int(every)), rtol, mode
+        self.dynamics = system.dynamics
+        e = self.dynamics.energy(q, v)
+        self.E0 = e.total
+        self.peak = self.scale = e.kinetic + e.elastic
+        self.work = 0.0
+        self.abs_work = 0.0
+        self.uncertainty = 0.0  #: accumulated estimate of the quadrature error of ``work`` [J]
+        self._pending: tuple[float, float] | None = None  # (h, P at the step start)
+        self._before: tuple[float, float] | None = None  # the interval before that
+        self._steps = 0
+        self.first_violation: float | None = None
+        self.max_excess = 0.0
+
+    def before_step(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Call right before stepping from (t, q, v)."""
+        self.system.begin_step()
+
+    def after_step(self, t0: float, q0: np.ndarray, v0: np.ndarray, h: float, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Call right after a step from (t0, q0, v0) of length h [s] to (t, q, v)."""
+        self._close_interval(self.system.power_at(t0, q0, v0), h)
+        self._steps += 1
+        if self._steps % self.every == 0:
+            self._check(t0, q0, v0)
+
+    def finish(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Close the work integral at the final state and check once more."""
+        self.system.begin_step()
+        self._close_interval(self.system.power_at(t, q, v), None)
+        self._check(t, q, v)
+
+    def _close_interval(self, p_end: float, h_next: float | None) -> None:
+        """Add the work of the pending interval, which ends where the power is ``p_end``."""
+        if self._pending is not None:
+            h, p = self._pending
+            if self._before is not None and abs(self._before[0] - h) <= 1e-12 * h:
+                dw = h / 12.0 * (5.0 * p_end + 8.0 * p - self._before[1])
+                self.uncertainty += h / 12.0 * abs(p_end - 2.0 * p + self._before[1])  # |this − trapezoid|
+            else:
+                dw = 0.5 * h * (p + p_end)
+                self.uncertainty += 0.5 * h * abs(p_end - p)  # |trapezoid − rectangle|
+            self.work += dw
+            self.abs_work += abs(dw)
+            self._before = self._pending
+        self._pending = None if h_next is None else (h_next, p_end)
+
+    def _check(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Compare the energy at (t, q, v) — where the work integral ends — with the work."""
+        e = self.dynamics.energy(q, v)
+        self.peak = max(self.peak, e.kinetic + e.elastic)
+        self.scale = self.peak + self.abs_work
+        excess = (e.total - self.E0) - self.work
+        tol = self.rtol * self.scale + self.uncertainty + 1e-9 * (abs(self.E0) + 1.0)
+        self.max_excess = max(self.max_excess, excess)
+        if excess > tol and self.first_violation is None:
+            self.first_violation = t
+            msg = (
+                f"energy balance broken at t = {t:.6g} s: the energy grew by {e.total - self.E0:.6g} J while the joint "
+                f"torques did {self.work:.6g} J of net work (dissipation included); the excess {excess:.3g} J is more than "
+                f"{self.rtol:.0%} of the energy in play ({self.scale:.3g} J). The integrator is probably unstable or too "
+                "coarse here: reduce dt, or use 'implicit_euler'/'ros2' (see coopdyn.advise)"
+            )
+            if self.mode == "raise":
+                raise EnergyBalanceError(msg)
+            warnings.warn(msg, EnergyBalanceWarning, stacklevel=4)

@@ -1,0 +1,238 @@
+"""Stability: predicted (linearised) and measured largest stable steps, and advice per method.
+
+:func:`advise` linearises the scene at a state, ``x' = A x`` with
+``A = [[0, I], [−M⁻¹K̃, −M⁻¹D̃]]`` (interconnections, joint damping and the controller's PD
+gains), and finds for each method the largest step whose step map has spectral radius ≤ 1.
+:func:`measure_stable_dt` finds the same limit by bisection on real simulations.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .dynamics import Dynamics
+from .errors import SimulationError
+from .integrators import INTEGRATORS, Controller, Integrator, ScipyReference, System, get_integrator, nonlinearity
+from .scene import Scene
+
+#: Methods :func:`advise` reports on by default.
+ADVISED = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "exponential")
+
+
+@dataclass(frozen=True)
+class MethodAdvice:
+    """What one method can do on the linearised scene."""
+
+    name: str
+    max_stable_dt: float  #: predicted largest stable step [s] (``inf``: unconditionally stable)
+    applicable: bool  #: False when the method cannot run this scene (``exponential`` on a nonlinear one)
+    note: str
+
+
+@dataclass(frozen=True)
+class Advice:
+    """The result of :func:`advise`."""
+
+    omega_max: float  #: largest undamped natural frequency [rad/s]
+    damping_ratio: float  #: damping ratio of the fastest eigenvalue (−Re λ / |λ|)
+    lambda_max: float  #: largest |λ| of the linearised first-order system [1/s]
+    linear: bool  #: whether the scene's dynamics are exactly linear
+    methods: tuple[MethodAdvice, ...]
+    recommendation: str
+
+    def max_stable_dt(self, name: str) -> float:
+        """Predicted largest stable step of the method ``name`` [s]."""
+        for m in self.methods:
+            if m.name == name:
+                return m.max_stable_dt
+        raise SimulationError(f"no advice for {name!r}; advised: {[m.name for m in self.methods]}")
+
+    def stable_at(self, dt: float) -> list[str]:
+        """Names of the applicable methods predicted stable at ``dt`` [s]."""
+        return [m.name for m in self.methods if m.applicable and dt <= m.max_stable_dt]
+
+    def __str__(self) -> str:
+        lines = [
+            f"stiffest mode: ω_max = {self.omega_max:.4g} rad/s, |λ|max = {self.lambda_max:.4g} 1/s, "
+            f"damping ratio {self.damping_ratio:.3g}; dynamics {'linear' if self.linear else 'nonlinear'}",
+            f"{'method':<18} {'largest stable dt':>18}  note",
+        ]
+        for m in self.methods:
+            dt = "unconditional" if math.isinf(m.max_stable_dt) else f"{m.max_stable_dt * 1e3:.4g} ms"
+            lines.append(f"{m.name:<18} {dt if m.applicable else 'n/a':>18}  {m.note}")
+        lines.append(self.recommendation)
+        return "\n".join(lines)
+
+
+def linearize(scene: Scene, q: Any = None, v: Any = None, controller: Controller | None = None) -> np.ndarray:
+    """State matrix A (2nv, 2nv) of the linearised stiff dynamics at (q, v)."""
+    q, v = scene.check_state(scene.q0 if q is None else q, scene.v0 if v is None else v)
+    M, K, D = System(Dynamics(scene), controller).stiffness(q, v)
+    n = scene.nv
+    return np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
+
+
+def predicted_stable_dt(method: Integrator, A: np.ndarray, *, h_max: float = 10.0, rel_tol: float = 1e-3) -> float:
+    """Largest h with spectral radius of the step map ≤ 1 (+1e-9), by bisection; ``inf`` when
+    the method is stable up to ``h_max`` [s]."""
+    if method.a_stable:
+        return math.inf
+
+    def stable(h: float) -> bool:  # 1e-6: the rigid-body modes' Jordan blocks sit at 1 ± O(√ε)
+        return method.spectral_radius(A, h) <= 1.0 + 1e-6
+
+    if stable(h_max):
+        return math.inf
+    lo, hi = 1e-12, h_max
+    while hi / lo > 1.0 + rel_tol:
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def advise(
+    scene: Scene,
+    q: Any = None,
+    v: Any = None,
+    controller: Controller | None = None,
+    methods: Sequence[str] = ADVISED,
+    dt: float | None = None,
+) -> Advice:
+    """Linearise ``scene`` at (q, v) (default: its initial state) and advise on integrators.
+
+    Args:
+        scene: the scene. q, v: the state to linearise at.
+        controller: its PD gains (``controller.gains()``) enter the linearisation when it has them.
+        methods: names of the methods to report on.
+        dt: the step the user intends [s]; the recommendation then says which methods are stable at it.
+    """
+    A = linearize(scene, q, v, controller)
+    n = scene.nv
+    lam = np.linalg.eigvals(A)
+    k = int(np.argmax(np.abs(lam)))
+    lam_max = float(abs(lam[k]))
+    zeta = float(-lam[k].real / lam_max) if lam_max > 0 else 1.0
+    M_inv_K = -A[n:, :n]
+    omega_max = float(math.sqrt(max(np.max(np.linalg.eigvals(M_inv_K).real), 0.0)))
+    why_nonlinear = nonlinearity(scene)
+    advice = []
+    for name in methods:
+        method = get_integrator(name)
+        if name == "exponential" and why_nonlinear is not None:
+            advice.append(MethodAdvice(name, 0.0, False, "needs a linear scene (all joints prismatic)"))
+            continue
+        h = predicted_stable_dt(method, A)
+        if name == "exponential":
+            note = "exact discretisation: any dt; error only from the torque hold"
+        elif math.isinf(h):
+            note = f"stable at any dt (order {method.order}); accuracy sets dt"
+        else:
+            note = f"ω_max·dt limit = {omega_max * h:.3g}" + (
+                " (adaptive: its step control finds this)" if method.adaptive else ""
+            )
+        advice.append(MethodAdvice(name, h, True, note))
+    if why_nonlinear is None:
+        rec = "linear scene: use 'exponential' (exact for a sampled controller, second order with the default first-order hold)"
+    else:
+        explicit = [a for a in advice if a.applicable and not math.isinf(a.max_stable_dt)]
+        fastest = max(explicit, key=lambda a: a.max_stable_dt, default=None)
+        rec = (
+            f"explicit methods need dt below {fastest.max_stable_dt * 1e3:.3g} ms ({fastest.name}); "
+            "above that use 'implicit_euler' (cheapest) or 'ros2' (second order)"
+            if fastest is not None
+            else "use 'implicit_euler' or 'ros2'"
+        )
+    if dt is not None:
+        ok = [a.name for a in advice if a.applicable and dt <= a.max_stable_dt]
+        rec += f". At dt = {dt * 1e3:.4g} ms these are stable: {ok}"
+    return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec)
+
+
+def is_stable_at(
+    scene: Scene,
+    integrator: str | Integrator,
+    dt: float,
+    *,
+    controller: Controller | None = None,
+    n_steps: int = 3000,
+    v0: Any = None,
+    growth: float = 1e3,
+) -> bool:
+    """Run ``n_steps`` of ``integrator`` at ``dt`` [s]; stable when the state stays finite and the
+    largest velocity stays below ``growth·(1 + max|v₀|)``."""
+    from .simulate import simulate
+
+    method = get_integrator(integrator)
+    if isinstance(method, ScipyReference) or method.adaptive:
+        raise SimulationError("measure the stability of fixed-step methods only")
+    v_start = scene.v0 if v0 is None else np.asarray(v0, dtype=float)
+    limit = growth * (1.0 + float(np.max(np.abs(v_start))))
+    try:
+        res = simulate(
+            scene,
+            n_steps * dt,
+            controller=controller,
+            integrator=method,
+            dt=dt,
+            v0=v_start,
+            save_every=max(1, n_steps // 50),
+            max_speed=limit,
+            energy_check="off",
+        )
+    except SimulationError:
+        return False
+    return bool(np.max(np.abs(res.v)) < limit)
+
+
+def measure_stable_dt(
+    scene: Scene,
+    integrator: str | Integrator,
+    *,
+    controller: Controller | None = None,
+    guess: float = 1e-3,
+    rel_tol: float = 0.03,
+    n_steps: int = 3000,
+    v0: Any = None,
+) -> float:
+    """Largest stable step [s] of a fixed-step method on ``scene``, by bisection on simulations
+    (:func:`is_stable_at`); ``guess`` is a starting bracket point [s]."""
+    method = get_integrator(integrator)
+
+    def stable(h: float) -> bool:
+        return is_stable_at(scene, method, h, controller=controller, n_steps=n_steps, v0=v0)
+
+    lo = hi = guess
+    if stable(guess):
+        while stable(hi * 2.0):
+            hi *= 2.0
+            if hi > 1.0:
+                return math.inf
+        lo, hi = hi, hi * 2.0
+    else:
+        while not stable(lo / 2.0):
+            lo /= 2.0
+            if lo < 1e-9:
+                return 0.0
+        lo, hi = lo / 2.0, lo
+    while hi / lo > 1.0 + rel_tol:
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+__all__ = [
+    "ADVISED",
+    "INTEGRATORS",
+    "Advice",
+    "MethodAdvice",
+    "advise",
+    "is_stable_at",
+    "linearize",
+    "measure_stable_dt",
+    "predicted_stable_dt",
+]

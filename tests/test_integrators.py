@@ -1,0 +1,181 @@
+"""Integrators: convergence orders on the exact linear case and on two Pandas with a free-flying
+box, the exponential integrator, adaptive methods, stability prediction vs measurement."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.control import GravityCompensationPD
+from coopdyn.integrators import INTEGRATORS, Exponential, System, get_integrator
+from coopdyn.reference import Drive, linear_book_exact
+
+pytestmark = pytest.mark.filterwarnings("ignore::coopdyn.EnergyBalanceWarning")  # coarse steps on purpose
+
+# (method, nominal order, step sizes in the asymptotic range) on the linear case over 1 s
+LINEAR_ORDERS = {
+    "symplectic_euler": (1, [4e-3, 2e-3, 1e-3]),
+    "rk4": (4, [4e-3, 2e-3, 1e-3]),
+    "implicit_euler": (1, [4e-3, 2e-3, 1e-3]),
+    "ros2": (2, [1e-3, 5e-4, 2.5e-4]),
+}
+
+
+def _slope(dts: list[float], errors: list[float]) -> float:
+    return float(np.polyfit(np.log(dts), np.log(errors), 1)[0])
+
+
+@pytest.mark.parametrize("name", LINEAR_ORDERS)
+def test_order_on_the_linear_case(book: cd.Scene, name: str) -> None:
+    order, dts = LINEAR_ORDERS[name]
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+    errors = []
+    for dt in dts:
+        res = cd.simulate(book, 1.0, controller=ctrl, integrator=name, dt=dt)
+        errors.append(np.max(np.abs(cd.scenes.book_positions(res.q, book) - linear_book_exact(res.t, d1, d2).Y)))
+    assert _slope(dts, errors) == pytest.approx(order, abs=0.3)
+
+
+def _fixed_steps(scene: cd.Scene, method: cd.integrators.Integrator, dt: float, v0: np.ndarray, t_final: float) -> np.ndarray:
+    """Fixed steps of any method (adaptive ones without their step control); the final q."""
+    system = System(cd.Dynamics(scene))
+    q, v, t = scene.q0, v0, 0.0
+    for _ in range(round(t_final / dt)):
+        q, v = method.step(system, t, q, v, dt)
+        t += dt
+    return q
+
+
+# (method, nominal order, step sizes) on two Pandas + free-flying box, k = 1e4 N/m, over 0.04 s
+PANDA_ORDERS = {
+    "symplectic_euler": (1, [4e-4, 2e-4, 1e-4]),
+    "rk4": (4, [8e-4, 4e-4, 2e-4]),
+    "dopri5": (5, [8e-4, 4e-4, 2e-4]),
+    "implicit_euler": (1, [4e-4, 2e-4, 1e-4]),
+    "ros2": (2, [2e-4, 1e-4, 5e-5]),
+}
+
+
+@pytest.fixture(scope="module")
+def panda_reference(pandas: cd.Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Initial velocity and the final q from RK4 at dt = 1e-5 (checked against Dormand–Prince)."""
+    v0 = np.random.default_rng(3).normal(size=pandas.nv) * 0.5
+    q_ref = _fixed_steps(pandas, get_integrator("rk4"), 1e-5, v0, 0.04)
+    q_dp = _fixed_steps(pandas, get_integrator("dopri5"), 4e-5, v0, 0.04)
+    assert np.max(np.abs(pin.difference(pandas.model, q_ref, q_dp))) < 1e-12  # two methods agree
+    return v0, q_ref
+
+
+@pytest.mark.parametrize("name", PANDA_ORDERS)
+def test_order_on_two_pandas_with_a_free_flying_box(
+    pandas: cd.Scene, panda_reference: tuple[np.ndarray, np.ndarray], name: str
+) -> None:
+    """Errors in the tangent space (pin.difference): the Lie-group chart keeps every order."""
+    order, dts = PANDA_ORDERS[name]
+    v0, q_ref = panda_reference
+    method = get_integrator(name)
+    errors = [np.max(np.abs(pin.difference(pandas.model, q_ref, _fixed_steps(pandas, method, dt, v0, 0.04)))) for dt in dts]
+    assert _slope(dts, errors) == pytest.approx(order, abs=0.3)
+
+
+def test_exponential_is_exact_for_a_held_controller(book: cd.Scene) -> None:
+    """Zero-order hold: the torque is constant over each step, exactly what the exact solution
+    with a piecewise-constant drive sees; agreement to round-off at any dt."""
+    dt = 0.01
+    values = np.random.default_rng(0).normal(300.0, 40.0, size=(100, 2))
+    drives = [Drive([cd.reference.Segment(k * dt, values[k, i]) for k in range(100)]) for i in range(2)]
+
+    def held(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        k = min(round(t / dt), 99)
+        return values[k]
+
+    res = cd.simulate(book, 1.0, controller=held, integrator=Exponential(hold="zoh"), dt=dt)
+    exact = linear_book_exact(res.t, *drives)
+    assert np.max(np.abs(cd.scenes.book_positions(res.q, book) - exact.Y)) < 1e-12
+    assert np.max(np.abs(res.wrench(0)[:, 2] - exact.Fc1)) < 1e-8
+
+
+@pytest.mark.parametrize(("hold", "order", "dts"), [("foh", 2, [2e-3, 1e-3, 5e-4]), ("cubic", 4, [5e-3, 2.5e-3, 1.25e-3])])
+def test_exponential_hold_order(book: cd.Scene, hold: str, order: int, dts: list[float]) -> None:
+    """Contact-force error vs dt; the drives' breakpoints (0.5, 1, 2, 2.25 s) are on these grids."""
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+    errors = []
+    for dt in dts:
+        res = cd.simulate(book, 3.0, controller=ctrl, integrator=Exponential(hold), dt=dt)
+        exact = linear_book_exact(res.t, d1, d2)
+        errors.append(max(np.max(np.abs(res.wrench(0)[:, 2] - exact.Fc1)), np.max(np.abs(res.wrench(1)[:, 2] - exact.Fc2))))
+    assert _slope(dts, errors) == pytest.approx(order, abs=0.3)
+
+
+def test_exponential_refuses_a_nonlinear_scene(pandas: cd.Scene) -> None:
+    with pytest.raises(
+        cd.SimulationError, match=r"needs a linear scene; this one is not: joints that are not prismatic .*left/panda_joint1"
+    ):
+        cd.simulate(pandas, 0.01, integrator="exponential")
+
+
+def test_advise_detects_linearity(book: cd.Scene, pandas: cd.Scene) -> None:
+    assert cd.advise(book).linear and "use 'exponential'" in cd.advise(book).recommendation
+    advice = cd.advise(pandas)
+    assert not advice.linear and not next(m for m in advice.methods if m.name == "exponential").applicable
+
+
+@pytest.mark.parametrize("name", ["dopri5", "ros2_adaptive"])
+def test_adaptive_methods_meet_their_tolerance(book: cd.Scene, name: str) -> None:
+    """The global error follows the tolerance, and outputs land on the save grid."""
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+    errors = []
+    for rtol in (1e-3, 1e-5):
+        method = INTEGRATORS[name](rtol=rtol, atol=rtol * 1e-3)  # type: ignore[call-arg]
+        res = cd.simulate(book, 1.0, controller=ctrl, integrator=method, dt=0.01)
+        np.testing.assert_allclose(res.t, np.linspace(0.0, 1.0, 101), atol=1e-12)
+        errors.append(np.max(np.abs(cd.scenes.book_positions(res.q, book) - linear_book_exact(res.t, d1, d2).Y)))
+        assert res.n_steps > 0
+    assert errors[1] < errors[0] / 10.0
+    assert errors[1] < 1e-5 * 0.3  # error in units of the tolerance x the solution scale (~0.3 m)
+
+
+@pytest.mark.parametrize("k", [1e4, 1e5, 1e6])
+@pytest.mark.parametrize("name", ["symplectic_euler", "rk4"])
+def test_predicted_stable_dt_matches_measurement(k: float, name: str) -> None:
+    """advise's linearised limit is within 25 % of the bisection on real simulations."""
+    scene = cd.scenes.facing_arms("panda", stiffness=k)
+    ctrl = GravityCompensationPD(scene, 50.0, 5.0)  # [N·m/rad], [N·m·s/rad]
+    predicted = cd.advise(scene, controller=ctrl).max_stable_dt(name)
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.05
+    measured = cd.measure_stable_dt(scene, name, controller=ctrl, guess=predicted, v0=v0, n_steps=2000)
+    assert predicted == pytest.approx(measured, rel=0.25)
+
+
+def test_implicit_methods_survive_stiffness_that_breaks_explicit_ones() -> None:
+    """k = 1e7 N/m at dt = 1 ms: RK4 diverges with a diagnosis, implicit Euler and ROS2 hold."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e7, damping=1e-3)
+    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
+    with pytest.raises(
+        cd.DivergenceError, match=r"with rk4 at dt = 0.001 s.*stable at dt = 0.001 s: \['implicit_euler', 'ros2'\]"
+    ):
+        cd.simulate(scene, 0.5, controller=ctrl, integrator="rk4", dt=1e-3)
+    for name in ("implicit_euler", "ros2"):
+        res = cd.simulate(scene, 0.5, controller=ctrl, integrator=name, dt=1e-3, energy_check="raise")
+        assert np.all(np.isfinite(res.q)) and np.max(np.abs(res.v)) < 10.0
+
+
+def test_energy_monitor_flags_unexplained_growth() -> None:
+    """Symplectic Euler just beyond its limit: the monitor warns before anything is non-finite."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e5)
+    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
+    dt = 1.05 * cd.advise(scene, controller=ctrl).max_stable_dt("symplectic_euler")
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.05
+    with pytest.raises(cd.EnergyBalanceError, match=r"energy balance broken at t = "):
+        cd.simulate(scene, 0.5, controller=ctrl, integrator="symplectic_euler", dt=dt, v0=v0, energy_check="raise")
+
+
+def test_energy_monitor_is_quiet_on_a_good_run(pandas: cd.Scene) -> None:
+    ctrl = GravityCompensationPD(pandas, 200.0, 20.0)
+    v0 = np.random.default_rng(5).normal(size=pandas.nv) * 0.3
+    cd.simulate(pandas, 0.3, controller=ctrl, integrator="rk4", dt=2e-4, v0=v0, energy_check="raise")
