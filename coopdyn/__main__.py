@@ -41,6 +41,13 @@ def _book(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench(args: argparse.Namespace) -> int:
+    from .bench import run_benchmarks
+
+    run_benchmarks(args.out, quick=args.quick)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     parser = argparse.ArgumentParser(prog="coopdyn", description="Multi-arm cooperating robots with elastic interconnections.")
@@ -51,6 +58,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     book.add_argument("--t-final", type=float, default=3.0, help="duration [s] (default: 3)")
     book.add_argument("--integrator", default="rk4", help="integrator name (default: rk4)")
     book.set_defaults(func=_book)
+    bench = sub.add_parser("bench", help="work–precision and stability benchmarks (tables, CSV, PNG)")
+    bench.add_argument("--out", default="out/bench", help="output folder (default: out/bench)")
+    bench.add_argument("--quick", action="store_true", help="few points, short runs, one repetition (CI)")
+    bench.set_defaults(func=_bench)
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     try:

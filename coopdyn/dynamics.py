@@ -5,8 +5,7 @@ Arm and object equations (DESIGN §1–§2), all in one merged model::
     H(q) q̈ + h(q, q̇) = S τ − B q̇ + Σ_i (J_Gᵢᵀ G_f_G + J_Tᵢᵀ T_f_T)
 
 with S selecting the arm joints, B the viscous joint damping, and the interconnection wrenches
-of :func:`coopdyn.interconnection.spring` entering ABA as external forces on the parent joints
-of the frames T and G.
+of :func:`coopdyn.interconnection.spring` mapped to joint space by the frame Jacobians.
 """
 
 from __future__ import annotations
@@ -47,34 +46,12 @@ class Dynamics:
         model = scene.model
         self.model = model
         self.data = model.createData()
-        self.fext = pin.StdVec_Force()
-        for _ in range(model.njoints):
-            self.fext.append(pin.Force.Zero())
-        frames = model.frames
-        # Per link: (T frame, G frame, T joint, G joint, jXf* of T, jXf* of G, K, D)
-        self._links = [
-            (
-                lk.tip_frame,
-                lk.grasp_frame,
-                frames[lk.tip_frame].parentJoint,
-                frames[lk.grasp_frame].parentJoint,
-                frames[lk.tip_frame].placement.toDualActionMatrix(),
-                frames[lk.grasp_frame].placement.toDualActionMatrix(),
-                lk.K,
-                lk.D,
-            )
-            for lk in scene.links
-        ]
-        self._joints = sorted({j for link in self._links for j in (link[2], link[3])})
-        self._F = np.zeros((model.njoints, 6))
-        self._hot = [
-            (t, g, jt, jg, Xg, K, D, frames[t].placement, bool(np.any(D))) for (t, g, jt, jg, _, Xg, K, D) in self._links
-        ]
+        # Per link: (T frame, G frame, K, D, whether D ≠ 0)
+        self._hot = [(lk.tip_frame, lk.grasp_frame, lk.K, lk.D, bool(np.any(lk.D))) for lk in scene.links]
         self._damping = np.zeros(model.nv)
         for arm in scene.arms:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
-        self._tau = np.zeros(model.nv)
         #: power dissipated [W] at the state of the last :meth:`acceleration` call
         self.last_dissipation = 0.0
 
@@ -83,7 +60,7 @@ class Dynamics:
         """Spring states after ``forwardKinematics(q, v)`` has run."""
         model, data = self.model, self.data
         out = []
-        for t_id, g_id, _, _, _, _, K, D in self._links:
+        for t_id, g_id, K, D, _ in self._hot:
             oMT = pin.updateFramePlacement(model, data, t_id)
             oMG = pin.updateFramePlacement(model, data, g_id)
             T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
@@ -96,43 +73,68 @@ class Dynamics:
         pin.forwardKinematics(self.model, self.data, q, v)
         return self._springs()
 
+    def _interconnections(self, q: np.ndarray, v: np.ndarray, matrices: bool) -> np.ndarray:
+        """Run kinematics at (q, v) and return the interconnections' generalized force Q (nv,).
+
+        With the LOCAL frame Jacobians, ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` maps q̇ to the relative
+        twist ξ and ``A = Jlog6(T_M_G) Jr`` maps q̇ to ė, so ``Q = −Σ Aᵀ (K e + D A q̇)`` — the
+        same as ``J_Gᵀ G_f_G + J_Tᵀ T_f_T``. Also sets ``last_dissipation`` and, with
+        ``matrices``, ``self.K_t = Σ Aᵀ K A`` and ``self.D_t = Σ Aᵀ D A + B``.
+        """
+        model, data = self.model, self.data
+        pin.forwardKinematics(model, data, q, v)
+        pin.computeJointJacobians(model, data)
+        Q = np.zeros(model.nv)
+        p_diss = 0.0
+        if matrices:
+            K_t = np.zeros((model.nv, model.nv))
+            D_t = np.diag(self._damping)
+        for t_id, g_id, K, D, has_d in self._hot:
+            T_M_G = pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))
+            J_G = pin.getFrameJacobian(model, data, g_id, LOCAL)
+            J_T = pin.getFrameJacobian(model, data, t_id, LOCAL)
+            A = pin.Jlog6(T_M_G) @ (J_G - T_M_G.toActionMatrixInverse() @ J_T)
+            w = K @ pin.log6(T_M_G).vector
+            if has_d:
+                D_e_dot = D @ (A @ v)
+                p_diss += (A @ v) @ D_e_dot
+                w += D_e_dot
+            Q -= A.T @ w
+            if matrices:
+                K_t += A.T @ K @ A
+                if has_d:
+                    D_t += A.T @ D @ A
+        if matrices:
+            self.K_t, self.D_t = K_t, D_t
+        if self._has_damping:
+            p_diss += v @ (self._damping * v)
+        self.last_dissipation = p_diss
+        return Q
+
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N].
 
-        This is the hot path: it evaluates the spring law of :func:`spring` inline, with
-        ``w = K e + D ė`` so that ``G_f_G = −Jlog6ᵀ w`` and ``T_f_T = T_M_G·Jlog6ᵀ w``.
+        This is the hot path: the interconnection wrenches enter ABA as the generalized force
+        ``Q`` (see :meth:`_interconnections`), which costs fewer Python-level operations than
+        moving each wrench to its joint as an external force.
         """
-        model, data, F = self.model, self.data, self._F
-        pin.forwardKinematics(model, data, q, v)
-        F[self._joints] = 0.0
-        p_diss = 0.0
-        for t_id, g_id, j_t, j_g, X_g, K, D, jMT, has_d in self._hot:
-            oMT = pin.updateFramePlacement(model, data, t_id)
-            oMG = pin.updateFramePlacement(model, data, g_id)
-            T_M_G = oMT.actInv(oMG)
-            J = pin.Jlog6(T_M_G)
-            w = K @ pin.log6(T_M_G).vector
-            if has_d:
-                T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
-                G_v_G = pin.getFrameVelocity(model, data, g_id, LOCAL).vector
-                e_dot = J @ (G_v_G - T_M_G.toActionMatrixInverse() @ T_v_T)
-                D_e_dot = D @ e_dot
-                w += D_e_dot
-                p_diss += e_dot @ D_e_dot
-            f = J.T @ w
-            F[j_g] -= X_g @ f
-            F[j_t] += (jMT * T_M_G).toDualActionMatrix() @ f
-        fext = self.fext
-        for j in self._joints:
-            fext[j].vector = F[j]
-        t = self._tau
-        t[self.scene.actuated] = tau
+        t = self._interconnections(q, v, matrices=False)
+        t[self.scene.actuated] += tau
         if self._has_damping:
-            damping_force = self._damping * v
-            t -= damping_force
-            p_diss += damping_force @ v
-        self.last_dissipation = p_diss
-        return pin.aba(model, data, q, v, t, fext).copy()
+            t -= self._damping * v
+        return pin.aba(self.model, self.data, q, v, t).copy()
+
+    def implicit_terms(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What a linearly implicit step needs at (q, v), from one kinematics pass:
+        ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the matrices of
+        :meth:`stiffness` (nv, nv)."""
+        model, data = self.model, self.data
+        f = self._interconnections(q, v, matrices=True)
+        f[self.scene.actuated] += tau
+        if self._has_damping:
+            f -= self._damping * v
+        f -= pin.nonLinearEffects(model, data, q, v)
+        return f, pin.crba(model, data, q).copy(), self.K_t, self.D_t
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Σ (J_Gᵀ G_f_G + J_Tᵀ T_f_T), the interconnections' generalized force (nv,)."""
@@ -140,7 +142,7 @@ class Dynamics:
         states = self.springs(q, v)
         pin.computeJointJacobians(model, data, q)
         out = np.zeros(model.nv)
-        for (t_id, g_id, *_), s in zip(self._links, states, strict=True):
+        for (t_id, g_id, *_), s in zip(self._hot, states, strict=True):
             out += pin.getFrameJacobian(model, data, g_id, LOCAL).T @ s.G_f_G
             out += pin.getFrameJacobian(model, data, t_id, LOCAL).T @ s.T_f_T
         return out
@@ -156,23 +158,8 @@ class Dynamics:
         Returns:
             (M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad].
         """
-        model, data = self.model, self.data
-        pin.forwardKinematics(model, data, q, v)
-        pin.computeJointJacobians(model, data)
-        M = pin.crba(model, data, q).copy()
-        K_t = np.zeros((model.nv, model.nv))
-        D_t = np.diag(self._damping)
-        for t_id, g_id, *_, K, D in self._links:
-            oMT = pin.updateFramePlacement(model, data, t_id)
-            oMG = pin.updateFramePlacement(model, data, g_id)
-            T_M_G = oMT.actInv(oMG)
-            J_G = pin.getFrameJacobian(model, data, g_id, LOCAL)
-            J_T = pin.getFrameJacobian(model, data, t_id, LOCAL)
-            A = pin.Jlog6(T_M_G) @ (J_G - T_M_G.toActionMatrixInverse() @ J_T)
-            K_t += A.T @ K @ A
-            if D.any():
-                D_t += A.T @ D @ A
-        return M, K_t, D_t
+        self._interconnections(q, v, matrices=True)
+        return pin.crba(self.model, self.data, q).copy(), self.K_t, self.D_t
 
     # -- readouts -----------------------------------------------------------------------------
     def elastic_energy(self, q: np.ndarray) -> np.ndarray:

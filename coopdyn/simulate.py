@@ -47,7 +47,7 @@ def simulate(
         progress: show a progress bar.
         max_speed: a joint velocity above this [rad/s or m/s] is taken as divergence.
         energy_check: ``"warn"`` (default), ``"raise"`` or ``"off"``: the energy-balance monitor
-            (:class:`coopdyn.monitor.EnergyMonitor`), evaluated about every millisecond; not
+            (:class:`coopdyn.monitor.EnergyMonitor`), evaluated about every 5 ms (the work is integrated every step); not
             run for ``exponential``, whose exact discretisation cannot go unstable.
 
     Returns:
@@ -77,7 +77,7 @@ def simulate(
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     monitor = None
     if energy_check != "off" and not getattr(method, "exact_discretisation", False):
-        monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(1e-3 / dt)), mode=energy_check)
+        monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check)
     bar = _progress_bar(t_final, method.name) if progress else None
     cpu0 = time.process_time()
     try:

@@ -104,6 +104,24 @@ class System:
         self.dynamics.acceleration(q, v, tau)
         return float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation
 
+    def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
+        matrices of :meth:`stiffness` with the controller's PD gains. Counts one RHS and one
+        Jacobian, and records the net power like :meth:`acceleration`."""
+        self.n_rhs += 1
+        self.n_jac += 1
+        tau = self.torque(t, q, v)
+        f, M, K, D = self.dynamics.implicit_terms(q, v, tau)
+        if self._gains is not None:
+            act = self.scene.actuated
+            K[act, act] += self._gains[0]
+            D[act, act] += self._gains[1]
+        record = (q, v, float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
+        if self._first is None:
+            self._first = record
+        self._last = record
+        return f, M, K, D
+
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains; counts one Jacobian."""
         self.n_jac += 1

@@ -19,16 +19,16 @@ from .base import AdaptiveIntegrator, Attempt, Integrator, System
 
 
 class _WSolver:
-    """``(I − γhJ)⁻¹`` at one state, factorised once."""
+    """``(I − γhJ)⁻¹`` at one state: ``S = M + γh D̃ + (γh)² K̃`` factorised once."""
 
-    def __init__(self, system: System, q: np.ndarray, v: np.ndarray, gh: float) -> None:
-        self.M, self.K, D = system.stiffness(q, v)
-        self.gh = gh
-        self.factor = scipy.linalg.cho_factor(self.M + gh * D + (gh * gh) * self.K, check_finite=False)
+    def __init__(self, system: System, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
+        self.M, self.K, self.gh = M, K, gh
+        self.factor = scipy.linalg.cho_factor(M + gh * D + (gh * gh) * K, check_finite=False)
         system.n_factor += 1
 
-    def solve(self, f_q: np.ndarray, f_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        k_v = scipy.linalg.cho_solve(self.factor, self.M @ f_v - self.gh * (self.K @ f_q), check_finite=False)
+    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(k_q, k_v) for the right-hand side (f_q, f_v), given ``M f_v``."""
+        k_v = scipy.linalg.cho_solve(self.factor, Mf_v - self.gh * (self.K @ f_q), check_finite=False)
         return f_q + self.gh * k_v, k_v
 
 
@@ -44,10 +44,11 @@ class LinearlyImplicitEuler(Integrator):
     a_stable = True
 
     def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-        a = system.acceleration(t, q, v)
-        w = _WSolver(system, q, v, h)
-        k_q, _ = w.solve(v, a)  # k_q = v + h k_v = v⁺
-        return pin.integrate(system.model, q, h * k_q), k_q
+        f, M, K, D = system.implicit_terms(t, q, v)  # f = M a
+        system.n_factor += 1
+        k_v = np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))  # one LU of the SPD matrix
+        v_new = v + h * k_v
+        return pin.integrate(system.model, q, h * v_new), v_new
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return 1.0 / (1.0 - np.asarray(z, dtype=complex))
@@ -58,11 +59,13 @@ GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 
 def _ros2(system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
     """One ROS2 step; returns (δ, v⁺, error of δ, error of v⁺) with the embedded first-order estimate."""
-    w = _WSolver(system, q, v, GAMMA * h)
-    kq1, kv1 = w.solve(v, system.acceleration(t, q, v))
+    f1, M, K, D = system.implicit_terms(t, q, v)
+    w = _WSolver(system, M, K, D, GAMMA * h)
+    kq1, kv1 = w.solve(v, f1)
     d2, v2 = h * kq1, v + h * kv1
     q2 = pin.integrate(system.model, q, d2)
-    kq2, kv2 = w.solve(system.chart_velocity(q, d2, v2) - 2.0 * kq1, system.acceleration(t + h, q2, v2) - 2.0 * kv1)
+    a2 = system.acceleration(t + h, q2, v2)
+    kq2, kv2 = w.solve(system.chart_velocity(q, d2, v2) - 2.0 * kq1, M @ (a2 - 2.0 * kv1))
     delta = h * (1.5 * kq1 + 0.5 * kq2)
     v_new = v + h * (1.5 * kv1 + 0.5 * kv2)
     return delta, v_new, 0.5 * h * (kq1 + kq2), 0.5 * h * (kv1 + kv2)
