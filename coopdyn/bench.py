@@ -294,15 +294,17 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
     names = list(dict.fromkeys(r.scene for r in rows))
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), constrained_layout=True, squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
+        n_bad = 0
         for method in dict.fromkeys(r.method for r in rows if r.scene == name):
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
                 ax.loglog([r.cpu_per_sim_s for r in pts], [max(r.wrench_error, 1e-16) for r in pts], "o-", label=method, ms=4)
             bad = [r for r in rows if r.scene == name and r.method == method and not r.stable]
             for r in bad:
+                n_bad += 1
                 ax.annotate(
-                    f"× {method} {r.setting}",
-                    (0.02, 0.02 + 0.05 * bad.index(r)),
+                    f"× diverged: {method} {r.setting}",
+                    (0.02, 0.05 * n_bad - 0.03),
                     xycoords="axes fraction",
                     fontsize=6,
                     color="red",

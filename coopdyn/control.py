@@ -43,3 +43,41 @@ class GravityCompensationPD:
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         g = pin.computeGeneralizedGravity(self.scene.model, self._data, q)[self.scene.actuated]
         return g + self.kp * (self.q_des - q[self._q_index]) - self.kd * v[self.scene.actuated]
+
+
+class ComputedTorque:
+    """``τ = M(q)(q̈_d + Kp (q_d − q) + Kd (q̇_d − q̇)) + h(q, q̇)`` on the arm joints.
+
+    Uses each arm's own inertia and nonlinear effects (the interconnection forces are not
+    compensated: they act as a disturbance). Args:
+        scene: the scene.
+        kp: [1/s²], kd: [1/s] — per joint, scalar or (n_actuated,) (the error dynamics'
+            ω² and 2ζω).
+        reference: ``reference(t) -> (q_d, q̇_d, q̈_d)`` each (n_actuated,); default: hold q0.
+    """
+
+    def __init__(self, scene: Scene, kp: Any = 400.0, kd: Any = 40.0, reference: Any = None) -> None:
+        n = scene.n_actuated
+        self.scene = scene
+        self.kp = np.broadcast_to(_validate.finite_array(kp, "kp"), (n,)).copy()
+        self.kd = np.broadcast_to(_validate.finite_array(kd, "kd"), (n,)).copy()
+        self._q_index = np.concatenate([a.q_index for a in scene.arms])
+        if self._q_index.size != n:
+            raise SceneError("ComputedTorque needs arms made of 1-DOF joints (nq = nv)")
+        q0 = scene.q0[self._q_index]
+        zero = np.zeros(n)
+        self.reference = reference if reference is not None else (lambda t: (q0, zero, zero))
+        self._data = scene.model.createData()
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        model, data, act = self.scene.model, self._data, self.scene.actuated
+        q_d, v_d, a_d = self.reference(t)
+        M = pin.crba(model, data, q)[np.ix_(act, act)]
+        h = pin.nonLinearEffects(model, data, q, v)[act]
+        return M @ (a_d + self.kp * (q_d - q[self._q_index]) + self.kd * (v_d - v[act])) + h
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """Approximate joint stiffness/damping [N·m/rad], [N·m·s/rad]: diag(M)·(Kp, Kd) at q0."""
+        M = pin.crba(self.scene.model, self._data, self.scene.q0)
+        d = np.diag(M)[self.scene.actuated]
+        return d * self.kp, d * self.kd

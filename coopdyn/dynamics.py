@@ -73,7 +73,9 @@ class Dynamics:
         pin.forwardKinematics(self.model, self.data, q, v)
         return self._springs()
 
-    def _interconnections(self, q: np.ndarray, v: np.ndarray, matrices: bool) -> np.ndarray:
+    def _interconnections(
+        self, q: np.ndarray, v: np.ndarray, matrices: bool, object_wrench: np.ndarray | None = None
+    ) -> np.ndarray:
         """Run kinematics at (q, v) and return the interconnections' generalized force Q (nv,).
 
         With the LOCAL frame Jacobians, ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` maps q̇ to the relative
@@ -106,30 +108,38 @@ class Dynamics:
                     D_t += A.T @ D @ A
         if matrices:
             self.K_t, self.D_t = K_t, D_t
+        if object_wrench is not None:  # world-aligned wrench at the object frame origin → LOCAL
+            fo = self.scene.object_frame
+            R = pin.updateFramePlacement(model, data, fo).rotation
+            local = np.concatenate([R.T @ object_wrench[:3], R.T @ object_wrench[3:]])
+            Q += pin.getFrameJacobian(model, data, fo, LOCAL).T @ local
         if self._has_damping:
             p_diss += v @ (self._damping * v)
         self.last_dissipation = p_diss
         return Q
 
-    def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N].
+    def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
+        """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N] and an
+        optional external wrench on the object (6,) [N, N·m] (world axes, at the object frame origin).
 
         This is the hot path: the interconnection wrenches enter ABA as the generalized force
         ``Q`` (see :meth:`_interconnections`), which costs fewer Python-level operations than
         moving each wrench to its joint as an external force.
         """
-        t = self._interconnections(q, v, matrices=False)
+        t = self._interconnections(q, v, False, object_wrench)
         t[self.scene.actuated] += tau
         if self._has_damping:
             t -= self._damping * v
         return pin.aba(self.model, self.data, q, v, t).copy()
 
-    def implicit_terms(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, ...]:
+    def implicit_terms(
+        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
+    ) -> tuple[np.ndarray, ...]:
         """What a linearly implicit step needs at (q, v), from one kinematics pass:
         ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the matrices of
         :meth:`stiffness` (nv, nv)."""
         model, data = self.model, self.data
-        f = self._interconnections(q, v, matrices=True)
+        f = self._interconnections(q, v, True, object_wrench)
         f[self.scene.actuated] += tau
         if self._has_damping:
             f -= self._damping * v

@@ -69,3 +69,46 @@ def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
     os.replace(tmp, path)
     _pyplot().close(fig)
     return path
+
+
+def cooperative_figure(result: Result, reference: Any = None, path: str | os.PathLike[str] | None = None) -> Any:
+    """Figure-11-style plot of any result: object and tool positions, interconnection forces,
+    internal (squeeze) force, joint torques against time. ``reference(t)`` (e.g. a
+    :class:`coopdyn.cooperative.GripLiftOscillate`) adds the desired object position."""
+    plt = _pyplot()
+    t = result.t
+    fig, axes = plt.subplots(4, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
+    obj = result.object_position()
+    for k, c in enumerate("xyz"):
+        (line,) = axes[0].plot(t, obj[:, k], label=f"object {c}")
+        if reference is not None:
+            axes[0].plot(t, [reference(s).position[k] for s in t], "--", color=line.get_color(), lw=1, label=f"desired {c}")
+    for arm in result.scene.arms:
+        axes[0].plot(t, result.tip_position(arm.name)[:, 2], ":", label=f"{arm.name} tool z")
+    axes[0].set_ylabel("position [m]")
+    W = result.wrenches()
+    for i, lk in enumerate(result.scene.links):
+        name = result.scene.arms[lk.arm].name
+        for k, c in enumerate("xyz"):
+            axes[1].plot(t, W[:, i, k], label=f"{name} F{c}")
+    axes[1].set_ylabel("interconnection force\non the object [N]")
+    sq = result.squeeze()
+    for i, lk in enumerate(result.scene.links):
+        axes[2].plot(t, sq[:, i], label=f"{result.scene.arms[lk.arm].name}")
+    if reference is not None:
+        axes[2].plot(t, [reference(s).squeeze for s in t], "k--", lw=1, label="commanded")
+    axes[2].set_ylabel("internal (squeeze)\nforce [N]")
+    joints = [n for a in result.scene.arms for n in a.joint_names]
+    for j in range(result.tau.shape[1]):
+        axes[3].plot(t, result.tau[:, j], lw=0.8, label=joints[j] if j < len(joints) else str(j))
+    axes[3].set_ylabel("joint torque [N·m]")
+    axes[3].set_xlabel("time [s]")
+    for ax in axes[:3]:
+        ax.legend(loc="best", fontsize=7, ncol=3)
+    axes[3].legend(loc="upper left", fontsize=5, ncol=7)
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(f"{', '.join(a.name for a in result.scene.arms)} holding the object: {result.integrator}, dt = {result.dt:g} s")
+    if path is not None:
+        save_figure(fig, path)
+    return fig

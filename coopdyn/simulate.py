@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
+import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,6 +33,7 @@ def simulate(
     progress: bool = False,
     max_speed: float = 1e4,
     energy_check: str = "warn",
+    object_wrench: Callable[[float], np.ndarray] | None = None,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -49,6 +53,8 @@ def simulate(
         energy_check: ``"warn"`` (default), ``"raise"`` or ``"off"``: the energy-balance monitor
             (:class:`coopdyn.monitor.EnergyMonitor`), evaluated about every 5 ms (the work is integrated every step); not
             run for ``exponential``, whose exact discretisation cannot go unstable.
+        object_wrench: ``object_wrench(t) -> (6,)``: an external wrench on the object [N, N·m],
+            world axes, at the object frame origin (disturbances, loads, contacts).
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -73,7 +79,7 @@ def simulate(
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
 
-    system = System(Dynamics(scene), controller)
+    system = System(Dynamics(scene), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     monitor = None
     if energy_check != "off" and not getattr(method, "exact_discretisation", False):
@@ -352,6 +358,52 @@ class Result:
             pin.forwardKinematics(model, data, q)
             out[k] = pin.updateFramePlacement(model, data, frame).translation
         return out
+
+    def grasp_points(self) -> np.ndarray:
+        """World positions of the grasp frames (n, N, 3) [m]."""
+        return np.stack([self.frame_position(lk.grasp_frame) for lk in self.scene.links], axis=1)
+
+    def wrenches(self) -> np.ndarray:
+        """Every interconnection's wrench on the object (n, N, 6) [N, N·m] (see :meth:`wrench`)."""
+        return np.stack([self.wrench(i) for i in range(len(self.scene.links))], axis=1)
+
+    def wrench_split(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interconnection wrenches on the object split into the part that moves the object
+        and the internal part (:func:`coopdyn.grasp.split`), each (n, N, 6) [N, N·m]."""
+        from .grasp import grasp_matrix, split
+
+        W, P = self.wrenches(), self.grasp_points()
+        parts = [split(grasp_matrix(p), w) for p, w in zip(P, W, strict=True)]
+        return np.array([s.moving for s in parts]), np.array([s.internal for s in parts])
+
+    def squeeze(self) -> np.ndarray:
+        """Internal (squeeze) force at each grasp (n, N) [N], positive = compression."""
+        from .grasp import squeeze_force
+
+        return np.array([squeeze_force(p, w) for p, w in zip(self.grasp_points(), self.wrenches(), strict=True)])
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the trajectory atomically (temporary file, then rename): ``.npz`` (t, q, v, tau
+        and the interconnection wrenches) or ``.csv`` (one row per sample). Returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        W = self.wrenches().reshape(len(self.t), -1)
+        if path.suffix == ".npz":
+            with open(tmp, "wb") as f:
+                np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, integrator=self.integrator, dt=self.dt)
+        elif path.suffix == ".csv":
+            qn = [f"q[{i}]" for i in range(self.scene.nq)]
+            vn = [f"v[{i}]" for i in range(self.scene.nv)]
+            joints = [name for a in self.scene.arms for name in a.joint_names]
+            taun = [f"tau[{joints[i] if len(joints) == self.scene.n_actuated else i}]" for i in range(self.scene.n_actuated)]
+            wn = [f"link{i}_{c}" for i in range(len(self.scene.links)) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
+            header = ",".join(["t", *qn, *vn, *taun, *wn])
+            np.savetxt(tmp, np.column_stack([self.t, self.q, self.v, self.tau, W]), delimiter=",", header=header, comments="")
+        else:
+            raise SimulationError(f"unknown result format {path.suffix!r}: use .npz or .csv")
+        os.replace(tmp, path)
+        return path
 
     def tip_position(self, arm: int | str) -> np.ndarray:
         """World position of an arm's tip frame (n, 3) [m]."""

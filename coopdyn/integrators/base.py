@@ -37,6 +37,8 @@ class System:
         controller: ``controller(t, q, v) -> τ`` (n_actuated,) [N·m or N]; ``None`` means τ = 0.
             A controller with a method ``gains() -> (Kp, Kd)`` (each (n_actuated,) [N·m/rad],
             [N·m·s/rad]) has its joint PD gains included in the implicit methods' Jacobian.
+        object_wrench: ``object_wrench(t) -> (6,)`` external wrench on the object [N, N·m],
+            world axes, at the object frame origin (a disturbance, a contact, a load).
 
     Attributes:
         n_rhs, n_jac, n_factor: right-hand-side evaluations, Jacobian (stiffness) evaluations
@@ -44,11 +46,14 @@ class System:
         cache: scratch for integrators (reset per run).
     """
 
-    def __init__(self, dynamics: Dynamics, controller: Controller | None = None) -> None:
+    def __init__(
+        self, dynamics: Dynamics, controller: Controller | None = None, object_wrench: Callable[[float], np.ndarray] | None = None
+    ) -> None:
         self.dynamics = dynamics
         self.scene = dynamics.scene
         self.model = dynamics.model
         self.controller = controller
+        self.object_wrench = object_wrench
         self.n_actuated = dynamics.scene.n_actuated
         self._zero = np.zeros(self.n_actuated)
         self.n_rhs = 0
@@ -82,12 +87,20 @@ class System:
         ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
         self.n_rhs += 1
         tau = self.torque(t, q, v)
-        a = self.dynamics.acceleration(q, v, tau)
-        record = (q, v, float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
+        a = self.dynamics.acceleration(q, v, tau, None if self.object_wrench is None else self._wrench(t))
+        p_ext = 0.0 if self.object_wrench is None else self._object_power(self._wrench(t))
+        record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
         if self._first is None:
             self._first = record
         self._last = record
         return a
+
+    def _wrench(self, t: float) -> np.ndarray:
+        assert self.object_wrench is not None
+        w = np.asarray(self.object_wrench(t), dtype=float)
+        if w.shape != (6,) or not math.isfinite(w.sum()):
+            raise ControllerError(f"object_wrench(t) must return 6 finite numbers [N, N·m] at t = {t:.6g} s, got {w!r}")
+        return w
 
     def begin_step(self) -> None:
         """Mark the start of a step (for :meth:`power_at`)."""
@@ -101,8 +114,10 @@ class System:
             if record is not None and record[0] is q and record[1] is v:
                 return record[2]
         tau = self.torque(t, q, v)
-        self.dynamics.acceleration(q, v, tau)
-        return float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation
+        w = None if self.object_wrench is None else self._wrench(t)
+        self.dynamics.acceleration(q, v, tau, w)
+        p_ext = 0.0 if w is None else self._object_power(w)
+        return p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
@@ -111,12 +126,13 @@ class System:
         self.n_rhs += 1
         self.n_jac += 1
         tau = self.torque(t, q, v)
-        f, M, K, D = self.dynamics.implicit_terms(q, v, tau)
+        f, M, K, D = self.dynamics.implicit_terms(q, v, tau, None if self.object_wrench is None else self._wrench(t))
         if self._gains is not None:
             act = self.scene.actuated
             K[act, act] += self._gains[0]
             D[act, act] += self._gains[1]
-        record = (q, v, float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
+        p_ext = 0.0 if self.object_wrench is None else self._object_power(self._wrench(t))
+        record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
         if self._first is None:
             self._first = record
         self._last = record
@@ -131,6 +147,12 @@ class System:
             K[act, act] += self._gains[0]
             D[act, act] += self._gains[1]
         return M, K, D
+
+    def _object_power(self, wrench: np.ndarray) -> float:
+        """Power [W] of a world-aligned wrench at the object origin, at the last evaluated state."""
+        model, data = self.model, self.dynamics.data
+        V = pin.getFrameVelocity(model, data, self.scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).vector
+        return float(wrench @ V)
 
     def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
         """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ."""

@@ -119,6 +119,8 @@ class Exponential(Integrator):
         return system.cache[key]
 
     def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+        if system.object_wrench is not None:
+            raise SimulationError("the exponential integrator does not take object_wrench (its discretisation has no such input)")
         step, predictor, inner, p = self._discrete(system, h)
         n = q.size
         u0 = system.torque(t, q, v)

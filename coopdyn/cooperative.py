@@ -1,0 +1,227 @@
+"""Cooperative object-level control: impedance on the object, non-squeezing load
+distribution, commanded internal force, and a grip / lift / oscillate / hold task.
+
+:class:`ObjectImpedance` computes, at every call,
+
+1. the object wrench ``F = m (a_d − g) + K_p e_p + D_p (v_d − v)`` and
+   ``M = K_r log(R_d Rᵀ) − D_r ω`` (world axes, at the object frame origin);
+2. its non-squeezing distribution over the grasps ``f = G⁺ F`` plus the internal wrenches of
+   the commanded squeeze ``s(t)`` (inward forces projected onto the null space of G);
+3. ``τ_i = J_iᵀ f_i + h_i(q, q̇) − D_j q̇ + N_i (K_null (q0 − q) − D_null q̇)``: the tool wrench
+   through the tip Jacobian (world-aligned, at the tip), the arm's own gravity and Coriolis
+   terms, joint damping and a posture task in the null space of the tip Jacobian.
+
+The object's motion is then that of a mass–spring–damper with the designed K and D and the
+mass of the object plus the arms' reflected inertia at the grasps
+(:meth:`ObjectImpedance.effective_mass`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from . import _validate
+from .grasp import grasp_matrix, squeeze_directions
+from .scene import Scene
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class ObjectReference(NamedTuple):
+    """Desired object motion at one instant (world axes)."""
+
+    position: np.ndarray  #: (3,) [m]
+    rotation: np.ndarray  #: (3, 3)
+    velocity: np.ndarray  #: (3,) [m/s]
+    angular_velocity: np.ndarray  #: (3,) [rad/s]
+    acceleration: np.ndarray  #: (3,) [m/s²]
+    squeeze: float  #: commanded internal force per grasp [N], positive = compression
+
+
+@dataclass(frozen=True)
+class GripLiftOscillate:
+    """The book's task: grip, lift, oscillate, hold — a desired object motion and squeeze.
+
+    Attributes (times [s], lengths [m], forces [N], frequency [Hz]):
+        start: the object's initial position (3,); its orientation is held.
+        squeeze: internal force to grip with; ramped up over ``t_grip``.
+        lift: rise along world z, a smooth (minimum-jerk) motion over ``[t_lift, t_lift + lift_duration]``.
+        amplitude, frequency, axis: the oscillation ``amplitude·sin(2π f (t − t_osc))`` along
+            ``axis`` over ``cycles`` periods from ``t_osc``, with a smooth (sin²) amplitude
+            envelope; then hold.
+    """
+
+    start: Any
+    rotation: Any = None
+    squeeze: float = 20.0
+    t_grip: float = 0.5
+    lift: float = 0.1
+    t_lift: float = 0.75
+    lift_duration: float = 1.25
+    amplitude: float = 0.03
+    frequency: float = 1.0
+    cycles: int = 2
+    t_osc: float = 2.25
+    axis: Any = (0.0, 1.0, 0.0)
+
+    def __call__(self, t: float) -> ObjectReference:
+        p0 = np.asarray(self.start, dtype=float)
+        R = np.eye(3) if self.rotation is None else np.asarray(self.rotation, dtype=float)
+        s = min(max(t / self.t_grip, 0.0), 1.0)
+        squeeze = self.squeeze * (3 * s**2 - 2 * s**3)
+        pos, vel, acc = p0.copy(), np.zeros(3), np.zeros(3)
+        # lift: minimum-jerk profile
+        tau = min(max((t - self.t_lift) / self.lift_duration, 0.0), 1.0)
+        shape = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+        dshape = (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / self.lift_duration if 0 < tau < 1 else 0.0
+        ddshape = (60 * tau - 180 * tau**2 + 120 * tau**3) / self.lift_duration**2 if 0 < tau < 1 else 0.0
+        pos[2] += self.lift * shape
+        vel[2] += self.lift * dshape
+        acc[2] += self.lift * ddshape
+        # oscillation with a sin² envelope over the whole window: x = A sin²(πu) sin(ωs)
+        duration = self.cycles / self.frequency
+        s_osc = t - self.t_osc
+        if 0.0 < s_osc < duration:
+            axis = np.asarray(self.axis, dtype=float)
+            axis = axis / np.linalg.norm(axis)
+            w, W = 2 * math.pi * self.frequency, math.pi / duration
+            env, denv, ddenv = math.sin(W * s_osc) ** 2, W * math.sin(2 * W * s_osc), 2 * W**2 * math.cos(2 * W * s_osc)
+            osc, dosc, ddosc = math.sin(w * s_osc), w * math.cos(w * s_osc), -(w**2) * math.sin(w * s_osc)
+            pos += self.amplitude * env * osc * axis
+            vel += self.amplitude * (denv * osc + env * dosc) * axis
+            acc += self.amplitude * (ddenv * osc + 2 * denv * dosc + env * ddosc) * axis
+        return ObjectReference(pos, R, vel, np.zeros(3), acc, float(squeeze))
+
+    @property
+    def duration(self) -> float:
+        """End of the oscillation [s]; the task holds after it."""
+        return self.t_osc + self.cycles / self.frequency
+
+
+class ObjectImpedance:
+    """Cooperative impedance control of the held object with internal-force regulation.
+
+    Args:
+        scene: the scene (any number of arms, each with one interconnection).
+        reference: ``reference(t) -> ObjectReference`` (e.g. :class:`GripLiftOscillate`);
+            default: hold the initial pose with no squeeze.
+        stiffness: object translational / rotational stiffness, scalars or (3,)
+            [N/m], [N·m/rad].
+        damping: object translational / rotational damping [N·s/m], [N·m·s/rad].
+        joint_damping: extra joint damping on every arm joint [N·m·s/rad].
+        null_stiffness, null_damping: posture task in the tip Jacobians' null space
+            [N·m/rad], [N·m·s/rad] (redundant arms).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        reference: Callable[[float], ObjectReference] | None = None,
+        stiffness: tuple[Any, Any] = (2000.0, 100.0),
+        damping: tuple[Any, Any] = (120.0, 6.0),
+        joint_damping: float = 3.0,
+        null_stiffness: float = 20.0,
+        null_damping: float = 5.0,
+    ) -> None:
+        self.scene = scene
+        model = scene.model
+        self._data = model.createData()
+        self.Kp = np.broadcast_to(_validate.finite_array(stiffness[0], "object stiffness (linear)"), (3,)).copy()
+        self.Kr = np.broadcast_to(_validate.finite_array(stiffness[1], "object stiffness (angular)"), (3,)).copy()
+        self.Dp = np.broadcast_to(_validate.finite_array(damping[0], "object damping (linear)"), (3,)).copy()
+        self.Dr = np.broadcast_to(_validate.finite_array(damping[1], "object damping (angular)"), (3,)).copy()
+        self.joint_damping = float(joint_damping)
+        self.null_stiffness, self.null_damping = float(null_stiffness), float(null_damping)
+        data = self._data
+        pin.framesForwardKinematics(model, data, scene.q0)
+        oMo = data.oMf[scene.object_frame]
+        hold = ObjectReference(oMo.translation.copy(), oMo.rotation.copy(), np.zeros(3), np.zeros(3), np.zeros(3), 0.0)
+        self.reference = reference if reference is not None else (lambda t: hold)
+        self.mass = scene.object.mass
+        self._com = np.asarray(scene.object.com, dtype=float)
+        self._links = [(lk.grasp_frame, lk.tip_frame, scene.arms[lk.arm]) for lk in scene.links]
+        self._q_index = np.concatenate([a.q_index for a in scene.arms])
+        self._q0 = scene.q0[self._q_index]
+
+    def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
+        """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
+        model, data, scene = self.scene.model, self._data, self.scene
+        ref = self.reference(t)
+        oMo = data.oMf[scene.object_frame]
+        V = pin.getFrameVelocity(model, data, scene.object_frame, LWA)
+        e_p = ref.position - oMo.translation
+        e_r = pin.log3(ref.rotation @ oMo.rotation.T)
+        force = self.mass * (ref.acceleration - scene.gravity) + self.Kp * e_p + self.Dp * (ref.velocity - V.linear)
+        com_w = oMo.rotation @ self._com
+        moment = self.Kr * e_r + self.Dr * (ref.angular_velocity - V.angular) + np.cross(com_w, -self.mass * scene.gravity)
+        return np.concatenate([force, moment]), ref
+
+    def grasp_wrenches(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Commanded wrench of each interconnection on the object (N, 6), about its grasp point."""
+        model, data, scene = self.scene.model, self._data, self.scene
+        pin.forwardKinematics(model, data, q, v)
+        pin.updateFramePlacements(model, data)
+        F, ref = self.object_wrench(t, q, v)
+        points = np.array([data.oMf[g].translation for g, _, _ in self._links])
+        G = grasp_matrix(points)
+        c = points.mean(axis=0)
+        o = data.oMf[scene.object_frame].translation
+        F_c = F.copy()
+        F_c[3:] += np.cross(o - c, F[:3])  # moment about the grasps' centroid
+        G_pinv = np.linalg.pinv(G)
+        f = G_pinv @ F_c
+        if ref.squeeze and len(points) > 1:
+            inward = np.zeros(6 * len(points))
+            for i, d in enumerate(squeeze_directions(points)):
+                inward[6 * i : 6 * i + 3] = ref.squeeze * d
+            f += inward - G_pinv @ (G @ inward)  # keep only its internal (null-space) part
+        return f.reshape(-1, 6)
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        model, data, scene = self.scene.model, self._data, self.scene
+        f = self.grasp_wrenches(t, q, v)
+        pin.computeJointJacobians(model, data, q)
+        tau_full = pin.nonLinearEffects(model, data, q, v)
+        out = []
+        for (g_id, t_id, arm), f_i in zip(self._links, f, strict=True):
+            J = pin.getFrameJacobian(model, data, t_id, LWA)[:, arm.v_index]
+            # the wrench is about the grasp point; the tip sits on it up to the (small) deformation
+            r = data.oMf[g_id].translation - data.oMf[t_id].translation
+            w = f_i.copy()
+            w[3:] += np.cross(r, f_i[:3])
+            tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * v[arm.v_index]
+            J_pinv = np.linalg.pinv(J)
+            N = np.eye(arm.v_index.size) - J.T @ J_pinv.T
+            q_arm = q[arm.q_index]
+            q0 = scene.q0[arm.q_index]
+            tau += N @ (self.null_stiffness * (q0 - q_arm) - self.null_damping * v[arm.v_index])
+            out.append(tau)
+        return np.concatenate(out)
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint damping added by the controller, for implicit integrators [N·m/rad], [N·m·s/rad]."""
+        n = self.scene.n_actuated
+        return np.full(n, self.null_stiffness), np.full(n, self.joint_damping + self.null_damping)
+
+    def effective_mass(self, q: np.ndarray | None = None) -> float:
+        """Object mass + the arms' reflected translational inertia along world z at the grasps
+        [kg] (from each arm's operational-space inertia): the mass the impedance moves."""
+        model, data, scene = self.scene.model, self._data, self.scene
+        q = scene.q0 if q is None else q
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        M = pin.crba(model, data, q)
+        m = self.mass
+        ez = np.array([0.0, 0.0, 1.0])
+        for _, t_id, arm in self._links:
+            Jv = pin.getFrameJacobian(model, data, t_id, LWA)[:3, arm.v_index]
+            M_arm = M[np.ix_(arm.v_index, arm.v_index)]
+            Lambda_inv = Jv @ np.linalg.solve(M_arm, Jv.T)
+            m += 1.0 / float(ez @ Lambda_inv @ ez)  # reflected mass along z (others free)
+        return m

@@ -1,0 +1,35 @@
+"""The benchmark machinery on a small sweep (the full one is `coopdyn bench`)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from coopdyn import bench
+
+
+def test_work_precision_rows_and_outputs(tmp_path: Path) -> None:
+    case = bench.linear_case(0.5)
+    rows = bench.work_precision([case], ["symplectic_euler", "rk4", "exponential"], quick=True, repeats=1, progress=False)
+    assert {r.method for r in rows} == {"symplectic_euler", "rk4", "exponential"}
+    for method in ("symplectic_euler", "rk4"):
+        errs = [r.wrench_error for r in rows if r.method == method]
+        assert all(r.stable for r in rows if r.method == method)
+        assert errs == sorted(errs, reverse=True)  # smaller dt, smaller error
+    rk4 = [r for r in rows if r.method == "rk4"]
+    assert np.log2(rk4[0].wrench_error / rk4[-1].wrench_error) / (len(rk4) - 1) > 3.0  # ~4th order per halving
+    assert all(r.n_rhs > 0 and r.cpu_per_sim_s > 0 for r in rows)
+    csv = bench.write_csv(rows, tmp_path / "wp.csv")
+    assert csv.read_text().splitlines()[0].startswith("scene,method,setting,dt,rtol,position_error")
+    assert bench.plot_work_precision(rows, tmp_path / "wp.png").stat().st_size > 10_000
+    assert "force err [N]" in bench.format_rows(rows)
+
+
+def test_diverging_points_are_marked_not_dropped() -> None:
+    case = bench.panda_case(1e6, t_final=0.02)
+    rows = bench.work_precision([case], ["symplectic_euler"], quick=True, repeats=1, progress=False)
+    first = rows[0]  # dt = 5 ms, far beyond the explicit limit (~1 ms)
+    assert not first.stable and math.isinf(first.wrench_error)
+    assert "DIVERGED" in bench.format_rows(rows)
