@@ -33,7 +33,7 @@ shift || true
 setup
 case "$job" in
   demo)
-    exec "$VENV/bin/coopdyn" book --out out "$@"
+    exec "$VENV/bin/coopdyn" demo --out out/demo "$@"
     ;;
   test)
     "$VENV/bin/ruff" check coopdyn tests examples

@@ -41,6 +41,33 @@ def _book(args: argparse.Namespace) -> int:
     return 0
 
 
+def _demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    run_demo(args.out, t_final=args.t_final, dt=args.dt, integrator=args.integrator, html=not args.no_html)
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from .scenefile import load, run
+
+    run(load(args.scene_file), folder=args.out)
+    return 0
+
+
+def _view(args: argparse.Namespace) -> int:
+    from .scenefile import load, load_result
+    from .viewer import export_html, view
+
+    loaded = load(args.scene_file)
+    result = load_result(loaded, args.result)
+    if args.html:
+        print(f"wrote {export_html(result, args.html)}")
+        return 0
+    view(result, loops=args.loops)
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from .bench import run_benchmarks
 
@@ -52,6 +79,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     parser = argparse.ArgumentParser(prog="coopdyn", description="Multi-arm cooperating robots with elastic interconnections.")
     sub = parser.add_subparsers(dest="command", required=True)
+    demo = sub.add_parser("demo", help="two Pandas grip, lift and oscillate a box (the main job)")
+    demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
+    demo.add_argument("--t-final", type=float, default=5.0, help="duration [s] (default: 5)")
+    demo.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default: 1e-3)")
+    demo.add_argument("--integrator", default="implicit_euler", help="integrator name (default: implicit_euler)")
+    demo.add_argument("--no-html", action="store_true", help="skip the HTML animation")
+    demo.set_defaults(func=_demo)
+    simulate = sub.add_parser("simulate", help="run a scene file (see examples/scenes/*.toml)")
+    simulate.add_argument("scene_file", help="a .toml scene file")
+    simulate.add_argument("--out", default=None, help="output folder (default: the file's [output] folder)")
+    simulate.set_defaults(func=_simulate)
+    view = sub.add_parser("view", help="play a scene file's saved result in a live meshcat viewer")
+    view.add_argument("scene_file", help="the .toml scene file the result came from")
+    view.add_argument("--result", default=None, help="trajectory .npz (default: <output folder>/trajectory.npz)")
+    view.add_argument("--loops", type=int, default=None, help="play this many times (default: until Ctrl-C)")
+    view.add_argument("--html", default=None, help="write a standalone HTML animation to this path instead")
+    view.set_defaults(func=_view)
     book = sub.add_parser("book", help="the book's linear cooperative system vs its exact solution (Figure 11)")
     book.add_argument("--out", default="out", help="output folder (default: out)")
     book.add_argument("--dt", type=float, default=5e-4, help="time step [s] (default: 5e-4)")

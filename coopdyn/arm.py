@@ -26,6 +26,7 @@ DEFAULT_TIP_FRAMES: dict[str, str] = {
     "ur3": "tool0",
     "ur5": "tool0",
     "ur10": "tool0",
+    "kinova": "j2s6s200_end_effector",
 }
 
 #: Joints locked by default for well-known arms ("model no more than a scene needs").
@@ -78,6 +79,7 @@ class LoadedArm:
     tip_frame: str
     base: pin.SE3
     damping: np.ndarray
+    visual: pin.GeometryModel | None = None  #: display geometry (``load_arm(..., meshes=...)``)
 
 
 def _robot_name(robot: str | os.PathLike[str]) -> str | None:
@@ -87,17 +89,22 @@ def _robot_name(robot: str | os.PathLike[str]) -> str | None:
     return text
 
 
-def _load_urdf(robot: str | os.PathLike[str]) -> tuple[pin.Model, np.ndarray | None]:
-    """Load the kinematic/inertial model and, where one exists, the reference posture."""
+def _load_urdf(
+    robot: str | os.PathLike[str], meshes: str | None = None
+) -> tuple[pin.Model, np.ndarray | None, pin.GeometryModel | None]:
+    """Load the kinematic/inertial model, the reference posture where one exists and, with
+    ``meshes`` ("visual" or "collision"), that geometry of the URDF (meshes resolved through
+    its package folders)."""
     name = _robot_name(robot)
     if name is None:
         path = Path(os.fspath(robot))
         if not path.is_file():
             raise ModelLoadError(f"URDF file not found: {path}. Give an existing .urdf path or an example-robot-data name.")
         try:
-            return pin.buildModelFromUrdf(str(path)), None
+            model = pin.buildModelFromUrdf(str(path))
         except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError with XML details
             raise ModelLoadError(f"could not parse URDF {path}: {exc}") from exc
+        return model, None, _geometry(model, path, [str(p) for p in path.resolve().parents], meshes) if meshes else None
     try:
         from example_robot_data import robots_loader
     except ImportError as exc:  # pragma: no cover - a dependency of coopdyn
@@ -115,13 +122,24 @@ def _load_urdf(robot: str | os.PathLike[str]) -> tuple[pin.Model, np.ndarray | N
     rel = os.path.join(loader.path, loader.urdf_subpath, loader.urdf_filename)
     root = robots_loader.getModelPath(rel)
     model = pin.buildModelFromUrdf(os.path.join(root, rel))
+    visual = _geometry(model, Path(root, rel), [os.path.join(root, "../..")], meshes) if meshes else None
     q_ref = None
     if loader.srdf_filename:
         srdf = os.path.join(root, loader.path, loader.srdf_subpath, loader.srdf_filename)
         pin.loadReferenceConfigurations(model, srdf, False)
         if "default" in model.referenceConfigurations:
             q_ref = np.array(model.referenceConfigurations["default"], dtype=float)
-    return model, q_ref
+    return model, q_ref, visual
+
+
+def _geometry(model: pin.Model, path: Path, package_dirs: list[str], meshes: str) -> pin.GeometryModel:
+    kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
+    if meshes not in kinds:
+        raise SceneError(f"meshes must be 'visual' or 'collision', got {meshes!r}")
+    try:
+        return pin.buildGeomFromUrdf(model, str(path), kinds[meshes], package_dirs=package_dirs)
+    except Exception as exc:
+        raise ModelLoadError(f"could not load the {meshes} geometry of {path}: {exc}") from exc
 
 
 def _joint_id(model: pin.Model, joint: str, what: str) -> int:
@@ -131,14 +149,15 @@ def _joint_id(model: pin.Model, joint: str, what: str) -> int:
     return int(model.getJointId(joint))
 
 
-def load_arm(arm: Arm) -> LoadedArm:
-    """Load, reduce, re-inertia and prefix the model of ``arm``."""
+def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
+    """Load, reduce, re-inertia and prefix the model of ``arm`` (and, with ``meshes`` =
+    "visual" or "collision", that geometry for display)."""
     if not isinstance(arm.name, str) or not arm.name or "/" in arm.name:
         raise SceneError(f"arm name must be a non-empty string without '/', got {arm.name!r}")
-    model, q_ref = _load_urdf(arm.robot)
+    model, q_ref, visual = _load_urdf(arm.robot, meshes)
     if model.nq == 0:
         raise ModelLoadError(f"arm {arm.name!r}: the URDF {arm.robot} has no movable joint")
-    q_full = pin.neutral(model) if q_ref is None else q_ref
+    q_full = _inside_limits(model, pin.neutral(model)) if q_ref is None else q_ref
     what = f"arm {arm.name!r}"
 
     # Locked joints: remove them from the model, held at their value.
@@ -156,7 +175,9 @@ def load_arm(arm: Arm) -> LoadedArm:
                 raise SceneError(f"{what}: locked joint {j!r} is not a 1-DOF joint; give it without a value")
             q_full[model.joints[jid].idx_q] = float(_validate.finite_array(locked[j], f"{what}, locked value of {j!r}", ()))
     full_model = model
-    if lock_ids:
+    if lock_ids and visual is not None:
+        model, visual = pin.buildReducedModel(full_model, visual, lock_ids, q_full)
+    elif lock_ids:
         model = pin.buildReducedModel(full_model, lock_ids, q_full)
     q_default = _reduced_configuration(full_model, model, q_full)
 
@@ -195,7 +216,22 @@ def load_arm(arm: Arm) -> LoadedArm:
         model.names[i] = f"{arm.name}/{model.names[i]}"
     for frame in model.frames:
         frame.name = f"{arm.name}/{frame.name}"
-    return LoadedArm(spec=arm, model=model, q0=q0, tip_frame=f"{arm.name}/{tip}", base=base, damping=damping)
+    if visual is not None:
+        for g in visual.geometryObjects:
+            g.name = f"{arm.name}/{g.name}"
+    return LoadedArm(spec=arm, model=model, q0=q0, tip_frame=f"{arm.name}/{tip}", base=base, damping=damping, visual=visual)
+
+
+def _inside_limits(model: pin.Model, q: np.ndarray) -> np.ndarray:
+    """``q`` with every 1-DOF joint outside its finite limits moved to mid-range."""
+    q = q.copy()
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    for j in model.joints[1:]:
+        if j.nq == 1 and j.nv == 1:
+            i = j.idx_q
+            if lo[i] < hi[i] and np.isfinite(lo[i]) and np.isfinite(hi[i]) and not lo[i] <= q[i] <= hi[i]:
+                q[i] = 0.5 * (lo[i] + hi[i])
+    return q
 
 
 def _reduced_configuration(full: pin.Model, reduced: pin.Model, q_full: np.ndarray) -> np.ndarray:

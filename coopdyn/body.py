@@ -54,6 +54,7 @@ class RigidObject:
     joint: str = "freeflyer"
     axis: str | Sequence[float] = "z"
     name: str = "object"
+    size: Any = None  #: edge lengths (x, y, z) [m] of a box, for visualisation (set by :meth:`box`)
 
     @classmethod
     def box(cls, mass: float, size: Sequence[float], **kwargs: Any) -> RigidObject:
@@ -64,7 +65,7 @@ class RigidObject:
             raise SceneError(f"box size must be three positive edge lengths [m], got {s.tolist()}")
         x2, y2, z2 = s**2
         inertia = m / 12.0 * np.diag([y2 + z2, x2 + z2, x2 + y2])
-        return cls(mass=m, inertia=inertia, **kwargs)
+        return cls(mass=m, inertia=inertia, size=tuple(float(x) for x in s), **kwargs)
 
     def spatial_inertia(self) -> pin.Inertia:
         """The validated spatial inertia of the body, about the object frame origin."""

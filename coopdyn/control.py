@@ -29,10 +29,11 @@ class GravityCompensationPD:
         self.kp = np.broadcast_to(_validate.finite_array(kp, "kp"), (n,)).copy()
         self.kd = np.broadcast_to(_validate.finite_array(kd, "kd"), (n,)).copy()
         self._q_index = np.concatenate([a.q_index for a in scene.arms])
-        if self._q_index.size != n:
-            raise SceneError("GravityCompensationPD needs arms made of 1-DOF joints (nq = nv)")
-        default = scene.q0[self._q_index]
-        self.q_des = default if q_des is None else _validate.finite_array(q_des, "q_des", (n,))
+        self.q_des = scene.q0.copy()  # a full configuration: pin.difference handles any joint type
+        if q_des is not None:
+            if self._q_index.size != n:
+                raise SceneError("q_des is per joint coordinate; give it only for arms of 1-DOF joints (nq = nv)")
+            self.q_des[self._q_index] = _validate.finite_array(q_des, "q_des", (n,))
         self._data = scene.model.createData()
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
@@ -41,8 +42,10 @@ class GravityCompensationPD:
         return self.kp, self.kd
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        g = pin.computeGeneralizedGravity(self.scene.model, self._data, q)[self.scene.actuated]
-        return g + self.kp * (self.q_des - q[self._q_index]) - self.kd * v[self.scene.actuated]
+        act = self.scene.actuated
+        g = pin.computeGeneralizedGravity(self.scene.model, self._data, q)[act]
+        error = pin.difference(self.scene.model, q, self.q_des)[act]
+        return g + self.kp * error - self.kd * v[act]
 
 
 class ComputedTorque:

@@ -27,6 +27,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _validate
+from .errors import SceneError
 from .grasp import grasp_matrix, squeeze_directions
 from .scene import Scene
 
@@ -136,7 +137,10 @@ class ObjectImpedance:
         self.Kr = np.broadcast_to(_validate.finite_array(stiffness[1], "object stiffness (angular)"), (3,)).copy()
         self.Dp = np.broadcast_to(_validate.finite_array(damping[0], "object damping (linear)"), (3,)).copy()
         self.Dr = np.broadcast_to(_validate.finite_array(damping[1], "object damping (angular)"), (3,)).copy()
-        self.joint_damping = float(joint_damping)
+        for name, value in (("stiffness", (self.Kp, self.Kr)), ("damping", (self.Dp, self.Dr))):
+            if np.any(np.concatenate(value) < 0.0):
+                raise SceneError(f"object {name} must be >= 0, got {np.concatenate(value).tolist()}")
+        self.joint_damping = _validate.non_negative(joint_damping, "joint_damping", "N·m·s/rad")
         self.null_stiffness, self.null_damping = float(null_stiffness), float(null_damping)
         data = self._data
         pin.framesForwardKinematics(model, data, scene.q0)
@@ -146,8 +150,6 @@ class ObjectImpedance:
         self.mass = scene.object.mass
         self._com = np.asarray(scene.object.com, dtype=float)
         self._links = [(lk.grasp_frame, lk.tip_frame, scene.arms[lk.arm]) for lk in scene.links]
-        self._q_index = np.concatenate([a.q_index for a in scene.arms])
-        self._q0 = scene.q0[self._q_index]
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
@@ -188,6 +190,7 @@ class ObjectImpedance:
         f = self.grasp_wrenches(t, q, v)
         pin.computeJointJacobians(model, data, q)
         tau_full = pin.nonLinearEffects(model, data, q, v)
+        posture = pin.difference(model, q, scene.q0)  # towards the initial posture, any joint type
         out = []
         for (g_id, t_id, arm), f_i in zip(self._links, f, strict=True):
             J = pin.getFrameJacobian(model, data, t_id, LWA)[:, arm.v_index]
@@ -198,9 +201,7 @@ class ObjectImpedance:
             tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * v[arm.v_index]
             J_pinv = np.linalg.pinv(J)
             N = np.eye(arm.v_index.size) - J.T @ J_pinv.T
-            q_arm = q[arm.q_index]
-            q0 = scene.q0[arm.q_index]
-            tau += N @ (self.null_stiffness * (q0 - q_arm) - self.null_damping * v[arm.v_index])
+            tau += N @ (self.null_stiffness * posture[arm.v_index] - self.null_damping * v[arm.v_index])
             out.append(tau)
         return np.concatenate(out)
 
@@ -209,19 +210,29 @@ class ObjectImpedance:
         n = self.scene.n_actuated
         return np.full(n, self.null_stiffness), np.full(n, self.joint_damping + self.null_damping)
 
-    def effective_mass(self, q: np.ndarray | None = None) -> float:
-        """Object mass + the arms' reflected translational inertia along world z at the grasps
-        [kg] (from each arm's operational-space inertia): the mass the impedance moves."""
+    def effective(self, direction: Any = (0.0, 0.0, 1.0), q: np.ndarray | None = None) -> tuple[float, float, float]:
+        """(mass [kg], damping [N·s/m], stiffness [N/m]) of the object's translation along
+        ``direction`` (world) as this controller shapes it, with stiff interconnections: the
+        object's mass plus each arm's reflected inertia at its tool, the designed damping plus the
+        reflected joint damping, the designed stiffness. The designed response is then
+        ``ω_n = √(k/m)`` and ``ζ = d / (2√(k m))``.
+
+        Each tool moves with the object (twist ``V = (u, 0)``): the arm adds ``Vᵀ Λ V`` to the
+        mass (``Λ = (J M⁻¹ Jᵀ)⁻¹``, its operational-space inertia) and ``b Vᵀ (J Jᵀ)⁻¹ V`` to
+        the damping (joint damping b along the least-norm joint motion; the posture task damps
+        the rest of the null space)."""
         model, data, scene = self.scene.model, self._data, self.scene
         q = scene.q0 if q is None else q
+        u = np.asarray(direction, dtype=float)
+        u = u / np.linalg.norm(u)
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         M = pin.crba(model, data, q)
-        m = self.mass
-        ez = np.array([0.0, 0.0, 1.0])
+        m, d = self.mass, float(u @ (self.Dp * u))
+        V = np.concatenate([u, np.zeros(3)])
         for _, t_id, arm in self._links:
-            Jv = pin.getFrameJacobian(model, data, t_id, LWA)[:3, arm.v_index]
+            J = pin.getFrameJacobian(model, data, t_id, LWA)[:, arm.v_index]
             M_arm = M[np.ix_(arm.v_index, arm.v_index)]
-            Lambda_inv = Jv @ np.linalg.solve(M_arm, Jv.T)
-            m += 1.0 / float(ez @ Lambda_inv @ ez)  # reflected mass along z (others free)
-        return m
+            m += float(V @ np.linalg.solve(J @ np.linalg.solve(M_arm, J.T), V))
+            d += self.joint_damping * float(V @ np.linalg.solve(J @ J.T, V))
+        return m, d, float(u @ (self.Kp * u))

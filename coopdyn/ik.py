@@ -40,7 +40,7 @@ def solve_ik(
     Raises:
         SceneError: if the pose is not reached within the limits (unreachable or too far).
     """
-    loaded = load_arm(arm)
+    loaded = load_arm(arm)  # kinematics only
     model = loaded.model
     data = model.createData()
     frame = model.getFrameId(loaded.tip_frame)
@@ -50,6 +50,10 @@ def solve_ik(
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     err = np.inf
     eye6, eye_n = np.eye(6), np.eye(model.nv)
+    # joint limits act on 1-DOF joints (revolute, prismatic); their q index per v index
+    bounded = np.array([j.nq == 1 and j.nv == 1 for j in model.joints[1:] for _ in range(j.nv)])
+    q_of_v = np.array([j.idx_q for j in model.joints[1:] for _ in range(j.nv)])
+    lo_v, hi_v = lo[q_of_v], hi[q_of_v]
     for _ in range(max_iter):
         pin.framesForwardKinematics(model, data, q)
         M = data.oMf[frame].actInv(base_target)
@@ -66,14 +70,16 @@ def solve_ik(
             J_pinv = Jf.T @ np.linalg.inv(Jf @ Jf.T + damping * eye6)
             # primary: the pose; secondary (null space): stay near the reference posture
             dq = -J_pinv @ error + (eye_n - J_pinv @ Jf) @ (posture * pin.difference(model, q, q_ref) * free)
-            blocked = free & (((q <= lo + 1e-9) & (dq < 0.0)) | ((q >= hi - 1e-9) & (dq > 0.0)))
+            qv = q[q_of_v]
+            blocked = free & bounded & (((qv <= lo_v + 1e-9) & (dq < 0.0)) | ((qv >= hi_v - 1e-9) & (dq > 0.0)))
             if not blocked.any():
                 break
             free &= ~blocked
         step = float(np.max(np.abs(dq)))
         if step > max_step:  # small steps follow the error down instead of jumping to another branch
             dq *= max_step / step
-        q = np.clip(pin.integrate(model, q, dq), lo, hi)
+        q = pin.integrate(model, q, dq)
+        q[q_of_v[bounded]] = np.clip(q[q_of_v[bounded]], lo_v[bounded], hi_v[bounded])
     raise SceneError(
         f"inverse kinematics of arm {arm.name!r} did not reach the target within the joint limits "
         f"(remaining error {err:.3g} after {max_iter} iterations): the pose is unreachable or far from q_init"

@@ -36,7 +36,15 @@ def linear_book(**params: Any) -> Scene:
         Arm("tip1", slider, tip_frame="tip", q0=[p.Y10], mass_overrides={"slide": p.m1}),
         Arm("tip2", slider, tip_frame="tip", q0=[p.Y30], mass_overrides={"slide": p.m2}),
     ]
-    obj = RigidObject(mass=p.m, inertia=np.eye(3) * 0.1, pose=[0.0, 0.0, p.Y20], joint="prismatic", axis="z", name="object")
+    obj = RigidObject(
+        mass=p.m,
+        inertia=np.eye(3) * 0.1,
+        pose=[0.0, 0.0, p.Y20],
+        joint="prismatic",
+        axis="z",
+        name="object",
+        size=(0.08, 0.08, 0.04),
+    )
     links = [
         Interconnection("tip1", stiffness=axial(p.c_p), damping=axial(p.d_p), grasp=[0.0, 0.0, -p.s1]),
         Interconnection("tip2", stiffness=axial(p.c_k), damping=axial(p.d_k), grasp=[0.0, 0.0, p.s3]),
@@ -112,13 +120,18 @@ def drives_controller(*drives: Drive) -> Callable[[float, np.ndarray, np.ndarray
     return controller
 
 
+#: Default (base separation [m], box height [m]) of :func:`facing_arms` per robot: poses
+#: where the tool reaches the box horizontally within the joint limits.
+PLACEMENT: dict[str | None, tuple[float, float]] = {"panda": (1.2, 0.7), "ur5": (1.0, 0.5), "kinova": (1.2, 0.6)}
+
+
 def facing_arms(
     robot: str = "panda",
     *,
     box_mass: float = 2.0,
     box_size: Any = (0.2, 0.2, 0.2),
-    separation: float = 1.2,
-    height: float = 0.7,
+    separation: float | None = None,
+    height: float | None = None,
     stiffness: float = 1e4,
     rotational_ratio: float = 0.01,
     damping: float = 0.0,
@@ -136,8 +149,8 @@ def facing_arms(
         robot: example-robot-data name or URDF path of both arms.
         box_mass: mass of the box [kg].
         box_size: edge lengths (x, y, z) of the box [m]; the tools touch its faces y = ±size_y/2.
-        separation: distance between the arm bases [m].
-        height: height of the box centre [m].
+        separation: distance between the arm bases [m]; default per robot (:data:`PLACEMENT`).
+        height: height of the box centre [m]; default per robot.
         stiffness: translational interconnection stiffness k [N/m]; rotational = ratio·k [N·m/rad].
         rotational_ratio: rotational/translational stiffness ratio [m²/rad].
         damping: interconnection damping as a ratio of stiffness [s] (D = damping·K).
@@ -146,10 +159,12 @@ def facing_arms(
     """
     from .ik import solve_ik
 
-    h = float(_validate.finite_array(height, "height", ()))
+    name = robot if isinstance(robot, str) and robot in PLACEMENT else None
+    default_sep, default_h = PLACEMENT[name] if name else (1.2, 0.7)
+    h = float(_validate.finite_array(default_h if height is None else height, "height", ()))
     box = RigidObject.box(box_mass, box_size, pose=[0.0, 0.0, h])
     half = float(np.asarray(box_size, dtype=float)[1]) / 2.0
-    sep = _validate.positive(separation, "separation", "m")
+    sep = _validate.positive(default_sep if separation is None else separation, "separation", "m")
     K = diagonal(stiffness, rotational_ratio * stiffness)
     D = _validate.non_negative(damping, "damping", "s") * K
     # In each base frame: tool at distance sep/2 − half ahead, approach (tool z) along base x, tool x up.

@@ -1,0 +1,324 @@
+"""Scene files: a whole run (scene, controller, task, integrator, duration, outputs) in TOML.
+
+Every table maps onto a coopdyn function or class, and every key onto one of its parameters;
+an unknown key, a value of the wrong type or a missing field raises :class:`SceneFileError`
+naming the file, the key, its line and what is valid. See ``examples/scenes/*.toml``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import re
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from . import scenes
+from .control import ComputedTorque, GravityCompensationPD
+from .cooperative import GripLiftOscillate, ObjectImpedance
+from .errors import CoopdynError, SceneError
+from .integrators import INTEGRATORS
+from .reference import BookParameters
+from .scene import Scene
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+class SceneFileError(SceneError):
+    """A scene file is malformed; the message names the file, the key and its line."""
+
+
+#: [scene] builder → function; [controller] type → class; [task] type → class
+BUILDERS: dict[str, Callable[..., Scene]] = {"facing_arms": scenes.facing_arms, "linear_book": scenes.linear_book}
+#: where a builder's keyword parameters are declared, when not in its own signature
+SIGNATURES: dict[str, Callable[..., Any]] = {"linear_book": BookParameters}
+CONTROLLERS: dict[str, Any] = {
+    "none": None,
+    "gravity_pd": GravityCompensationPD,
+    "computed_torque": ComputedTorque,
+    "object_impedance": ObjectImpedance,
+    "book_drives": "book_drives",
+}
+TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
+TABLES = ("scene", "controller", "task", "simulation", "output")
+SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int}
+OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
+
+
+@dataclass
+class Run:
+    """A loaded scene file, ready to simulate."""
+
+    path: Path
+    scene: Scene
+    controller: Any
+    task: Any
+    duration: float
+    integrator: str
+    dt: float
+    save_every: int
+    output: dict[str, Any] = field(default_factory=dict)
+
+
+class _File:
+    """The raw text, for line numbers in messages."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path, self.lines = path, text.splitlines()
+
+    def line(self, table: str | None, key: str | None = None) -> int | None:
+        """1-based line of ``key`` inside ``[table]`` (or of the table header)."""
+        start = 0
+        if table is not None:
+            header = re.compile(rf"^\s*\[\s*{re.escape(table)}\s*\]")
+            hits = [i for i, s in enumerate(self.lines) if header.match(s)]
+            if not hits:
+                return None
+            start = hits[0]
+            if key is None:
+                return start + 1
+        pattern = re.compile(rf"^\s*{re.escape(key or '')}\s*=")
+        for i in range(start + (1 if table else 0), len(self.lines)):
+            if table is not None and i > start and re.match(r"^\s*\[", self.lines[i]):
+                break
+            if pattern.match(self.lines[i]):
+                return i + 1
+        return None
+
+    def error(self, message: str, table: str | None, key: str | None = None) -> SceneFileError:
+        line = self.line(table, key)
+        where = f"{self.path}" + (f", line {line}" if line else "")
+        what = f"[{table}] {key}" if table and key else (f"[{table}]" if table else (key or ""))
+        return SceneFileError(f"{where}: {what}: {message}")
+
+
+def _check_type(f: _File, table: str, key: str, value: Any, kind: Any) -> Any:
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise f.error(f"must be a finite number, got {value!r}", table, key)
+        return float(value)
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise f.error(f"must be an integer, got {value!r}", table, key)
+        return value
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise f.error(f"must be true or false, got {value!r}", table, key)
+        return value
+    if kind is str and not isinstance(value, str):
+        raise f.error(f"must be a string, got {value!r}", table, key)
+    return value
+
+
+def _params(
+    f: _File, table: str, target: Callable[..., Any], values: Mapping[str, Any], skip: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """Check ``values`` against ``target``'s keyword parameters (names and, from the defaults, types)."""
+    sig = inspect.signature(target)
+    valid = {n: p for n, p in sig.parameters.items() if n not in skip and p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+    var_kw = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
+    out = {}
+    for key, value in values.items():
+        if key not in valid and not var_kw:
+            raise f.error(f"unknown key; valid keys: {sorted(valid)}", table, key)
+        default = valid[key].default if key in valid else inspect.Parameter.empty
+        if isinstance(default, bool):
+            value = _check_type(f, table, key, value, bool)
+        elif isinstance(default, int | float) and default is not None:
+            value = _check_type(f, table, key, value, float if isinstance(default, float) else int)
+        elif isinstance(default, str):
+            value = _check_type(f, table, key, value, str)
+        elif var_kw and isinstance(value, int | float) and not isinstance(value, bool):
+            value = _check_type(f, table, key, value, float)
+        out[key] = value
+    missing = [n for n, p in valid.items() if p.default is inspect.Parameter.empty and n not in out]
+    if missing:
+        raise f.error(f"missing required key(s) {missing}", table)
+    return out
+
+
+def load(path: str | Path) -> Run:
+    """Read and validate a scene file; build the scene, controller and task."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneFileError(f"scene file not found: {path}")
+    text = path.read_text()
+    f = _File(path, text)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneFileError(f"{path}: not valid TOML: {exc}") from exc
+    for table, value in doc.items():
+        if not isinstance(value, dict):
+            raise f.error(f"a top-level key; everything goes in one of the tables {list(TABLES)}", None, table)
+        if table not in TABLES:
+            raise f.error(f"unknown table; valid tables: {list(TABLES)}", table)
+    for table in ("scene", "simulation"):
+        if table not in doc:
+            raise SceneFileError(f"{path}: missing table [{table}]")
+
+    scene_doc = dict(doc["scene"])
+    builder_name = scene_doc.pop("builder", None)
+    if builder_name not in BUILDERS:
+        raise f.error(f"must be one of {sorted(BUILDERS)}, got {builder_name!r}", "scene", "builder")
+    builder = BUILDERS[builder_name]
+    kwargs = _params(f, "scene", SIGNATURES.get(builder_name, builder), scene_doc)
+    try:
+        scene = builder(**kwargs)
+    except CoopdynError as exc:
+        raise f.error(str(exc), "scene") from exc
+
+    sim = doc["simulation"]
+    for key in sim:
+        if key not in SIMULATION_KEYS:
+            raise f.error(f"unknown key; valid keys: {sorted(SIMULATION_KEYS)}", "simulation", key)
+    if "duration" not in sim:
+        raise f.error("missing required key 'duration' [s]", "simulation")
+    duration = _check_type(f, "simulation", "duration", sim["duration"], float)
+    dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)
+    integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "rk4"), str)
+    if integrator not in INTEGRATORS:
+        raise f.error(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)}", "simulation", "integrator")
+    save_every = _check_type(f, "simulation", "save_every", sim.get("save_every", max(1, round(0.01 / dt))), int)
+    if duration < 0 or dt <= 0 or save_every < 1:
+        raise f.error("need duration >= 0 [s], dt > 0 [s], save_every >= 1", "simulation")
+
+    task = _task(f, doc.get("task"), scene)
+    controller = _controller(f, doc.get("controller", {"type": "none"}), scene, task, builder_name, kwargs)
+
+    out_doc = doc.get("output", {})
+    output = {"folder": f"out/{path.stem}", "plot": True, "html": False, "npz": True, "csv": False}
+    for key, value in out_doc.items():
+        if key not in OUTPUT_KEYS:
+            raise f.error(f"unknown key; valid keys: {sorted(OUTPUT_KEYS)}", "output", key)
+        output[key] = _check_type(f, "output", key, value, OUTPUT_KEYS[key])
+    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
+
+
+def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
+    if doc is None:
+        return None
+    doc = dict(doc)
+    kind = doc.pop("type", None)
+    if kind not in TASKS:
+        raise f.error(f"must be one of {sorted(TASKS)}, got {kind!r}", "task", "type")
+    cls = TASKS[kind]
+    if cls is None:
+        return None
+    from .demo import object_start
+
+    kwargs = _params(f, "task", cls, doc, skip=("start",))
+    return cls(start=object_start(scene), **kwargs)
+
+
+def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str, scene_kwargs: dict[str, Any]) -> Any:
+    doc = dict(doc)
+    kind = doc.pop("type", None)
+    if kind not in CONTROLLERS:
+        raise f.error(f"must be one of {sorted(CONTROLLERS)}, got {kind!r}", "controller", "type")
+    target = CONTROLLERS[kind]
+    if target is None:
+        if doc:
+            raise f.error("takes no other keys", "controller")
+        return None
+    if target == "book_drives":
+        if builder != "linear_book":
+            raise f.error(
+                "'book_drives' drives the book's linear system: it needs [scene] builder = 'linear_book'", "controller", "type"
+            )
+        kwargs = _params(f, "controller", scenes.book_task, doc, skip=("params",))
+        return scenes.drives_controller(*scenes.book_task(BookParameters.from_kwargs(**scene_kwargs), **kwargs))
+    kwargs = _params(f, "controller", target, doc, skip=("scene", "reference"))
+    try:
+        if target is ObjectImpedance:
+            return ObjectImpedance(scene, task, **kwargs)
+        return target(scene, **kwargs)
+    except CoopdynError as exc:
+        raise f.error(str(exc), "controller") from exc
+
+
+def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True) -> Any:
+    """Simulate a loaded scene file and write its outputs; returns the Result."""
+    import numpy as np
+
+    from .plotting import book_figure, cooperative_figure
+    from .simulate import simulate
+
+    out = Path(folder or loaded.output["folder"])
+    res = simulate(
+        loaded.scene,
+        loaded.duration,
+        controller=loaded.controller,
+        integrator=loaded.integrator,
+        dt=loaded.dt,
+        save_every=loaded.save_every,
+        progress=progress,
+    )
+    written = []
+    out.mkdir(parents=True, exist_ok=True)
+    copy = out / "scene.toml"
+    tmp = copy.with_name(".scene.toml.tmp")
+    tmp.write_text(loaded.path.read_text())
+    tmp.replace(copy)
+    written.append(copy)
+    if loaded.output["npz"]:
+        written.append(res.save(out / "trajectory.npz"))
+    if loaded.output["csv"]:
+        written.append(res.save(out / "trajectory.csv"))
+    if loaded.output["plot"]:
+        png = out / "plot.png"
+        if loaded.scene.object.joint == "prismatic" and len(loaded.scene.links) == 2 and loaded.scene.nv == 3:
+            book_figure(res, None, png)
+        else:
+            cooperative_figure(res, loaded.task, png)
+        written.append(png)
+    if loaded.output["html"]:
+        from .viewer import export_html
+
+        written.append(export_html(res, out / "animation.html"))
+    print(f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s")
+    print(
+        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS"
+    )
+    if loaded.task is not None:
+        desired = np.array([loaded.task(t).position for t in res.t])
+        err = np.linalg.norm(res.object_position() - desired, axis=1)
+        print(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
+    if len(loaded.scene.links) > 1:
+        print(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
+    for w in written:
+        print(f"  wrote {w}")
+    return res
+
+
+def load_result(loaded: Run, path: str | Path | None = None) -> Any:
+    """The Result saved by :func:`run` for this scene file (``trajectory.npz``)."""
+    import numpy as np
+
+    from .simulate import Result
+
+    path = Path(path) if path is not None else Path(loaded.output["folder"]) / "trajectory.npz"
+    if not path.is_file():
+        raise SceneFileError(f"no saved trajectory at {path}: run `coopdyn simulate {loaded.path}` first (with npz = true)")
+    with np.load(path) as z:
+        if z["q"].shape[1] != loaded.scene.nq:
+            raise SceneFileError(
+                f"{path} holds configurations of size {z['q'].shape[1]}, the scene of {loaded.path} has nq = {loaded.scene.nq}"
+            )
+        return Result(
+            scene=loaded.scene,
+            t=z["t"],
+            q=z["q"],
+            v=z["v"],
+            tau=z["tau"],
+            integrator=str(z["integrator"]),
+            dt=float(z["dt"]),
+            n_rhs=0,
+            cpu_time=0.0,
+        )

@@ -1,0 +1,254 @@
+"""meshcat visualisation: a self-contained HTML animation of a result (arms with their URDF
+meshes, the object, interconnection force arrows) and live viewing in a meshcat server.
+
+The HTML is written without any server: a recording stand-in for meshcat's connection keeps the
+scene tree and packs it with meshcat's own viewer script, as ``meshcat-server`` does for
+``Visualizer.static_html()``. The file plays offline in a browser.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .arm import load_arm
+from .errors import CoopdynError
+from .scene import Scene
+from .simulate import Result
+
+FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
+
+
+def _meshcat() -> Any:
+    try:
+        import meshcat
+        import meshcat.geometry
+    except ImportError as exc:  # pragma: no cover - a dependency of coopdyn
+        raise CoopdynError("visualisation needs meshcat: pip install meshcat") from exc
+    return meshcat
+
+
+class RecordingWindow:
+    """Stands in for meshcat's server connection: records the scene tree (objects, transforms,
+    properties, animation) so that :meth:`get_scene` can write a standalone HTML page."""
+
+    def __init__(self) -> None:
+        from meshcat.servers.tree import SceneTree
+
+        self.tree = SceneTree()
+
+    def send(self, command: Any) -> None:
+        import umsgpack
+        from meshcat.servers.tree import SceneTree, find_node
+
+        data = command.lower()
+        path = [p for p in data["path"].split("/") if p]
+        packed = umsgpack.packb(data)
+        kind = data["type"]
+        if kind == "delete":
+            if path:
+                parent = find_node(self.tree, path[:-1])
+                if path[-1] in parent:
+                    del parent[path[-1]]
+            else:
+                self.tree = SceneTree()
+            return
+        node = find_node(self.tree, path)
+        if kind == "set_object":
+            node.object, node.properties = packed, []
+        elif kind == "set_transform":
+            node.transform = packed
+        elif kind == "set_property":
+            node.properties.append(packed)
+        elif kind == "set_animation":
+            node.animation = packed
+
+    def get_scene(self) -> str:
+        """The recorded scene as a standalone HTML page (meshcat's viewer script inlined)."""
+        from meshcat.servers.tree import walk
+        from meshcat.servers.zmqserver import VIEWER_ROOT
+
+        commands: list[bytes] = []
+        for node in walk(self.tree):
+            blobs = [node.object, *node.properties, node.transform, node.animation]
+            commands.extend(b for b in blobs if b is not None)
+        js = Path(VIEWER_ROOT, "main.min.js").read_text()
+        # decode synchronously, in order (fetch() of data URLs may resolve out of order)
+        calls = "\n".join(f'viewer.handle_command_bytearray(b64("{base64.b64encode(c).decode()}"));' for c in commands)
+        return _HTML.format(js=js, commands=calls)
+
+    def url(self) -> str:
+        return "(recording: no server)"
+
+
+_HTML = """<!DOCTYPE html>
+<html>
+<head><meta charset="utf-8"><title>coopdyn</title>
+<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}</style></head>
+<body>
+<div id="meshcat-pane"></div>
+<script>{js}</script>
+<script>
+function b64(s) {{
+  const bin = atob(s); const out = new Uint8Array(bin.length);
+  for (let i = 0; i < bin.length; i++) out[i] = bin.charCodeAt(i);
+  return out;
+}}
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+{commands}
+</script>
+</body>
+</html>
+"""
+
+
+def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
+    """Display geometry of the whole scene on ``scene.model``: every arm's URDF ``meshes``
+    ("collision": compact, the default; "visual": the full meshes, ~30 MB of HTML for two
+    Pandas) and a box for the object (``RigidObject.size``, or a 5 cm cube)."""
+    import coal
+
+    geom = pin.GeometryModel()
+    model = scene.model
+    for spec, info in zip(scene.arm_specs, scene.arms, strict=True):
+        la = load_arm(spec, meshes=meshes)
+        assert la.visual is not None
+        base = la.base
+        for g in la.visual.geometryObjects:
+            joint_name = la.model.names[g.parentJoint]
+            frame_name = la.model.frames[g.parentFrame].name
+            copy = pin.GeometryObject(g)
+            if g.parentJoint == 0:  # fixed to the arm's base
+                copy.parentJoint, copy.placement = 0, base * g.placement
+            else:
+                copy.parentJoint = model.getJointId(joint_name)
+            copy.parentFrame = model.getFrameId(frame_name) if model.existFrame(frame_name) else 0
+            geom.addGeometryObject(copy)
+        del info
+    size = scene.object.size if scene.object.size is not None else (0.05, 0.05, 0.05)
+    box = pin.GeometryObject(
+        f"{scene.object.name}/box", scene.object_joint, scene.object_frame, pin.SE3.Identity(), coal.Box(*size)
+    )
+    box.meshColor = np.array([0.85, 0.55, 0.2, 1.0])
+    geom.addGeometryObject(box)
+    return geom
+
+
+class _Animator:
+    """Loads a scene into a meshcat visualizer and writes poses of one result frame."""
+
+    def __init__(self, scene: Scene, viewer: Any, meshes: str = "collision", root: str = "coopdyn") -> None:
+        meshcat = _meshcat()
+        from pinocchio.visualize import MeshcatVisualizer
+
+        self.scene = scene
+        self.geom = visual_model(scene, meshes)
+        self.viz = MeshcatVisualizer(scene.model, None, self.geom)
+        self.viz.initViewer(viewer=viewer)
+        self.viz.loadViewerModel(rootNodeName=root)
+        self.viewer = viewer
+        self.data = scene.model.createData()
+        self.gdata = self.geom.createData()
+        self.arrows = [f"{root}/forces/link{i}" for i in range(len(scene.links))]
+        for name in self.arrows:
+            red = meshcat.geometry.MeshLambertMaterial(color=0xD62728)
+            viewer[name].set_object(meshcat.geometry.Cylinder(1.0, 0.006), red)
+        self.nodes = [
+            (self.viz.getViewerNodeName(g, pin.GeometryType.VISUAL), i, g.meshScale)
+            for i, g in enumerate(self.geom.geometryObjects)
+        ]
+
+    def poses(self, q: np.ndarray, wrenches: np.ndarray) -> Iterator[tuple[str, np.ndarray]]:
+        """(node, 4x4 transform) of every visual and force arrow at configuration q."""
+        model, data = self.scene.model, self.data
+        pin.framesForwardKinematics(model, data, q)
+        pin.updateGeometryPlacements(model, data, self.geom, self.gdata)
+        for name, i, scale in self.nodes:
+            T = self.gdata.oMg[i].homogeneous.copy()
+            T[:3, :3] = T[:3, :3] @ np.diag(scale)
+            yield name, T
+        for name, lk, w in zip(self.arrows, self.scene.links, wrenches, strict=True):
+            yield name, _arrow(data.oMf[lk.grasp_frame].translation, w[:3] * FORCE_SCALE)
+
+
+def _arrow(origin: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Transform of meshcat's unit cylinder (along y, centred) into a bar from origin along vec."""
+    length = float(np.linalg.norm(vec))
+    T = np.eye(4)
+    if length < 1e-9:
+        T[:3, :3] *= 1e-6
+        T[:3, 3] = origin
+        return T
+    y = vec / length
+    a = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(y, a)
+    x /= np.linalg.norm(x)
+    z = np.cross(x, y)
+    T[:3, :3] = np.column_stack([x, y * length, z])
+    T[:3, 3] = origin + 0.5 * vec
+    return T
+
+
+def _frames(result: Result, fps: float) -> np.ndarray:
+    times = np.arange(0.0, result.t[-1] + 1e-12, 1.0 / fps)
+    return np.unique(np.clip(np.searchsorted(result.t, times), 0, len(result.t) - 1))
+
+
+def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30.0, meshes: str = "collision") -> Path:
+    """Write a self-contained HTML animation of ``result`` (plays offline in a browser),
+    atomically; ``meshes`` as in :func:`visual_model`."""
+    meshcat = _meshcat()
+    from meshcat.animation import Animation
+
+    window = RecordingWindow()
+    vis = meshcat.Visualizer(window=window)
+    animator = _Animator(result.scene, vis, meshes)
+    idx = _frames(result, fps)
+    wrenches = result.wrenches()
+    for name, T in animator.poses(result.q[0], wrenches[0]):
+        vis[name].set_transform(T)
+    anim = Animation(default_framerate=fps)
+    for frame, k in enumerate(idx):
+        with anim.at_frame(vis, frame) as f:
+            for name, T in animator.poses(result.q[k], wrenches[k]):
+                f[name].set_transform(T)
+    vis.set_animation(anim, play=True, repetitions=1000)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(window.get_scene())
+    os.replace(tmp, path)
+    return path
+
+
+def view(
+    result: Result, *, fps: float = 30.0, loops: int | None = None, zmq_url: str | None = None, meshes: str = "visual"
+) -> str:
+    """Play ``result`` in a live meshcat viewer (starts a local meshcat server unless ``zmq_url``
+    is given) and return the viewer's URL. Plays ``loops`` times (``None``: until Ctrl-C)."""
+    meshcat = _meshcat()
+    vis = meshcat.Visualizer(zmq_url=zmq_url)
+    animator = _Animator(result.scene, vis, meshes)
+    idx = _frames(result, fps)
+    wrenches = result.wrenches()
+    url = vis.url()
+    print(f"meshcat viewer at {url} (Ctrl-C to stop)", flush=True)
+    n = 0
+    try:
+        while loops is None or n < loops:
+            for k in idx:
+                t0 = time.perf_counter()
+                for name, T in animator.poses(result.q[k], wrenches[k]):
+                    vis[name].set_transform(T)
+                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
+            n += 1
+    except KeyboardInterrupt:
+        pass
+    return str(url)

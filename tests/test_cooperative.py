@@ -1,0 +1,109 @@
+"""Cooperative control: load distribution, internal force, designed object impedance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import curve_fit
+
+import coopdyn as cd
+from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.demo import object_start
+from coopdyn.grasp import distribute, grasp_matrix, split, squeeze_force
+
+
+@pytest.mark.parametrize("n_grasps", [2, 3, 4])
+@pytest.mark.parametrize("seed", range(5))
+def test_non_squeezing_distribution_has_no_internal_force(n_grasps: int, seed: int) -> None:
+    """Random grasp geometry and object wrench: G⁺F reproduces F, has no internal part, and no
+    pair of grasps pushes against each other along the line joining them."""
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(n_grasps, 3)) * 0.3
+    F = rng.normal(size=6) * np.array([20, 20, 20, 3, 3, 3])
+    G = grasp_matrix(points)
+    f = distribute(G, F)
+    np.testing.assert_allclose(G @ f.reshape(-1), F, atol=1e-12)
+    np.testing.assert_allclose(split(G, f).internal, 0.0, atol=1e-12)
+    for i in range(n_grasps):
+        for j in range(i + 1, n_grasps):
+            e = (points[j] - points[i]) / np.linalg.norm(points[j] - points[i])
+            assert abs((f[i, :3] - f[j, :3]) @ e) < 1e-12
+    np.testing.assert_allclose(squeeze_force(points, f), 0.0, atol=1e-12)
+
+
+def test_internal_part_exerts_no_resultant() -> None:
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(3, 3))
+    G = grasp_matrix(points)
+    parts = split(G, rng.normal(size=(3, 6)))
+    np.testing.assert_allclose(G @ parts.internal.reshape(-1), 0.0, atol=1e-12)
+
+
+def test_commanded_internal_force_is_reached() -> None:
+    """Grip with 20 N and hold: each interconnection's squeeze settles within 1 % of it."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    task = GripLiftOscillate(start=object_start(scene), squeeze=20.0, lift=0.0, amplitude=0.0)
+    res = cd.simulate(scene, 2.0, controller=ObjectImpedance(scene, task), integrator="implicit_euler", dt=1e-3, save_every=100)
+    np.testing.assert_allclose(res.squeeze()[-1], 20.0, rtol=0.01)
+    moving, internal = res.wrench_split()
+    np.testing.assert_allclose(
+        moving[-1].sum(axis=0)[:3], scene.object.mass * -scene.gravity, rtol=1e-3, atol=1e-9
+    )  # carries the weight
+    assert np.linalg.norm(internal[-1, 0, :3]) == pytest.approx(20.0, rel=0.01)
+
+
+def _step_response(t: np.ndarray, z: np.ndarray, wn0: float, zeta0: float) -> tuple[float, float]:
+    """(ω_n, ζ) of a step response, by a least-squares fit of
+    z(t) = z∞ + A e^{−ζω_n t} cos(ω_d t + φ) (initial guess from the design)."""
+
+    def model(s: np.ndarray, z_inf: float, a: float, wn: float, zeta: float, phi: float) -> np.ndarray:
+        return z_inf + a * np.exp(-zeta * wn * s) * np.cos(wn * np.sqrt(1 - zeta**2) * s + phi)
+
+    s = t - t[0]
+    guess = (z[-1], z[0] - z[-1], wn0, zeta0, 0.0)
+    params, _ = curve_fit(model, s, z, p0=guess, maxfev=20000)
+    return float(params[2]), float(params[3])
+
+
+def test_object_answers_a_step_wrench_with_the_designed_dynamics() -> None:
+    """Stiff interconnections (1e6 N/m): a 5 N step on the box along z rings at the designed
+    ω_n = √(k/m_eff) with the designed ζ, each within 5 %."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e6)
+    k, zeta = 4000.0, 0.3  # object stiffness [N/m], damping ratio
+    probe = ObjectImpedance(scene, stiffness=(k, 100.0), damping=(0.0, 6.0))
+    m_eff, d_arms, _ = probe.effective()
+    ctrl = ObjectImpedance(scene, stiffness=(k, 100.0), damping=(2 * zeta * np.sqrt(k * m_eff) - d_arms, 6.0))
+    m, d, kk = ctrl.effective()
+    wn_design, zeta_design = np.sqrt(kk / m), d / (2 * np.sqrt(kk * m))
+    assert zeta_design == pytest.approx(zeta)
+
+    def step(t: float) -> np.ndarray:
+        return np.array([0.0, 0.0, 5.0 if t >= 0.1 else 0.0, 0.0, 0.0, 0.0])
+
+    res = cd.simulate(scene, 1.0, controller=ctrl, integrator="implicit_euler", dt=2e-4, save_every=5, object_wrench=step)
+    after = res.t >= 0.1
+    wn, z = _step_response(res.t[after], res.object_position()[after, 2], wn_design, zeta_design)
+    assert wn == pytest.approx(wn_design, rel=0.05)
+    assert z == pytest.approx(zeta_design, rel=0.05)
+    rise = res.object_position()[-1, 2] - res.object_position()[0, 2]
+    assert rise == pytest.approx(5.0 / k, rel=0.05)  # static compliance 1/k
+
+
+def test_object_impedance_refuses_negative_gains(pandas: cd.Scene) -> None:
+    with pytest.raises(cd.SceneError, match=r"object damping must be >= 0"):
+        ObjectImpedance(pandas, damping=(-1.0, 6.0))
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kinova"])
+def test_facing_arms_for_other_robots(robot: str) -> None:
+    """Any example-robot-data arm: mirror-symmetric IK solution, tools on the box faces."""
+    scene = cd.scenes.facing_arms(robot)
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    left, right = (data.oMf[a.tip_frame].translation for a in scene.arms)
+    box = data.oMf[scene.object_frame].translation
+    np.testing.assert_allclose(left, box - np.array([0.0, 0.1, 0.0]), atol=1e-8)
+    np.testing.assert_allclose(right, box + np.array([0.0, 0.1, 0.0]), atol=1e-8)
+    res = cd.simulate(scene, 0.05, controller=cd.control.GravityCompensationPD(scene), integrator="implicit_euler", dt=1e-3)
+    assert np.all(np.isfinite(res.q))

@@ -1,0 +1,127 @@
+"""What users look at: the demo, plots, the HTML animation in a real browser, scene files."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+import coopdyn as cd
+from coopdyn.__main__ import main
+from coopdyn.scenefile import SceneFileError, load, load_result
+from coopdyn.viewer import export_html
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
+
+
+def test_demo_writes_everything(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--out", str(tmp_path), "--t-final", "0.3"]) == 0
+    out = capsys.readouterr().out
+    for text in ("object tracking error: max", "internal force: peak", "real-time factor", "output folder:"):
+        assert text in out
+    for name in ("trajectory.npz", "trajectory.csv", "demo.png", "demo.html"):
+        assert (tmp_path / name).stat().st_size > 1000
+    with np.load(tmp_path / "trajectory.npz") as z:
+        assert z["q"].shape == (31, 21) and z["wrenches"].shape == (31, 12)
+    header = (tmp_path / "trajectory.csv").read_text().splitlines()[0]
+    assert header.startswith("t,q[0],") and "tau[left/panda_joint1]" in header and header.endswith("link1_mz")
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+@pytest.mark.skipif(_chromium() is None, reason="needs Chromium (Debian package 'chromium'; .ci/run installs it)")
+def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd.Scene) -> None:
+    """Headless Chromium renders the exported file: the arms (light grey) and the box (orange)
+    are on the screenshot, not a blank page."""
+    res = cd.simulate(pandas, 0.2, integrator="implicit_euler", dt=1e-3, save_every=20)
+    html = export_html(res, tmp_path / "anim.html")
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [
+            str(_chromium()), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+            "--window-size=800,600", "--virtual-time-budget=8000", f"--screenshot={shot}", html.resolve().as_uri(),
+        ],
+        check=True, timeout=120, capture_output=True,
+    )  # fmt: skip
+    img = matplotlib.image.imread(shot)[..., :3]
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    orange = (r > 0.6) & (g > 0.3) & (g < 0.7) & (b < 0.35)
+    grey = (np.abs(r - g) < 0.05) & (np.abs(g - b) < 0.05) & (r > 0.6)
+    assert orange.sum() > 200, "the box is not on the screenshot"
+    assert grey.sum() > 2000, "the arms are not on the screenshot"
+
+
+@pytest.mark.parametrize("name", ["two_pandas.toml", "linear_book.toml"])
+def test_example_scene_files_load(name: str) -> None:
+    run = load(EXAMPLES / name)
+    assert run.duration > 0 and run.scene.nv > 0
+
+
+def test_simulate_a_scene_file_and_view_its_result(tmp_path: Path) -> None:
+    scene_file = tmp_path / "book.toml"
+    scene_file.write_text((EXAMPLES / "linear_book.toml").read_text().replace("duration = 3.0", "duration = 0.2"))
+    assert main(["simulate", str(scene_file), "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "plot.png").is_file() and (tmp_path / "out" / "scene.toml").is_file()
+    run = load(scene_file)
+    result = load_result(run, tmp_path / "out" / "trajectory.npz")
+    assert result.q.shape[1] == run.scene.nq
+    assert (
+        main(["view", str(scene_file), "--result", str(tmp_path / "out" / "trajectory.npz"), "--html", str(tmp_path / "v.html")])
+        == 0
+    )
+
+
+GOOD = """
+[scene]
+builder = "linear_book"
+m = 25.0
+
+[simulation]
+duration = 0.1
+dt = 1e-3
+"""
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (GOOD.replace("m = 25.0", "mass = 25.0"), r"bad.toml, line 4: \[scene\] mass: unknown key; valid keys: \['Y10'"),
+        (GOOD.replace("m = 25.0", 'm = "heavy"'), r"line 4: \[scene\] m: must be a finite number, got 'heavy'"),
+        (GOOD.replace("duration = 0.1\n", ""), r"\[simulation\]: missing required key 'duration' \[s\]"),
+        (
+            GOOD.replace("dt = 1e-3", "dt = 1e-3\nstep = 2"),
+            r"line 9: \[simulation\] step: unknown key; valid keys: \['dt', 'duration'",
+        ),
+        (GOOD + "\n[physics]\ng = 9.81\n", r"line 10: \[physics\]: unknown table; valid tables: \['scene', 'controller'"),
+        (
+            GOOD.replace('builder = "linear_book"', 'builder = "book"'),
+            r"\[scene\] builder: must be one of \['facing_arms', 'linear_book'\]",
+        ),
+        (GOOD + '\n[controller]\ntype = "pid"\n', r"\[controller\] type: must be one of \['book_drives', 'computed_torque'"),
+        (
+            GOOD.replace("dt = 1e-3", 'dt = 1e-3\nintegrator = "rk45"'),
+            r"\[simulation\] integrator: unknown integrator 'rk45'; valid: \[",
+        ),
+        (GOOD.replace("m = 25.0", "m = -1.0"), r"\[scene\]: linear book parameter m must be > 0 \[kg\], got -1.0"),
+        ("[scene\nbuilder =", r"bad.toml: not valid TOML"),
+        (GOOD.replace("[scene]", "[scene]\n[simulation]"), r"bad.toml: not valid TOML"),
+    ],
+)
+def test_scene_file_errors_name_the_file_key_and_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SceneFileError, match=message):
+        load(path)
+
+
+def test_missing_scene_file(tmp_path: Path) -> None:
+    with pytest.raises(SceneFileError, match=r"scene file not found: .*nope.toml"):
+        load(tmp_path / "nope.toml")
