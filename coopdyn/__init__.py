@@ -4,7 +4,15 @@ from . import control, integrators, reference, scenes
 from .arm import Arm
 from .body import RigidObject
 from .dynamics import Dynamics, Energy
-from .errors import ControllerError, CoopdynError, DivergenceError, ModelLoadError, SceneError, SimulationError
+from .errors import (
+    ControllerError,
+    CoopdynError,
+    DivergenceError,
+    ModelLoadError,
+    SceneError,
+    SimulationError,
+    SimulationInterrupted,
+)
 from .interconnection import Interconnection, axial, diagonal
 from .monitor import EnergyBalanceError, EnergyBalanceWarning
 from .scene import Scene
@@ -28,6 +36,7 @@ __all__ = [
     "Scene",
     "SceneError",
     "SimulationError",
+    "SimulationInterrupted",
     "advise",
     "axial",
     "control",

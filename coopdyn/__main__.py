@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CoopdynError
+from .errors import CoopdynError, SimulationInterrupted
 
 
 def _book(args: argparse.Namespace) -> int:
@@ -113,6 +113,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CoopdynError as exc:
         print(f"coopdyn: error: {exc}", file=sys.stderr)
         return 2
+    except SimulationInterrupted as exc:
+        print(f"coopdyn: {exc}", file=sys.stderr)
+        return 130
     print(f"done in {time.perf_counter() - t0:.1f} s")
     return code
 

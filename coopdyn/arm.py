@@ -152,13 +152,28 @@ def _joint_id(model: pin.Model, joint: str, what: str) -> int:
 def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     """Load, reduce, re-inertia and prefix the model of ``arm`` (and, with ``meshes`` =
     "visual" or "collision", that geometry for display)."""
+    if not isinstance(arm, Arm):
+        raise SceneError(f"expected a coopdyn.Arm, got {type(arm).__name__}")
     if not isinstance(arm.name, str) or not arm.name or "/" in arm.name:
         raise SceneError(f"arm name must be a non-empty string without '/', got {arm.name!r}")
+    what = f"arm {arm.name!r}"
+    if not isinstance(arm.robot, str | os.PathLike) or not os.fspath(arm.robot):
+        raise SceneError(f"{what}: robot must be a URDF path or an example-robot-data name, got {arm.robot!r}")
+    if arm.tip_frame is not None and not isinstance(arm.tip_frame, str):
+        raise SceneError(f"{what}: tip_frame must be a frame name (string), got {arm.tip_frame!r}")
+    locked_spec = arm.locked_joints
+    if locked_spec is not None:
+        names = list(locked_spec) if isinstance(locked_spec, Mapping | list | tuple) else None
+        if names is None or not all(isinstance(n, str) for n in names):
+            raise SceneError(
+                f"{what}: locked_joints must be a list of joint names or a mapping name -> value, got {locked_spec!r}"
+            )
+    if not isinstance(arm.mass_overrides, Mapping) or not all(isinstance(k, str) for k in arm.mass_overrides):
+        raise SceneError(f"{what}: mass_overrides must be a mapping joint name -> mass [kg], got {arm.mass_overrides!r}")
     model, q_ref, visual = _load_urdf(arm.robot, meshes)
     if model.nq == 0:
         raise ModelLoadError(f"arm {arm.name!r}: the URDF {arm.robot} has no movable joint")
     q_full = _inside_limits(model, pin.neutral(model)) if q_ref is None else q_ref
-    what = f"arm {arm.name!r}"
 
     # Locked joints: remove them from the model, held at their value.
     robot_name = _robot_name(arm.robot)

@@ -11,8 +11,9 @@ import numpy as np
 
 from . import scenes
 from .cooperative import GripLiftOscillate, ObjectImpedance
+from .errors import DivergenceError, SimulationInterrupted
 from .plotting import cooperative_figure
-from .simulate import simulate
+from .simulate import save_partial, simulate
 
 STIFFNESS = 1e4  #: interconnection stiffness [N/m]; rotational 1e2 [N·m/rad]
 DAMPING = 0.002  #: interconnection damping / stiffness [s]
@@ -43,18 +44,22 @@ def run_demo(
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
     controller = ObjectImpedance(scene, task)
     wall0 = time.perf_counter()
-    res = simulate(
-        scene,
-        t_final,
-        controller=controller,
-        integrator=integrator,
-        dt=dt,
-        save_every=max(1, round(0.01 / dt)),  # 100 samples per second
-        progress=progress,
-    )
+    try:
+        res = simulate(
+            scene,
+            t_final,
+            controller=controller,
+            integrator=integrator,
+            dt=dt,
+            save_every=max(1, round(0.01 / dt)),  # 100 samples per second
+            progress=progress,
+        )
+    except (DivergenceError, SimulationInterrupted) as exc:
+        for path in save_partial(exc, out_dir):
+            print(f"  wrote {path} (what the run had)")
+        raise
     wall = time.perf_counter() - wall0
-    desired = np.array([task(t).position for t in res.t])
-    tracking = np.linalg.norm(res.object_position() - desired, axis=1)
+    tracking = res.tracking_error(task)
     squeeze = res.squeeze()
     summary = {
         "duration_s": t_final,

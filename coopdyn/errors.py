@@ -32,6 +32,15 @@ class DivergenceError(SimulationError):
         self.advice = advice
 
 
+class SimulationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a simulation. A ``KeyboardInterrupt`` (it stops a script like one), with
+    the trajectory computed so far in ``result``."""
+
+    def __init__(self, message: str, *, result: object = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
 class ControllerError(SimulationError):
     """A controller returned something that is not a finite torque vector of the right length."""
 

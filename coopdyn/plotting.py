@@ -13,12 +13,10 @@ from .simulate import Result
 
 
 def _pyplot() -> Any:
-    import matplotlib
+    from ._optional import require
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    require("matplotlib", "plotting", "matplotlib").use("Agg")
+    return require("matplotlib.pyplot", "plotting", "matplotlib")
 
 
 def book_figure(result: Result, exact: BookSolution | None = None, path: str | os.PathLike[str] | None = None) -> Any:

@@ -77,6 +77,8 @@ class Scene:
             if not isinstance(a, Arm):
                 raise SceneError(f"arms must be coopdyn.Arm instances, got {type(a).__name__}")
         names = [a.name for a in arms]
+        if not all(isinstance(n, str) and n for n in names):
+            raise SceneError(f"arm names must be non-empty strings, got {names!r}")
         if len(set(names)) != len(names):
             raise SceneError(f"arm names must be unique, got {names}")
         if not isinstance(obj, RigidObject):
@@ -112,7 +114,7 @@ class Scene:
         for k, ic in enumerate(interconnections):
             if not isinstance(ic, Interconnection):
                 raise SceneError(f"interconnections[{k}] must be a coopdyn.Interconnection, got {type(ic).__name__}")
-            if ic.arm not in names:
+            if not isinstance(ic.arm, str) or ic.arm not in names:
                 hint = did_you_mean(ic.arm, names)
                 raise SceneError(f"interconnections[{k}] names arm {ic.arm!r}, which is not in the scene.{hint} Arms: {names}")
             K, D = ic.matrices()

@@ -165,7 +165,7 @@ def load(path: str | Path) -> Run:
 
     scene_doc = dict(doc["scene"])
     builder_name = scene_doc.pop("builder", None)
-    if builder_name not in BUILDERS:
+    if not isinstance(builder_name, str) or builder_name not in BUILDERS:
         raise f.error(f"must be one of {sorted(BUILDERS)}, got {builder_name!r}", "scene", "builder")
     builder = BUILDERS[builder_name]
     kwargs = _params(f, "scene", SIGNATURES.get(builder_name, builder), scene_doc)
@@ -206,7 +206,7 @@ def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
         return None
     doc = dict(doc)
     kind = doc.pop("type", None)
-    if kind not in TASKS:
+    if not isinstance(kind, str) or kind not in TASKS:
         raise f.error(f"must be one of {sorted(TASKS)}, got {kind!r}", "task", "type")
     cls = TASKS[kind]
     if cls is None:
@@ -220,7 +220,7 @@ def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
 def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str, scene_kwargs: dict[str, Any]) -> Any:
     doc = dict(doc)
     kind = doc.pop("type", None)
-    if kind not in CONTROLLERS:
+    if not isinstance(kind, str) or kind not in CONTROLLERS:
         raise f.error(f"must be one of {sorted(CONTROLLERS)}, got {kind!r}", "controller", "type")
     target = CONTROLLERS[kind]
     if target is None:
@@ -247,19 +247,25 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
     """Simulate a loaded scene file and write its outputs; returns the Result."""
     import numpy as np
 
+    from .errors import DivergenceError, SimulationInterrupted
     from .plotting import book_figure, cooperative_figure
-    from .simulate import simulate
+    from .simulate import save_partial, simulate
 
     out = Path(folder or loaded.output["folder"])
-    res = simulate(
-        loaded.scene,
-        loaded.duration,
-        controller=loaded.controller,
-        integrator=loaded.integrator,
-        dt=loaded.dt,
-        save_every=loaded.save_every,
-        progress=progress,
-    )
+    try:
+        res = simulate(
+            loaded.scene,
+            loaded.duration,
+            controller=loaded.controller,
+            integrator=loaded.integrator,
+            dt=loaded.dt,
+            save_every=loaded.save_every,
+            progress=progress,
+        )
+    except (DivergenceError, SimulationInterrupted) as exc:
+        for path in save_partial(exc, out):
+            print(f"  wrote {path} (what the run had)")
+        raise
     written = []
     out.mkdir(parents=True, exist_ok=True)
     copy = out / "scene.toml"

@@ -11,6 +11,7 @@ import pinocchio as pin
 from . import _validate
 from .arm import Arm
 from .body import RigidObject
+from .errors import SceneError
 from .interconnection import Interconnection, axial, diagonal
 from .reference import BookParameters, Drive, Segment
 from .resources import urdf_path
@@ -137,13 +138,18 @@ def facing_arms(
     damping: float = 0.0,
     joint_damping: float | str = 0.0,
     gravity: Any = (0.0, 0.0, -9.81),
+    n_arms: int = 2,
+    tip_frame: str | None = None,
 ) -> Scene:
-    """Two identical arms facing each other along world y, gripping a box between their tools.
+    """Identical arms facing each other around a box, gripping it with their tools.
 
-    The arms' bases are at y = ∓separation/2 (left at −, right at +), both looking at the world
-    origin; inverse kinematics puts each tool frame on a side face of the box, approach axis
-    (tool z) pointing at the box centre, at ``height`` [m]. The interconnections are unloaded
-    at the initial state; the scene is mirror symmetric about the plane y = 0.
+    Two arms (the default) stand at y = ∓separation/2 (``left`` at −, ``right`` at +), looking at
+    the world origin; N arms (``arm0`` … ``armN-1``) stand on the circle of diameter
+    ``separation`` at angles −90° + k·360°/N. Inverse kinematics (one solution, reused by
+    symmetry) puts each tool on the circle of radius size_y/2 around the box centre — for two
+    arms the box faces y = ±size_y/2 — approach axis (tool z) pointing at the centre, at
+    ``height`` [m]. The interconnections are unloaded at the initial state; the scene is
+    symmetric (mirror for two arms, N-fold rotation otherwise).
 
     Args:
         robot: example-robot-data name or URDF path of both arms.
@@ -156,8 +162,13 @@ def facing_arms(
         damping: interconnection damping as a ratio of stiffness [s] (D = damping·K).
         joint_damping: viscous joint damping of both arms (see :class:`coopdyn.Arm`).
         gravity: (3,) [m/s²].
+        n_arms: number of arms, ≥ 1.
+        tip_frame: tool frame of the robot (default: the robot's known tool frame).
     """
     from .ik import solve_ik
+
+    if isinstance(n_arms, bool) or not isinstance(n_arms, int) or n_arms < 1:
+        raise SceneError(f"n_arms must be an integer >= 1, got {n_arms!r}")
 
     name = robot if isinstance(robot, str) and robot in PLACEMENT else None
     default_sep, default_h = PLACEMENT[name] if name else (1.2, 0.7)
@@ -170,12 +181,14 @@ def facing_arms(
     # In each base frame: tool at distance sep/2 − half ahead, approach (tool z) along base x, tool x up.
     R_tool = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
     local_target = pin.SE3(R_tool, np.array([sep / 2 - half, 0.0, h]))
-    bases = {
-        "left": pin.SE3(pin.utils.rotate("z", np.pi / 2), np.array([0.0, -sep / 2, 0.0])),
-        "right": pin.SE3(pin.utils.rotate("z", -np.pi / 2), np.array([0.0, sep / 2, 0.0])),
-    }
-    template = Arm("left", robot, base=bases["left"], joint_damping=joint_damping)
-    q0 = solve_ik(template, bases["left"] * local_target)
-    arms = [template.replace(q0=q0), template.replace(name="right", base=bases["right"], q0=q0)]
+    names = ["left", "right"] if n_arms == 2 else [f"arm{k}" for k in range(n_arms)]
+    bases = []
+    for k in range(n_arms):
+        angle = -np.pi / 2 + 2 * np.pi * k / n_arms  # where the base stands, seen from the box
+        position = np.array([np.cos(angle), np.sin(angle), 0.0]) * sep / 2
+        bases.append(pin.SE3(pin.utils.rotate("z", angle + np.pi), position))  # base x looks at the box
+    template = Arm(names[0], robot, base=bases[0], tip_frame=tip_frame, joint_damping=joint_damping)
+    q0 = solve_ik(template, bases[0] * local_target)
+    arms = [template.replace(name=n, base=b, q0=q0) for n, b in zip(names, bases, strict=True)]
     links = [Interconnection(a.name, stiffness=K, damping=D) for a in arms]
     return Scene(arms, box, links, gravity=gravity)

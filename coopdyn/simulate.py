@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import time
@@ -15,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import Dynamics, Energy
-from .errors import DivergenceError, SimulationError
+from .errors import DivergenceError, SimulationError, SimulationInterrupted
 from .integrators import AdaptiveIntegrator, Controller, Integrator, System, get_integrator
 from .monitor import EnergyMonitor
 from .scene import Scene
@@ -62,6 +63,7 @@ def simulate(
     Raises:
         DivergenceError: when the state stops being finite or exceeds ``max_speed``; it carries
             the trajectory up to the failure and a stability diagnosis.
+        SimulationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), carrying the trajectory so far.
         SimulationError: on invalid arguments. ControllerError: on a bad controller output.
     """
     if not isinstance(scene, Scene):
@@ -92,11 +94,23 @@ def simulate(
                 _adaptive_loop(run, q, v, monitor, bar)
             else:
                 _fixed_loop(run, q, v, monitor, bar)
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, SimulationInterrupted):
+            raise
+        run.cpu_time = time.process_time() - cpu0
+        partial = run.result("interrupted")
+        raise SimulationInterrupted(
+            f"interrupted at t = {partial.t[-1]:.6g} s of {t_final:g} s; the trajectory so far is in this exception's .result",
+            result=partial,
+        ) from None
     finally:
         if bar is not None:
             bar.close()
     run.cpu_time = time.process_time() - cpu0
     return run.result()
+
+
+MAX_STEPS = 10**9  #: a run asking for more steps is refused (it would not finish)
 
 
 class _Run:
@@ -109,8 +123,12 @@ class _Run:
         self.max_speed = max_speed
         n_steps = max(0, math.ceil(t_final / dt - 1e-9))
         self.n_steps = n_steps
-        self.save_steps = [*range(0, n_steps, save_every), n_steps]
-        self.save_times = [min(k * dt, t_final) for k in self.save_steps]
+        if n_steps > MAX_STEPS:
+            raise SimulationError(
+                f"t_final / dt = {t_final:g} / {dt:g} asks for {n_steps:.3g} steps (more than {MAX_STEPS:.0e}); "
+                "shorten the run or enlarge dt"
+            )
+        self.save_every = save_every
         self.t: list[float] = []
         self.q: list[np.ndarray] = []
         self.v: list[np.ndarray] = []
@@ -145,7 +163,7 @@ class _Run:
             )
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
-        partial = self.result()
+        partial = self.result("diverged")
         raise DivergenceError(
             f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
             f"{diagnosis}. The trajectory up to t = {partial.t[-1]:.6g} s is in this error's .result",
@@ -153,7 +171,7 @@ class _Run:
             advice=advice,
         )
 
-    def result(self) -> Result:
+    def result(self, status: str = "completed") -> Result:
         s = self.system
         n = len(self.t)
         return Result(
@@ -170,16 +188,16 @@ class _Run:
             n_factor=s.n_factor,
             n_steps=self.n_accepted,
             n_rejected=self.n_rejected,
+            status=status,
         )
 
 
 def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:
     method, system, dt, n_steps = run.method, run.system, run.dt, run.n_steps
-    t, i_save = 0.0, 0
+    t, every = 0.0, run.save_every
     for k in range(n_steps + 1):
-        if k == run.save_steps[i_save]:
+        if k % every == 0 or k == n_steps:
             run.save(t, q, v)
-            i_save += 1
         if k == n_steps:
             break
         h = min(dt, run.t_final - k * dt)
@@ -206,7 +224,11 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
     assert isinstance(method, AdaptiveIntegrator)
     t, h = 0.0, run.dt
     run.save(t, q, v)
-    for t_out in run.save_times[1:]:
+    steps = itertools.chain(range(run.save_every, run.n_steps, run.save_every), [run.n_steps])
+    outputs = (min(k * run.dt, run.t_final) for k in steps)
+    for t_out in outputs:
+        if t_out <= t:
+            continue
         while t < t_out:
             h_try = min(h, t_out - t)
             if t + h_try * (1.0 + 1e-9) >= t_out:  # land exactly on the output time
@@ -248,8 +270,9 @@ def _number(x: Any, name: str) -> float:
 
 
 def _progress_bar(t_final: float, desc: str) -> Any:
-    from tqdm import tqdm
+    from ._optional import require
 
+    tqdm = require("tqdm", "the progress bar", "tqdm").tqdm
     return tqdm(
         total=t_final, desc=desc, unit="s", leave=False, bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s [{elapsed}<{remaining}]"
     )
@@ -283,6 +306,7 @@ class Result:
     n_factor: int = 0
     n_steps: int = 0
     n_rejected: int = 0
+    status: str = "completed"  #: "completed", "interrupted" (Ctrl-C) or "diverged"
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @cached_property
@@ -405,6 +429,15 @@ class Result:
         os.replace(tmp, path)
         return path
 
+    def tracking_error(self, reference: Callable[[float], Any]) -> np.ndarray:
+        """Object position error ‖p − p_d‖ (n,) [m] against ``reference(t).position`` (e.g. a
+        :class:`coopdyn.cooperative.GripLiftOscillate`) or ``reference(t)`` returning (3,)."""
+        desired = []
+        for t in self.t:
+            ref = reference(float(t))
+            desired.append(np.asarray(getattr(ref, "position", ref), dtype=float))
+        return np.linalg.norm(self.object_position() - np.array(desired), axis=1)
+
     def tip_position(self, arm: int | str) -> np.ndarray:
         """World position of an arm's tip frame (n, 3) [m]."""
         return self.frame_position(self.scene.arms[self.scene.arm_index(arm)].tip_frame)
@@ -412,3 +445,22 @@ class Result:
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
         return self.frame_position(self.scene.object_frame)
+
+
+def save_partial(error: BaseException, folder: str | os.PathLike[str]) -> list[Path]:
+    """After a ``DivergenceError`` or ``SimulationInterrupted``: write the trajectory it carries
+    (``trajectory.npz``, ``trajectory.csv``) and the message (``diagnosis.txt``) to ``folder``,
+    atomically. Returns the paths written."""
+    result = getattr(error, "result", None)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    if isinstance(result, Result) and len(result.t):
+        written += [result.save(folder / "trajectory.npz"), result.save(folder / "trajectory.csv")]
+    note = folder / "diagnosis.txt"
+    tmp = note.with_name(".diagnosis.txt.tmp")
+    advice = getattr(error, "advice", None)
+    tmp.write_text(f"{type(error).__name__}: {error}\n" + (f"\n{advice}\n" if advice is not None else ""))
+    os.replace(tmp, note)
+    written.append(note)
+    return written

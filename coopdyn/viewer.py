@@ -19,7 +19,6 @@ import numpy as np
 import pinocchio as pin
 
 from .arm import load_arm
-from .errors import CoopdynError
 from .scene import Scene
 from .simulate import Result
 
@@ -27,12 +26,10 @@ FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
 
 
 def _meshcat() -> Any:
-    try:
-        import meshcat
-        import meshcat.geometry
-    except ImportError as exc:  # pragma: no cover - a dependency of coopdyn
-        raise CoopdynError("visualisation needs meshcat: pip install meshcat") from exc
-    return meshcat
+    from ._optional import require
+
+    require("meshcat.geometry", "meshcat visualisation", "meshcat")
+    return require("meshcat", "meshcat visualisation", "meshcat")
 
 
 class RecordingWindow:

@@ -32,6 +32,12 @@ def test_two_pandas_hold_example() -> None:
     assert np.all(forces[:, 2] > 0.0)  # both arms push the box up
 
 
+def test_cooperative_lift_example(tmp_path: Path) -> None:
+    squeeze = _load("cooperative_lift").main(t_final=1.0, n_arms=3, out=str(tmp_path / "lift.png"))
+    np.testing.assert_allclose(squeeze, 15.0, rtol=0.05)  # gripped (ramp over 0.5 s), lifting since 0.75 s
+    assert (tmp_path / "lift.png").stat().st_size > 10_000
+
+
 def test_cli_book(tmp_path: Path) -> None:
     from coopdyn.__main__ import main
 
