@@ -52,6 +52,9 @@ class Dynamics:
         for arm in scene.arms:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
+        act = scene.actuated
+        contiguous = act.size > 0 and np.array_equal(act, np.arange(act[0], act[0] + act.size))
+        self._act: slice | np.ndarray = slice(int(act[0]), int(act[0]) + act.size) if contiguous else act
         #: power dissipated [W] at the state of the last :meth:`acceleration` call
         self.last_dissipation = 0.0
 
@@ -84,8 +87,7 @@ class Dynamics:
         ``matrices``, ``self.K_t = Σ Aᵀ K A`` and ``self.D_t = Σ Aᵀ D A + B``.
         """
         model, data = self.model, self.data
-        pin.forwardKinematics(model, data, q, v)
-        pin.computeJointJacobians(model, data)
+        pin.computeJointJacobians(model, data, q)  # forward kinematics (positions) + joint Jacobians
         Q = np.zeros(model.nv)
         p_diss = 0.0
         if matrices:
@@ -98,8 +100,9 @@ class Dynamics:
             A = pin.Jlog6(T_M_G) @ (J_G - T_M_G.toActionMatrixInverse() @ J_T)
             w = K @ pin.log6(T_M_G).vector
             if has_d:
-                D_e_dot = D @ (A @ v)
-                p_diss += (A @ v) @ D_e_dot
+                e_dot = A @ v
+                D_e_dot = D @ e_dot
+                p_diss += e_dot @ D_e_dot
                 w += D_e_dot
             Q -= A.T @ w
             if matrices:
@@ -127,7 +130,7 @@ class Dynamics:
         moving each wrench to its joint as an external force.
         """
         t = self._interconnections(q, v, False, object_wrench)
-        t[self.scene.actuated] += tau
+        t[self._act] += tau
         if self._has_damping:
             t -= self._damping * v
         return pin.aba(self.model, self.data, q, v, t).copy()
@@ -140,7 +143,7 @@ class Dynamics:
         :meth:`stiffness` (nv, nv)."""
         model, data = self.model, self.data
         f = self._interconnections(q, v, True, object_wrench)
-        f[self.scene.actuated] += tau
+        f[self._act] += tau
         if self._has_damping:
             f -= self._damping * v
         f -= pin.nonLinearEffects(model, data, q, v)
@@ -174,15 +177,24 @@ class Dynamics:
     # -- readouts -----------------------------------------------------------------------------
     def elastic_energy(self, q: np.ndarray) -> np.ndarray:
         """½ eᵀ K e of each interconnection (n_links,) [J]."""
-        states = self.springs(q, np.zeros(self.model.nv))
-        return np.array([0.5 * s.e @ lk.K @ s.e for s, lk in zip(states, self.scene.links, strict=True)])
+        pin.forwardKinematics(self.model, self.data, q)
+        return self._elastic()
+
+    def _elastic(self) -> np.ndarray:
+        """Elastic energies after forward kinematics."""
+        model, data = self.model, self.data
+        out = []
+        for t_id, g_id, K, _, _ in self._hot:
+            e = pin.log6(pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))).vector
+            out.append(0.5 * e @ K @ e)
+        return np.array(out)
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
-        """Kinetic, gravity and elastic energy at (q, v) [J]."""
+        """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
         model, data = self.model, self.data
-        kinetic = float(pin.computeKineticEnergy(model, data, q, v))
-        potential = float(pin.computePotentialEnergy(model, data, q))
-        return Energy(kinetic, potential, float(np.sum(self.elastic_energy(q))))
+        kinetic = float(pin.computeKineticEnergy(model, data, q, v))  # runs forward kinematics (q, v)
+        potential = float(pin.computePotentialEnergy(model, data))
+        return Energy(kinetic, potential, float(np.sum(self._elastic())))
 
     def dissipation(self, q: np.ndarray, v: np.ndarray) -> float:
         """Power dissipated by interconnection and joint damping [W] (≥ 0)."""

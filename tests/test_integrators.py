@@ -179,3 +179,30 @@ def test_energy_monitor_is_quiet_on_a_good_run(pandas: cd.Scene) -> None:
     ctrl = GravityCompensationPD(pandas, 200.0, 20.0)
     v0 = np.random.default_rng(5).normal(size=pandas.nv) * 0.3
     cd.simulate(pandas, 0.3, controller=ctrl, integrator="rk4", dt=2e-4, v0=v0, energy_check="raise")
+
+
+def test_implicit_euler_with_jacobian_reuse(book: cd.Scene) -> None:
+    """Reusing M, K̃, D̃ for 10 steps keeps first order on the linear case and stability at
+    k = 1e7 N/m, dt = 1 ms on the Panda scene."""
+    from coopdyn.integrators import LinearlyImplicitEuler
+
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+    dts = [4e-3, 2e-3, 1e-3]
+    errors = []
+    for dt in dts:
+        res = cd.simulate(book, 1.0, controller=ctrl, integrator=LinearlyImplicitEuler(jacobian_every=10), dt=dt)
+        errors.append(np.max(np.abs(cd.scenes.book_positions(res.q, book) - linear_book_exact(res.t, d1, d2).Y)))
+    assert _slope(dts, errors) == pytest.approx(1.0, abs=0.3)
+    stiff = cd.scenes.facing_arms("panda", stiffness=1e7, damping=1e-3)
+    res = cd.simulate(
+        stiff,
+        0.5,
+        controller=GravityCompensationPD(stiff, 50.0, 5.0),
+        integrator=LinearlyImplicitEuler(10),
+        dt=1e-3,
+        energy_check="raise",
+    )
+    assert res.n_jac == 50 and np.max(np.abs(res.v)) < 10.0
+    with pytest.raises(cd.SimulationError, match=r"jacobian_every must be an integer >= 1, got 0"):
+        LinearlyImplicitEuler(0)
