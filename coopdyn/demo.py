@@ -13,20 +13,12 @@ from . import scenes
 from .cooperative import GripLiftOscillate, ObjectImpedance
 from .errors import DivergenceError, SimulationInterrupted
 from .plotting import cooperative_figure
+from .scenes import object_start
 from .simulate import save_partial, simulate
 
 STIFFNESS = 1e4  #: interconnection stiffness [N/m]; rotational 1e2 [N·m/rad]
 DAMPING = 0.002  #: interconnection damping / stiffness [s]
 SQUEEZE = 20.0  #: commanded internal force [N]
-
-
-def object_start(scene: Any) -> np.ndarray:
-    """Initial world position of the scene's object frame [m]."""
-    import pinocchio as pin
-
-    data = scene.model.createData()
-    pin.framesForwardKinematics(scene.model, data, scene.q0)
-    return data.oMf[scene.object_frame].translation.copy()
 
 
 def run_demo(

@@ -23,6 +23,7 @@ from .errors import CoopdynError, SceneError
 from .integrators import INTEGRATORS
 from .reference import BookParameters
 from .scene import Scene
+from .scenes import object_start
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -201,28 +202,27 @@ def load(path: str | Path) -> Run:
     return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
 
 
+def _pick(f: _File, doc: dict[str, Any], table: str, registry: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The registry entry named by the table's ``type`` key, and the table's other keys."""
+    rest = dict(doc)
+    kind = rest.pop("type", None)
+    if not isinstance(kind, str) or kind not in registry:
+        raise f.error(f"must be one of {sorted(registry)}, got {kind!r}", table, "type")
+    return registry[kind], rest
+
+
 def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
     if doc is None:
         return None
-    doc = dict(doc)
-    kind = doc.pop("type", None)
-    if not isinstance(kind, str) or kind not in TASKS:
-        raise f.error(f"must be one of {sorted(TASKS)}, got {kind!r}", "task", "type")
-    cls = TASKS[kind]
+    cls, doc = _pick(f, doc, "task", TASKS)
     if cls is None:
         return None
-    from .demo import object_start
-
     kwargs = _params(f, "task", cls, doc, skip=("start",))
     return cls(start=object_start(scene), **kwargs)
 
 
 def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str, scene_kwargs: dict[str, Any]) -> Any:
-    doc = dict(doc)
-    kind = doc.pop("type", None)
-    if not isinstance(kind, str) or kind not in CONTROLLERS:
-        raise f.error(f"must be one of {sorted(CONTROLLERS)}, got {kind!r}", "controller", "type")
-    target = CONTROLLERS[kind]
+    target, doc = _pick(f, doc, "controller", CONTROLLERS)
     if target is None:
         if doc:
             raise f.error("takes no other keys", "controller")

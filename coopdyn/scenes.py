@@ -192,3 +192,10 @@ def facing_arms(
     arms = [template.replace(name=n, base=b, q0=q0) for n, b in zip(names, bases, strict=True)]
     links = [Interconnection(a.name, stiffness=K, damping=D) for a in arms]
     return Scene(arms, box, links, gravity=gravity)
+
+
+def object_start(scene: Scene) -> np.ndarray:
+    """Initial world position of the scene's object frame (3,) [m] — the start of a task."""
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    return data.oMf[scene.object_frame].translation.copy()

@@ -9,8 +9,8 @@ from scipy.optimize import curve_fit
 
 import coopdyn as cd
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
-from coopdyn.demo import object_start
 from coopdyn.grasp import distribute, grasp_matrix, split, squeeze_force
+from coopdyn.scenes import object_start
 
 
 @pytest.mark.parametrize("n_grasps", [2, 3, 4])
