@@ -162,35 +162,41 @@ class _Animator:
             for i, g in enumerate(self.geom.geometryObjects)
         ]
 
-    def poses(self, q: np.ndarray, wrenches: np.ndarray) -> Iterator[tuple[str, np.ndarray]]:
-        """(node, 4x4 transform) of every visual and force arrow at configuration q."""
+    def poses(self, q: np.ndarray, wrenches: np.ndarray) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+        """(node, rigid 4x4 transform, scale (3,)) of every visual and force arrow at q.
+
+        meshcat animations carry position and orientation only, so the scale goes separately
+        (as an animated ``scale`` property; a static transform may fold it in)."""
         model, data = self.scene.model, self.data
         pin.framesForwardKinematics(model, data, q)
         pin.updateGeometryPlacements(model, data, self.geom, self.gdata)
         for name, i, scale in self.nodes:
-            T = self.gdata.oMg[i].homogeneous.copy()
-            T[:3, :3] = T[:3, :3] @ np.diag(scale)
-            yield name, T
+            yield name, self.gdata.oMg[i].homogeneous, scale
         for name, lk, w in zip(self.arrows, self.scene.links, wrenches, strict=True):
-            yield name, _arrow(data.oMf[lk.grasp_frame].translation, w[:3] * FORCE_SCALE)
+            vec = w[:3] * FORCE_SCALE  # drawn ending at the grasp point: the push, from outside the object
+            yield name, *_arrow(data.oMf[lk.grasp_frame].translation - vec, vec)
 
 
-def _arrow(origin: np.ndarray, vec: np.ndarray) -> np.ndarray:
-    """Transform of meshcat's unit cylinder (along y, centred) into a bar from origin along vec."""
+def _arrow(origin: np.ndarray, vec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rigid transform, scale) turning meshcat's unit cylinder (along y, centred) into a bar
+    from ``origin`` along ``vec``."""
     length = float(np.linalg.norm(vec))
     T = np.eye(4)
+    T[:3, 3] = origin + 0.5 * vec
     if length < 1e-9:
-        T[:3, :3] *= 1e-6
-        T[:3, 3] = origin
-        return T
+        return T, np.array([1e-6, 1e-6, 1e-6])
     y = vec / length
     a = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     x = np.cross(y, a)
     x /= np.linalg.norm(x)
-    z = np.cross(x, y)
-    T[:3, :3] = np.column_stack([x, y * length, z])
-    T[:3, 3] = origin + 0.5 * vec
-    return T
+    T[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
+    return T, np.array([1.0, length, 1.0])
+
+
+def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    out = T.copy()
+    out[:3, :3] = T[:3, :3] @ np.diag(scale)
+    return out
 
 
 def _frames(result: Result, fps: float) -> np.ndarray:
@@ -209,13 +215,15 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     animator = _Animator(result.scene, vis, meshes)
     idx = _frames(result, fps)
     wrenches = result.wrenches()
-    for name, T in animator.poses(result.q[0], wrenches[0]):
-        vis[name].set_transform(T)
+    for name, T, scale in animator.poses(result.q[0], wrenches[0]):
+        vis[name].set_transform(_scaled(T, scale))
     anim = Animation(default_framerate=fps)
     for frame, k in enumerate(idx):
         with anim.at_frame(vis, frame) as f:
-            for name, T in animator.poses(result.q[k], wrenches[k]):
+            for name, T, scale in animator.poses(result.q[k], wrenches[k]):
                 f[name].set_transform(T)
+                if name in animator.arrows:
+                    f[name].set_property("scale", "vector3", scale.tolist())
     vis.set_animation(anim, play=True, repetitions=1000)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -242,8 +250,8 @@ def view(
         while loops is None or n < loops:
             for k in idx:
                 t0 = time.perf_counter()
-                for name, T in animator.poses(result.q[k], wrenches[k]):
-                    vis[name].set_transform(T)
+                for name, T, scale in animator.poses(result.q[k], wrenches[k]):
+                    vis[name].set_transform(_scaled(T, scale))
                 time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
             n += 1
     except KeyboardInterrupt:

@@ -37,9 +37,10 @@ def _chromium() -> str | None:
 
 @pytest.mark.skipif(_chromium() is None, reason="needs Chromium (Debian package 'chromium'; .ci/run installs it)")
 def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd.Scene) -> None:
-    """Headless Chromium renders the exported file: the arms (light grey) and the box (orange)
-    are on the screenshot, not a blank page."""
-    res = cd.simulate(pandas, 0.2, integrator="implicit_euler", dt=1e-3, save_every=20)
+    """Headless Chromium renders the exported file: the arms (light grey), the box (orange) and
+    the interconnection force arrows (red) are on the screenshot, not a blank page."""
+    ctrl = cd.control.GravityCompensationPD(pandas, 200.0, 20.0)  # the box hangs on the springs: ~10 N each
+    res = cd.simulate(pandas, 0.2, controller=ctrl, integrator="implicit_euler", dt=1e-3, save_every=20)
     html = export_html(res, tmp_path / "anim.html")
     shot = tmp_path / "shot.png"
     subprocess.run(
@@ -57,6 +58,8 @@ def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd
     grey = (np.abs(r - g) < 0.05) & (np.abs(g - b) < 0.05) & (r > 0.6)
     assert orange.sum() > 200, "the box is not on the screenshot"
     assert grey.sum() > 2000, "the arms are not on the screenshot"
+    red = (r > 0.6) & (g < 0.3) & (b < 0.3)
+    assert red.sum() > 20, "the force arrows are not on the screenshot"
 
 
 @pytest.mark.parametrize("name", ["two_pandas.toml", "linear_book.toml"])
