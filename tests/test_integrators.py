@@ -206,3 +206,20 @@ def test_implicit_euler_with_jacobian_reuse(book: cd.Scene) -> None:
     assert res.n_jac == 50 and np.max(np.abs(res.v)) < 10.0
     with pytest.raises(cd.SimulationError, match=r"jacobian_every must be an integer >= 1, got 0"):
         LinearlyImplicitEuler(0)
+
+
+def test_dopri5_fixed_step_order_on_the_linear_case(book: cd.Scene) -> None:
+    """Dormand–Prince without its step control: fifth order against the exact solution."""
+    d1, d2 = cd.scenes.book_task()
+    method = get_integrator("dopri5")
+    dts = [2.5e-3, 1.25e-3, 6.25e-4]  # the drives' breakpoints are on these grids
+    errors = []
+    for dt in dts:
+        system = System(cd.Dynamics(book), cd.scenes.drives_controller(d1, d2))
+        q, v, qs = book.q0, book.v0, [book.q0]
+        for k in range(round(3.0 / dt)):
+            q, v = method.step(system, k * dt, q, v, dt)
+            qs.append(q)
+        t = dt * np.arange(len(qs))
+        errors.append(np.max(np.abs(cd.scenes.book_positions(np.array(qs), book) - linear_book_exact(t, d1, d2).Y)))
+    assert _slope(dts, errors) == pytest.approx(5.0, abs=0.3)
