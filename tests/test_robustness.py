@@ -56,7 +56,7 @@ def _assert_finite_or_error(scene: cd.Scene) -> None:
     assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v))
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     arm_name=mostly(st.just("a")),
     tip=mostly(st.just("tip"), st.one_of(st.just("tpi"), junk)),
@@ -147,7 +147,13 @@ def scene_files(draw: st.DrawFn) -> str:
     return "\n".join(lines) + "\n"
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=200,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 @given(text=scene_files())
 def test_scene_file_loader_gives_a_run_or_a_coopdyn_error(tmp_path: Path, text: str) -> None:
     path = tmp_path / "random.toml"
