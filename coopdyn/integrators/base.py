@@ -87,8 +87,9 @@ class System:
         ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
         self.n_rhs += 1
         tau = self.torque(t, q, v)
-        a = self.dynamics.acceleration(q, v, tau, None if self.object_wrench is None else self._wrench(t))
-        p_ext = 0.0 if self.object_wrench is None else self._object_power(self._wrench(t))
+        w = None if self.object_wrench is None else self._wrench(t)
+        a = self.dynamics.acceleration(q, v, tau, w)
+        p_ext = 0.0 if w is None else self._object_power(w)
         record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
         if self._first is None:
             self._first = record
@@ -126,12 +127,13 @@ class System:
         self.n_rhs += 1
         self.n_jac += 1
         tau = self.torque(t, q, v)
-        f, M, K, D = self.dynamics.implicit_terms(q, v, tau, None if self.object_wrench is None else self._wrench(t))
+        w = None if self.object_wrench is None else self._wrench(t)
+        f, M, K, D = self.dynamics.implicit_terms(q, v, tau, w)
         if self._gains is not None:
             act = self.scene.actuated
             K[act, act] += self._gains[0]
             D[act, act] += self._gains[1]
-        p_ext = 0.0 if self.object_wrench is None else self._object_power(self._wrench(t))
+        p_ext = 0.0 if w is None else self._object_power(w)
         record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
         if self._first is None:
             self._first = record
