@@ -54,7 +54,8 @@ class Dynamics:
         self._has_damping = bool(np.any(self._damping))
         act = scene.actuated
         contiguous = act.size > 0 and np.array_equal(act, np.arange(act[0], act[0] + act.size))
-        self._act: slice | np.ndarray = slice(int(act[0]), int(act[0]) + act.size) if contiguous else act
+        #: the arm joints in v: a slice when they are contiguous (cheaper to index on the hot path)
+        self.actuated_index: slice | np.ndarray = slice(int(act[0]), int(act[0]) + act.size) if contiguous else act
         #: power dissipated [W] at the state of the last :meth:`acceleration` call
         self.last_dissipation = 0.0
 
@@ -130,7 +131,7 @@ class Dynamics:
         moving each wrench to its joint as an external force.
         """
         t = self._interconnections(q, v, False, object_wrench)
-        t[self._act] += tau
+        t[self.actuated_index] += tau
         if self._has_damping:
             t -= self._damping * v
         return pin.aba(self.model, self.data, q, v, t).copy()
@@ -143,7 +144,7 @@ class Dynamics:
         :meth:`stiffness` (nv, nv)."""
         model, data = self.model, self.data
         f = self._interconnections(q, v, True, object_wrench)
-        f[self._act] += tau
+        f[self.actuated_index] += tau
         if self._has_damping:
             f -= self._damping * v
         f -= pin.nonLinearEffects(model, data, q, v)

@@ -84,7 +84,7 @@ def simulate(
     system = System(Dynamics(scene), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     monitor = None
-    if energy_check != "off" and not getattr(method, "exact_discretisation", False):
+    if energy_check != "off" and not method.exact_discretisation:
         monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check)
     bar = _progress_bar(t_final, method.name) if progress else None
     cpu0 = time.process_time()

@@ -61,6 +61,7 @@ class System:
         self.n_factor = 0
         self.cache: dict[Any, Any] = {}
         self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self.model.joints[1:] if j.nv > 1]
+        self._act = dynamics.actuated_index
         self._first: tuple[np.ndarray, np.ndarray, float] | None = None
         self._last: tuple[np.ndarray, np.ndarray, float] | None = None
         self._previous_last: tuple[np.ndarray, np.ndarray, float] | None = None
@@ -89,12 +90,16 @@ class System:
         tau = self.torque(t, q, v)
         w = None if self.object_wrench is None else self._wrench(t)
         a = self.dynamics.acceleration(q, v, tau, w)
+        self._record(q, v, tau, w)
+        return a
+
+    def _record(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> None:
+        """Keep the net power ``τ·q̇ + external − dissipation`` [W] of the state just evaluated."""
         p_ext = 0.0 if w is None else self._object_power(w)
-        record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
+        record = (q, v, p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation)
         if self._first is None:
             self._first = record
         self._last = record
-        return a
 
     def _wrench(self, t: float) -> np.ndarray:
         assert self.object_wrench is not None
@@ -118,7 +123,7 @@ class System:
         w = None if self.object_wrench is None else self._wrench(t)
         self.dynamics.acceleration(q, v, tau, w)
         p_ext = 0.0 if w is None else self._object_power(w)
-        return p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation
+        return p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
@@ -133,11 +138,7 @@ class System:
             act = self.scene.actuated
             K[act, act] += self._gains[0]
             D[act, act] += self._gains[1]
-        p_ext = 0.0 if w is None else self._object_power(w)
-        record = (q, v, p_ext + float(tau @ v[self.scene.actuated]) - self.dynamics.last_dissipation)
-        if self._first is None:
-            self._first = record
-        self._last = record
+        self._record(q, v, tau, w)
         return f, M, K, D
 
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -173,6 +174,8 @@ class Integrator(ABC):
     name: ClassVar[str]
     order: ClassVar[int]
     adaptive: ClassVar[bool] = False
+    #: True when a step is the exact flow of the model (nothing to monitor for instability).
+    exact_discretisation: ClassVar[bool] = False
     #: True when the method is unconditionally stable on the linearised problem.
     a_stable: ClassVar[bool] = False
 
@@ -198,7 +201,6 @@ class Attempt(NamedTuple):
     q: np.ndarray
     v: np.ndarray
     error: float  #: scaled error norm (accept when ≤ 1)
-    a_end: np.ndarray | None  #: q̈ at the end point when the method has it for free (FSAL)
 
 
 class AdaptiveIntegrator(Integrator):

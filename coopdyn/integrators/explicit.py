@@ -149,7 +149,7 @@ class DormandPrince(AdaptiveIntegrator):
         diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
         err = self.error_norm(system, h * _combine(diff, kd), h * _combine(diff, ka), q, v, v_new)
         system.cache["fsal"] = (q_new, ka[-1])
-        return Attempt(q_new, v_new, err, ka[-1])
+        return Attempt(q_new, v_new, err)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _rk_stability(self.tableau, z, self.tableau.b)

@@ -136,7 +136,7 @@ class AdaptiveROS2(AdaptiveIntegrator):
 
     def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
         delta, v_new, e_d, e_v = _ros2(system, t, q, v, h)
-        return Attempt(pin.integrate(system.model, q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new), None)
+        return Attempt(pin.integrate(system.model, q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new))
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
