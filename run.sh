@@ -17,11 +17,12 @@ setup() {
       "$PY" -m virtualenv --quiet "$VENV"
     fi
   fi
-  # (Re)install when pyproject.toml changed since the last install.
+  # (Re)install when the project definition or the compiled kernel's sources changed since the
+  # last install (the install compiles coopdyn._native: about 2 minutes).
   stamp="$VENV/.coopdyn-installed"
-  want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+  want=$(cat pyproject.toml CMakeLists.txt src/native/* | sha256sum | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "[run.sh] installing coopdyn and its dependencies into $VENV" >&2
+    echo "[run.sh] installing coopdyn and its dependencies into $VENV (compiles the C++ kernel)" >&2
     "$VENV/bin/python" -m pip install --quiet --upgrade pip
     "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
     echo "$want" > "$stamp"

@@ -1,6 +1,6 @@
 """coopdyn: dynamics and control of multi-arm cooperating robots with elastic interconnections."""
 
-from . import control, integrators, reference, scenes
+from . import backend, control, integrators, reference, scenes
 from .arm import Arm
 from .body import RigidObject
 from .dynamics import Dynamics, Energy
@@ -39,6 +39,7 @@ __all__ = [
     "SimulationInterrupted",
     "advise",
     "axial",
+    "backend",
     "control",
     "diagonal",
     "integrators",

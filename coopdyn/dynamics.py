@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from . import backend as _backend
 from .interconnection import SpringState, spring
 from .scene import Scene
 
@@ -39,9 +40,14 @@ class Dynamics:
 
     Args:
         scene: the scene; not modified.
+        backend: ``"native"``, ``"python"`` or ``"auto"`` (see :mod:`coopdyn.backend`); ``None``
+            reads the environment variable ``COOPDYN_BACKEND`` (default ``"auto"``).
+
+    Attributes:
+        backend: the backend that runs, ``"native"`` or ``"python"``.
     """
 
-    def __init__(self, scene: Scene) -> None:
+    def __init__(self, scene: Scene, backend: str | None = None) -> None:
         self.scene = scene
         model = scene.model
         self.model = model
@@ -58,6 +64,17 @@ class Dynamics:
         self.actuated_index: slice | np.ndarray = slice(int(act[0]), int(act[0]) + act.size) if contiguous else act
         #: power dissipated [W] at the state of the last :meth:`acceleration` call
         self.last_dissipation = 0.0
+        self.backend = _backend.resolve(backend)
+        self._kernel = None
+        if self.backend == "native":
+            self._kernel = _backend.kernel_module().Kernel(
+                model,
+                self.data,
+                [(t, g, K, D) for t, g, K, D, _ in self._hot],
+                self._damping,
+                np.asarray(act, dtype=np.int32),
+                scene.object_frame,
+            )
 
     # -- interconnections ---------------------------------------------------------------------
     def _springs(self) -> list[SpringState]:
@@ -130,6 +147,10 @@ class Dynamics:
         ``Q`` (see :meth:`_interconnections`), which costs fewer Python-level operations than
         moving each wrench to its joint as an external force.
         """
+        if self._kernel is not None:
+            a = self._kernel.acceleration(q, v, tau, object_wrench)
+            self.last_dissipation = self._kernel.last_dissipation
+            return a
         t = self._interconnections(q, v, False, object_wrench)
         t[self.actuated_index] += tau
         if self._has_damping:
@@ -142,6 +163,10 @@ class Dynamics:
         """What a linearly implicit step needs at (q, v), from one kinematics pass:
         ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the matrices of
         :meth:`stiffness` (nv, nv)."""
+        if self._kernel is not None:
+            terms = self._kernel.implicit_terms(q, v, tau, object_wrench)
+            self.last_dissipation = self._kernel.last_dissipation
+            return terms
         model, data = self.model, self.data
         f = self._interconnections(q, v, True, object_wrench)
         f[self.actuated_index] += tau
@@ -149,6 +174,30 @@ class Dynamics:
             f -= self._damping * v
         f -= pin.nonLinearEffects(model, data, q, v)
         return f, pin.crba(model, data, q).copy(), self.K_t, self.D_t
+
+    def implicit_euler_velocity(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        tau: np.ndarray,
+        h: float,
+        kp: np.ndarray,
+        kd: np.ndarray,
+        object_wrench: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """The velocity after one linearly implicit Euler step of ``h`` [s] from (q, v):
+        ``v⁺ = v + h k`` with ``(M + h D̃ + h² K̃) k = f − h K̃ v``, where K̃ and D̃ include the
+        joint PD gains ``kp``, ``kd`` (n_actuated,) [N·m/rad], [N·m·s/rad] and f is that of
+        :meth:`implicit_terms`. One kinematics pass and one Cholesky factorisation."""
+        if self._kernel is not None:
+            v_new = self._kernel.implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)
+            self.last_dissipation = self._kernel.last_dissipation
+            return v_new
+        f, M, K, D = self.implicit_terms(q, v, tau, object_wrench)
+        act = self.scene.actuated
+        K[act, act] += kp
+        D[act, act] += kd
+        return v + h * np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Σ (J_Gᵀ G_f_G + J_Tᵀ T_f_T), the interconnections' generalized force (nv,)."""
@@ -183,6 +232,8 @@ class Dynamics:
 
     def _elastic(self) -> np.ndarray:
         """Elastic energies after forward kinematics."""
+        if self._kernel is not None:
+            return self._kernel.elastic_energies()
         model, data = self.model, self.data
         out = []
         for t_id, g_id, K, _, _ in self._hot:

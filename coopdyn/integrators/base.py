@@ -67,6 +67,7 @@ class System:
         self._previous_last: tuple[np.ndarray, np.ndarray, float] | None = None
         gains = getattr(controller, "gains", None)
         self._gains = gains() if callable(gains) else None
+        self._gains_or_zero = self._gains if self._gains is not None else (self._zero, self._zero)
 
     def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The controller output, checked: (n_actuated,) finite floats."""
@@ -140,6 +141,21 @@ class System:
             D[act, act] += self._gains[1]
         self._record(q, v, tau, w)
         return f, M, K, D
+
+    def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
+        """v⁺ of one linearly implicit Euler step of ``h`` [s] from (t, q, v) (see
+        :meth:`Dynamics.implicit_euler_velocity`), with the controller's PD gains in the matrix.
+        Counts one RHS, one Jacobian and one factorisation; records the net power like
+        :meth:`acceleration`."""
+        self.n_rhs += 1
+        self.n_jac += 1
+        self.n_factor += 1
+        tau = self.torque(t, q, v)
+        w = None if self.object_wrench is None else self._wrench(t)
+        kp, kd = self._gains_or_zero
+        v_new = self.dynamics.implicit_euler_velocity(q, v, tau, h, kp, kd, w)
+        self._record(q, v, tau, w)
+        return v_new
 
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains; counts one Jacobian."""

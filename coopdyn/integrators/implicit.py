@@ -60,20 +60,18 @@ class LinearlyImplicitEuler(Integrator):
 
     def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
         if self.jacobian_every == 1:
-            f, M, K, D = system.implicit_terms(t, q, v)  # f = M a
-            system.n_factor += 1
-            k_v = np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))  # one LU of the SPD matrix
+            v_new = system.implicit_euler_velocity(t, q, v, h)
+            return pin.integrate(system.model, q, h * v_new), v_new
+        cache = system.cache.get("implicit_euler")
+        if cache is None or cache[0] >= self.jacobian_every or cache[1] != h:
+            f, M, K, D = system.implicit_terms(t, q, v)
+            w = _WSolver(system, M, K, D, h)
+            count = 0
         else:
-            cache = system.cache.get("implicit_euler")
-            if cache is None or cache[0] >= self.jacobian_every or cache[1] != h:
-                f, M, K, D = system.implicit_terms(t, q, v)
-                w = _WSolver(system, M, K, D, h)
-                count = 0
-            else:
-                count, _, w = cache
-                f = w.M @ system.acceleration(t, q, v)
-            system.cache["implicit_euler"] = (count + 1, h, w)
-            _, k_v = w.solve(v, f)
+            count, _, w = cache
+            f = w.M @ system.acceleration(t, q, v)
+        system.cache["implicit_euler"] = (count + 1, h, w)
+        _, k_v = w.solve(v, f)
         v_new = v + h * k_v
         return pin.integrate(system.model, q, h * v_new), v_new
 

@@ -1,0 +1,88 @@
+"""Which implementation runs the dynamics' hot path.
+
+* ``"native"`` — the compiled kernel ``coopdyn._native`` (C++ on Pinocchio's C++ API, built when
+  coopdyn is installed): the right-hand side, the implicit-method terms and the implicit Euler
+  solve in one call each.
+* ``"python"`` — the same equations with Pinocchio's Python bindings (:mod:`coopdyn.dynamics`);
+  the reference the kernel is tested against, and the fallback when the kernel is missing.
+
+The default (``"auto"``) takes the kernel when it imports and was built against the installed
+Pinocchio, else Python with a one-time warning saying why. Choose per object with
+``Dynamics(scene, backend=...)``, or for the process with the environment variable
+``COOPDYN_BACKEND=native|python|auto``.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from functools import cache
+from types import ModuleType
+
+import pinocchio as pin
+
+from .errors import CoopdynError
+
+BACKENDS = ("auto", "native", "python")
+
+
+class NativeBackendWarning(UserWarning):
+    """The compiled kernel is unavailable; the (slower) Python path runs instead."""
+
+
+class BackendError(CoopdynError, RuntimeError):
+    """The requested backend cannot be used."""
+
+
+@cache
+def _load() -> tuple[ModuleType | None, str]:
+    """(the kernel module or None, why not)."""
+    try:
+        from . import _native
+    except ImportError as exc:
+        return None, f"coopdyn._native did not import ({exc}); reinstall coopdyn with a C++17 compiler available"
+    built = getattr(_native, "PINOCCHIO_VERSION", "?")
+    if built != pin.__version__:
+        return None, (
+            f"coopdyn._native was built against Pinocchio {built} but Pinocchio {pin.__version__} is installed "
+            "(their C++ ABIs need not match); reinstall coopdyn to rebuild it"
+        )
+    return _native, ""
+
+
+def native_available() -> bool:
+    """True when the compiled kernel can be used."""
+    return _load()[0] is not None
+
+
+def resolve(backend: str | None = None) -> str:
+    """The backend that runs for a request: ``None`` reads ``COOPDYN_BACKEND`` (default ``"auto"``).
+
+    Raises:
+        BackendError: for an unknown name, or ``"native"`` when the kernel is unavailable.
+    """
+    name = os.environ.get("COOPDYN_BACKEND", "auto") if backend is None else backend
+    if name not in BACKENDS:
+        raise BackendError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+    module, why = _load()
+    if name == "python":
+        return "python"
+    if module is None:
+        if name == "native":
+            raise BackendError(f"the native backend was requested but {why}")
+        _warn_once(why)
+        return "python"
+    return "native"
+
+
+def kernel_module() -> ModuleType:
+    """The compiled kernel module (only after :func:`resolve` returned ``"native"``)."""
+    module, why = _load()
+    if module is None:
+        raise BackendError(why)
+    return module
+
+
+@cache
+def _warn_once(why: str) -> None:
+    warnings.warn(f"using the Python dynamics (several times slower): {why}", NativeBackendWarning, stacklevel=3)

@@ -1,0 +1,170 @@
+"""The compiled kernel computes the same physics as the Python reference, to round-off.
+
+Each quantity is compared on scenes that exercise every branch of the kernel: free-flying box
+with two Pandas (6-D springs, interconnection and joint damping, an external wrench), three
+arms, and the book's prismatic linear case (1-D springs, no free-flyer).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn import backend
+from coopdyn.dynamics import Dynamics
+
+pytestmark = pytest.mark.skipif(not backend.native_available(), reason="coopdyn._native is not built")
+
+
+def _scenes() -> dict[str, cd.Scene]:
+    return {
+        "pandas_damped": cd.scenes.facing_arms("panda", stiffness=1e5, damping=30.0, joint_damping=0.5),
+        "three_pandas": cd.scenes.facing_arms("panda", stiffness=1e4, n_arms=3),
+        "book": cd.scenes.linear_book(),
+    }
+
+
+SCENES = _scenes()
+
+
+def _pair(scene: cd.Scene) -> tuple[Dynamics, Dynamics]:
+    return Dynamics(scene, backend="native"), Dynamics(scene, backend="python")
+
+
+def _states(scene: cd.Scene, n: int = 4) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Random states around q0 (springs loaded) and torques."""
+    rng = np.random.default_rng(7)
+    out = []
+    for _ in range(n):
+        q = pin.integrate(scene.model, scene.q0, 0.05 * rng.normal(size=scene.nv))
+        out.append((q, rng.normal(size=scene.nv), 5.0 * rng.normal(size=scene.n_actuated)))
+    return out
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> None:
+    scale = max(1.0, float(np.max(np.abs(b))))
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-11 * scale)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_acceleration_and_dissipation_match_python(name: str) -> None:
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    wrench = np.array([3.0, -2.0, 5.0, 0.4, -0.1, 0.2])
+    for q, v, tau in _states(scene):
+        for w in (None, wrench):
+            _close(nat.acceleration(q, v, tau, w), py.acceleration(q, v, tau, w))
+            assert nat.last_dissipation == pytest.approx(py.last_dissipation, rel=1e-12, abs=1e-12)
+
+
+def test_dissipation_is_counted_where_there_is_damping() -> None:
+    """Guards the comparison above against comparing two zeros."""
+    scene = SCENES["pandas_damped"]
+    nat, _ = _pair(scene)
+    q, v, tau = _states(scene)[0]
+    nat.acceleration(q, v, tau)
+    assert nat.last_dissipation > 1.0
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_implicit_terms_match_python(name: str) -> None:
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    for q, v, tau in _states(scene):
+        for a, b in zip(nat.implicit_terms(q, v, tau), py.implicit_terms(q, v, tau), strict=True):
+            _close(a, b)
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_implicit_euler_velocity_matches_python(name: str) -> None:
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    kp, kd = np.full(scene.n_actuated, 80.0), np.full(scene.n_actuated, 4.0)
+    act = scene.actuated
+    for q, v, tau in _states(scene):
+        _, M, K, D = py.implicit_terms(q, v, tau)
+        K[act, act] += kp
+        D[act, act] += kd
+        for h in (1e-4, 1e-3, 1e-2):
+            # Cholesky (kernel) vs LU (Python) agree to the solve's conditioning times round-off.
+            kappa = np.linalg.cond(M + h * D + h * h * K)
+            a = nat.implicit_euler_velocity(q, v, tau, h, kp, kd)
+            b = py.implicit_euler_velocity(q, v, tau, h, kp, kd)
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=10.0 * kappa * np.finfo(float).eps * np.max(np.abs(b)))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_energies_match_python(name: str) -> None:
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    for q, v, _ in _states(scene):
+        e_nat, e_py = nat.energy(q, v), py.energy(q, v)
+        assert e_nat.elastic > 0.0
+        assert e_nat.total == pytest.approx(e_py.total, rel=1e-12)
+        _close(nat.elastic_energy(q), py.elastic_energy(q))
+
+
+def test_kernel_leaves_the_same_kinematics_in_data(pandas: cd.Scene) -> None:
+    """Readers of Dynamics.data after a right-hand side (object power, wrenches) see the state it was
+    evaluated at, whichever backend ran."""
+    nat, py = _pair(pandas)
+    q, v, tau = _states(pandas)[1]
+    nat.acceleration(q, v, tau)
+    py.acceleration(q, v, tau)
+    f = pandas.object_frame
+    for d in (nat, py):
+        pin.updateFramePlacement(pandas.model, d.data, f)
+    np.testing.assert_allclose(nat.data.oMf[f].homogeneous, py.data.oMf[f].homogeneous, atol=1e-14)
+    V = [pin.getFrameVelocity(pandas.model, d.data, f, pin.ReferenceFrame.LOCAL).vector for d in (nat, py)]
+    np.testing.assert_allclose(V[0], V[1], atol=1e-13)
+
+
+def test_implicit_euler_runs_agree_across_backends(pandas: cd.Scene) -> None:
+    """A whole closed-loop run (PD controller, energy monitor) gives the same trajectory."""
+    ctrl = cd.control.GravityCompensationPD(pandas, 50.0, 5.0)
+    v0 = np.random.default_rng(0).normal(size=pandas.nv) * 0.3
+    runs = []
+    for name in ("native", "python"):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setenv("COOPDYN_BACKEND", name)
+            runs.append(cd.simulate(pandas, 0.2, controller=ctrl, integrator="implicit_euler", dt=1e-3, v0=v0))
+    np.testing.assert_allclose(runs[0].q, runs[1].q, atol=1e-10)
+    np.testing.assert_allclose(runs[0].wrench(0), runs[1].wrench(0), atol=1e-6)
+
+
+def test_bad_sizes_are_value_errors(pandas: cd.Scene) -> None:
+    nat = Dynamics(pandas, backend="native")
+    q, v, tau = pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated)
+    with pytest.raises(ValueError, match="tau has 3 entries, expected 14"):
+        nat.acceleration(q, v, np.zeros(3))
+    with pytest.raises(ValueError, match="v has 4 entries"):
+        nat.acceleration(q, np.zeros(4), tau)
+    with pytest.raises(ValueError, match="q has"):
+        nat.acceleration(q[:-1], v, tau)
+    with pytest.raises(ValueError, match="object wrench must have 6 entries"):
+        nat.acceleration(q, v, tau, np.zeros(5))
+    with pytest.raises(ValueError, match="kp has"):
+        nat.implicit_euler_velocity(q, v, tau, 1e-3, np.zeros(2), np.zeros(pandas.n_actuated))
+
+
+def test_backend_choice(monkeypatch: pytest.MonkeyPatch, pandas: cd.Scene) -> None:
+    assert Dynamics(pandas, backend="python").backend == "python"
+    monkeypatch.setenv("COOPDYN_BACKEND", "python")
+    assert Dynamics(pandas).backend == "python"
+    monkeypatch.setenv("COOPDYN_BACKEND", "auto")
+    assert Dynamics(pandas).backend == "native"
+    with pytest.raises(backend.BackendError, match="backend must be one of auto, native, python, got 'fortran'"):
+        Dynamics(pandas, backend="fortran")
+
+
+def test_missing_kernel_warns_and_falls_back(monkeypatch: pytest.MonkeyPatch, pandas: cd.Scene) -> None:
+    why = "coopdyn._native was built against Pinocchio 0.0.1 but Pinocchio 4.1.0 is installed"
+    monkeypatch.delenv("COOPDYN_BACKEND", raising=False)
+    monkeypatch.setattr(backend, "_load", lambda: (None, why))
+    backend._warn_once.cache_clear()
+    with pytest.warns(backend.NativeBackendWarning, match=r"built against Pinocchio 0\.0\.1"):
+        assert Dynamics(pandas).backend == "python"
+    with pytest.raises(backend.BackendError, match=r"native backend was requested but coopdyn\._native was built"):
+        Dynamics(pandas, backend="native")
