@@ -15,12 +15,14 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from . import scenes
+from .backend import native_available, resolve
 from .control import GravityCompensationPD
 from .dynamics import Dynamics
 from .errors import DivergenceError, SimulationError
@@ -238,17 +240,30 @@ def stability_sweep(
     return out
 
 
-def rhs_timing(repeats: int = 2000) -> dict[str, float]:
-    """Median wall time of one right-hand side and one implicit-Euler step on two Pandas [µs]
-    (7 blocks of ``repeats`` calls, measured side by side)."""
+def _backends() -> list[str]:
+    """The backends to time side by side: Python always, the compiled kernel when built."""
+    return ["python", "native"] if native_available() else ["python"]
+
+
+def rhs_timing(repeats: int = 2000) -> dict[str, dict[str, float]]:
+    """Median wall time [µs] of one right-hand side, one evaluation of the stiffness terms and one
+    implicit-Euler step (PD controller included) on two Pandas, per backend: 7 blocks of
+    ``repeats`` calls, the backends interleaved block by block."""
     from .integrators import System, get_integrator
 
     scene = scenes.facing_arms("panda", stiffness=1e4)
-    dyn = Dynamics(scene)
     rng = np.random.default_rng(1)
     q, v, tau = scene.q0, rng.normal(size=scene.nv) * 0.1, np.zeros(scene.n_actuated)
-    system = System(dyn, GravityCompensationPD(scene, 50.0, 5.0))
     method = get_integrator("implicit_euler")
+    calls: dict[str, dict[str, Callable[[], object]]] = {}
+    for name in _backends():
+        dyn = Dynamics(scene, backend=name)
+        system = System(dyn, GravityCompensationPD(scene, 50.0, 5.0))
+        calls[name] = {
+            "rhs_us": partial(dyn.acceleration, q, v, tau),
+            "implicit_terms_us": partial(dyn.implicit_terms, q, v, tau),
+            "implicit_euler_step_us": partial(method.step, system, 0.0, q, v, 1e-3),
+        }
 
     def block(f: Callable[[], object]) -> float:
         t0 = time.perf_counter()
@@ -256,16 +271,12 @@ def rhs_timing(repeats: int = 2000) -> dict[str, float]:
             f()
         return (time.perf_counter() - t0) / repeats * 1e6
 
-    rhs, step, stiff = [], [], []
+    samples: dict[str, dict[str, list[float]]] = {b: {k: [] for k in c} for b, c in calls.items()}
     for _ in range(7):
-        rhs.append(block(lambda: dyn.acceleration(q, v, tau)))
-        stiff.append(block(lambda: dyn.stiffness(q, v)))
-        step.append(block(lambda: method.step(system, 0.0, q, v, 1e-3)))
-    return {
-        "rhs_us": statistics.median(rhs),
-        "stiffness_us": statistics.median(stiff),
-        "implicit_euler_step_us": statistics.median(step),
-    }
+        for name, fns in calls.items():
+            for key, f in fns.items():
+                samples[name][key].append(block(f))
+    return {b: {k: statistics.median(x) for k, x in d.items()} for b, d in samples.items()}
 
 
 def _bar(total: int, desc: str) -> Any:
@@ -356,19 +367,15 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
         "chart": plot_work_precision(rows, out_dir / "work_precision.png"),
         "stability_chart": plot_stability(stab, out_dir / "stability.png"),
     }
+    print(f"work–precision and stability runs: {resolve()} backend")
     print(format_rows(rows))
     print()
     print(format_stability(stab))
     print()
-    print(
-        f"two-Panda right-hand side: {timing['rhs_us']:.1f} µs; stiffness (M, K̃, D̃): {timing['stiffness_us']:.1f} µs; "
-        f"implicit_euler step: {timing['implicit_euler_step_us']:.1f} µs (medians of 7 blocks)"
-    )
-    for (k, every), (cpu, ok) in implicit_cost.items():
-        print(
-            f"implicit_euler (Jacobian every {every:>2} steps), dt = 1 ms, k = {k:.0e} N/m: "
-            f"{cpu:.4f} CPU s per simulated s, {'stable' if ok else 'UNSTABLE'}"
-        )
+    print(format_timing(timing))
+    print()
+    print(format_implicit_cost(implicit_cost))
+    print()
     best = _best_to_reach(rows, "linear", 1e-6)
     if best is not None:
         print(
@@ -381,28 +388,39 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     return {"rows": rows, "stability": stab, "timing": timing, "implicit_cost": implicit_cost, "files": files}
 
 
-def _implicit_cost(stiffnesses: Sequence[float], t_final: float) -> dict[tuple[float, int], tuple[float, bool]]:
+def _implicit_cost(stiffnesses: Sequence[float], t_final: float) -> dict[tuple[str, float, int], tuple[float, bool]]:
     """CPU s per simulated s of implicit_euler at dt = 1 ms on the Panda scene (PD 50/5, energy
-    monitor on), with the Jacobian evaluated every step and every 10 steps; median of 5."""
+    monitor on), with the Jacobian evaluated every step and every 10 steps, per backend (the
+    backends alternate run by run); median of 5. Keys: (backend, k, jacobian_every)."""
     out = {}
     for k in stiffnesses:
         scene = scenes.facing_arms("panda", stiffness=k)
         ctrl = GravityCompensationPD(scene, 50.0, 5.0)
         v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
         for every in (1, 10):
-            cpu = []
-            ok = True
+            cpu: dict[str, list[float]] = {b: [] for b in _backends()}
+            ok = dict.fromkeys(cpu, True)
             for _ in range(5):
-                try:
-                    res = simulate(
-                        scene, t_final, controller=ctrl, integrator=LinearlyImplicitEuler(every), dt=1e-3, v0=v0, save_every=100
-                    )
-                    cpu.append(res.cpu_time / t_final)
-                    ok = ok and bool(np.max(np.abs(res.v)) < 10.0)
-                except DivergenceError:
-                    ok = False
-                    break
-            out[(k, every)] = (statistics.median(cpu) if cpu else math.nan, ok)
+                for name in cpu:
+                    if not ok[name]:
+                        continue
+                    try:
+                        res = simulate(
+                            scene,
+                            t_final,
+                            controller=ctrl,
+                            integrator=LinearlyImplicitEuler(every),
+                            dt=1e-3,
+                            v0=v0,
+                            save_every=100,
+                            backend=name,
+                        )
+                        cpu[name].append(res.cpu_time / t_final)
+                        ok[name] = bool(np.max(np.abs(res.v)) < 10.0)
+                    except DivergenceError:
+                        ok[name] = False
+            for name, x in cpu.items():
+                out[(name, k, every)] = (statistics.median(x) if x else math.nan, ok[name])
     return out
 
 
@@ -426,6 +444,43 @@ def format_rows(rows: Sequence[Row]) -> str:
             f"{r.scene:<14} {r.method:<17} {r.setting:<13} {r.position_error:>11.3e} {r.wrench_error:>13.3e} "
             f"{r.cpu_per_sim_s:>11.4f} {r.n_rhs:>8d} {r.n_factor:>6d}  {ok}"
         )
+    return "\n".join(lines)
+
+
+def format_timing(timing: dict[str, dict[str, float]]) -> str:
+    """The per-call costs of :func:`rhs_timing`, one column per backend, with the ratio."""
+    names = list(timing)
+    labels = {
+        "rhs_us": "right-hand side",
+        "implicit_terms_us": "implicit terms (f, M, K̃, D̃)",
+        "implicit_euler_step_us": "implicit_euler step (incl. PD)",
+    }
+    head = f"{'two Pandas, nv = 20 [µs per call]':<36}" + "".join(f"{n:>10}" for n in names)
+    if len(names) == 2:
+        head += f"{'ratio':>8}"
+    lines = [head, "-" * len(head)]
+    for key, label in labels.items():
+        line = f"{label:<36}" + "".join(f"{timing[n][key]:>10.1f}" for n in names)
+        if len(names) == 2:
+            line += f"{timing[names[0]][key] / timing[names[1]][key]:>7.1f}×"
+        lines.append(line)
+    lines.append("(medians of 7 blocks, backends interleaved)")
+    return "\n".join(lines)
+
+
+def format_implicit_cost(cost: dict[tuple[str, float, int], tuple[float, bool]]) -> str:
+    """The whole-run costs of implicit_euler at dt = 1 ms, one line per backend and setting."""
+    ks = sorted({k for _, k, _ in cost})
+    head = f"{'implicit_euler, dt = 1 ms [CPU s / sim s]':<44}" + "".join(f"{f'k={k:.0e}':>10}" for k in ks)
+    lines = [head, "-" * len(head)]
+    for name, every in dict.fromkeys((b, e) for b, _, e in cost):
+        label = f"{name}, Jacobian every {'step' if every == 1 else f'{every} steps'}"
+        cells = []
+        for k in ks:
+            value, ok = cost[(name, k, every)]
+            cells.append(f"{value:>9.4f}{' ' if ok else '!'}")
+        lines.append(f"{label:<44}" + "".join(cells))
+    lines.append("(PD controller and energy monitor included; median of 5 runs of 1 s; ! = unstable)")
     return "\n".join(lines)
 
 

@@ -79,9 +79,10 @@ class System:
                 f"the controller returned shape {tau.shape} at t = {t:.6g} s; it must return one torque/force per "
                 f"arm joint, shape ({self.n_actuated},), in scene order"
             )
-        if not math.isfinite(tau.sum()):  # one reduction; NaN and ±inf propagate into the sum
+        if not math.isfinite(float(tau @ tau)):  # one dot product; NaN, ±inf (and overflow) fail it
             bad = np.flatnonzero(~np.isfinite(tau)).tolist()
-            raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")
+            if bad:
+                raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")
         return tau
 
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -167,9 +167,9 @@ private:
       J_T_.setZero();
       pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
       pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
-      J_G_.noalias() -= T_M_G.toActionMatrixInverse() * J_T_;
+      J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // lazy: cheaper than GEMM at 6 × nv
       pinocchio::Jlog6(T_M_G, Jlog);
-      A_.noalias() = Jlog * J_G_;
+      A_ = Jlog.lazyProduct(J_G_);
       Vector6 w = lk.K * pinocchio::log6(T_M_G).toVector();
       if (lk.has_damping) {
         const Vector6 e_dot = A_ * v;
@@ -179,11 +179,11 @@ private:
       }
       Q_.noalias() -= A_.transpose() * w;
       if (matrices) {
-        KA_.noalias() = lk.K * A_;
-        K_t_.noalias() += A_.transpose() * KA_;
+        KA_ = lk.K.lazyProduct(A_);
+        K_t_ += A_.transpose().lazyProduct(KA_);
         if (lk.has_damping) {
-          KA_.noalias() = lk.D * A_;
-          D_t_.noalias() += A_.transpose() * KA_;
+          KA_ = lk.D.lazyProduct(A_);
+          D_t_ += A_.transpose().lazyProduct(KA_);
         }
       }
     }
