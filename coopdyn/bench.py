@@ -28,7 +28,7 @@ from .dynamics import Dynamics
 from .errors import DivergenceError, SimulationError
 from .integrators import INTEGRATORS, Integrator, LinearlyImplicitEuler
 from .monitor import EnergyBalanceWarning
-from .reference import linear_book_exact
+from .reference import BookParameters, linear_book_exact
 from .scene import Scene
 from .simulate import Result, simulate
 from .stability import advise, measure_stable_dt
@@ -202,6 +202,54 @@ def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeat
     )
 
 
+def peer_rows(case: Case, *, quick: bool = False, repeats: int = 5, progress: bool = True) -> list[Row]:
+    """MuJoCo on the linear case of :func:`linear_case` (the book's parameters and drives; see
+    :mod:`coopdyn.peers`), over the same dt grid as coopdyn's fixed-step methods; empty when
+    MuJoCo is not installed."""
+    from .peers import MUJOCO_INTEGRATORS, mujoco_available, mujoco_linear_book
+
+    if case.name != "linear" or not mujoco_available():
+        return []
+    params = BookParameters()
+    drives = scenes.book_task(params)
+    plan = [(m, s) for m in MUJOCO_INTEGRATORS for s in _settings("rk4", quick, True)]
+    bar = _bar(len(plan), "MuJoCo (linear)") if progress else None
+    rows = []
+    for integrator, (label, dt, _) in plan:
+        save_every = max(1, round(OUTPUT_INTERVAL / dt))
+        cpu = []
+        for _ in range(repeats):
+            run = mujoco_linear_book(params, drives, case.t_final, dt, integrator, save_every)
+            cpu.append(run.cpu_time)
+            if run.cpu_time > 2.0:
+                break
+        exact = linear_book_exact(run.t, *drives, params=params)
+        stable = bool(np.all(np.isfinite(run.Y)))
+        F1, F2 = run.contact_forces(params)
+        rows.append(
+            Row(
+                case.name,
+                f"mujoco {integrator}",
+                label,
+                dt,
+                math.nan,
+                float(np.max(np.abs(run.Y[:, 1] - exact.Y[:, 1]))) if stable else math.inf,
+                float(max(np.max(np.abs(F1 - exact.Fc1)), np.max(np.abs(F2 - exact.Fc2)))) if stable else math.inf,
+                statistics.median(cpu) / case.t_final,
+                run.n_steps * (4 if integrator == "RK4" else 1),
+                0,
+                stable,
+                False,
+            )
+        )
+        if bar is not None:
+            bar.set_postfix_str(f"{integrator} {label}")
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return rows
+
+
 def stability_sweep(
     stiffnesses: Sequence[float],
     methods: Sequence[str] = ("symplectic_euler", "rk4"),
@@ -358,6 +406,7 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     cases = [linear_case(3.0)] + [panda_case(k, 0.1 if quick else 0.2) for k in stiffnesses]
     methods = ["symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "ros2_adaptive", "exponential"]
     rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
+    rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
     stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)
     timing = rhs_timing(200 if quick else 2000)
     implicit_cost = _implicit_cost([1e4, 1e7] if quick else [1e4, 1e5, 1e6, 1e7], 0.2 if quick else 1.0)
@@ -376,13 +425,7 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     print()
     print(format_implicit_cost(implicit_cost))
     print()
-    best = _best_to_reach(rows, "linear", 1e-6)
-    if best is not None:
-        print(
-            f"linear case, least CPU to reach a contact-force error ≤ 1e-6 N over 3 s: {best.method} {best.setting}: "
-            f"{best.cpu_per_sim_s * 3.0 * 1e3:.1f} ms (error {best.wrench_error:.2e} N)"
-        )
-    print("peers (MuJoCo, Drake): not installed here, not run")
+    print(format_peers(rows))
     for name, path in files.items():
         print(f"wrote {path}  ({name})")
     return {"rows": rows, "stability": stab, "timing": timing, "implicit_cost": implicit_cost, "files": files}
@@ -424,8 +467,9 @@ def _implicit_cost(stiffnesses: Sequence[float], t_final: float) -> dict[tuple[s
     return out
 
 
-def _best_to_reach(rows: Sequence[Row], scene: str, tol: float) -> Row | None:
-    good = [r for r in rows if r.scene == scene and r.stable and r.wrench_error <= tol]
+def _best_to_reach(rows: Sequence[Row], tol: float) -> Row | None:
+    """The cheapest stable row with a force error ≤ tol [N]."""
+    good = [r for r in rows if r.stable and r.wrench_error <= tol]
     return min(good, key=lambda r: r.cpu_per_sim_s, default=None)
 
 
@@ -444,6 +488,32 @@ def format_rows(rows: Sequence[Row]) -> str:
             f"{r.scene:<14} {r.method:<17} {r.setting:<13} {r.position_error:>11.3e} {r.wrench_error:>13.3e} "
             f"{r.cpu_per_sim_s:>11.4f} {r.n_rhs:>8d} {r.n_factor:>6d}  {ok}"
         )
+    return "\n".join(lines)
+
+
+def format_peers(rows: Sequence[Row]) -> str:
+    """What the peers reached on the linear case, next to coopdyn's best, at 1e-6 N and 1e-5 N."""
+    from .peers import mujoco_available
+
+    lines = []
+    mine = [r for r in rows if r.scene == "linear" and not r.method.startswith("mujoco")]
+    peers = [r for r in rows if r.scene == "linear" and r.method.startswith("mujoco")]
+    if not peers:
+        lines.append("peers: MuJoCo " + ("ran on no scene" if mujoco_available() else "is not installed (pip install mujoco)"))
+    for tol in (1e-5, 1e-6):
+        for who, pool in (("coopdyn", mine), ("MuJoCo", peers)):
+            if not pool:
+                continue
+            best = _best_to_reach(pool, tol)
+            lines.append(
+                f"linear case, least CPU for a force error ≤ {tol:g} N over 3 s, {who}: "
+                + (
+                    f"{best.method} {best.setting}: {best.cpu_per_sim_s * 3.0 * 1e3:.1f} ms (error {best.wrench_error:.2e} N)"
+                    if best
+                    else "not reached in the sweep"
+                )
+            )
+    lines.append("peers on the Panda scenes: not run (MuJoCo needs the URDF geometry rewritten, the SE(3) spring as a callback)")
     return "\n".join(lines)
 
 

@@ -1,0 +1,46 @@
+"""The MuJoCo peer model of the book's linear case is the same system: it converges to the
+exact solution at RK4's order (a wrong sign, rest length or mass would leave an error floor)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coopdyn import bench, scenes
+from coopdyn.peers import mujoco_linear_book
+from coopdyn.reference import BookParameters, linear_book_exact
+
+pytest.importorskip("mujoco")
+
+
+def _force_error(p: BookParameters, dt: float, integrator: str, t_final: float = 1.5) -> float:
+    drives = scenes.book_task(p)
+    run = mujoco_linear_book(p, drives, t_final, dt, integrator, save_every=round(0.01 / dt))
+    exact = linear_book_exact(run.t, *drives, params=p)
+    np.testing.assert_allclose(run.t, np.arange(run.t.size) * 0.01, atol=1e-12)
+    F1, F2 = run.contact_forces(p)
+    return float(max(np.max(np.abs(F1 - exact.Fc1)), np.max(np.abs(F2 - exact.Fc2))))
+
+
+@pytest.mark.parametrize("p", [BookParameters(), BookParameters(m1=5.0, m2=20.0, c_k=4e4, s3=0.03)], ids=["book", "asymmetric"])
+def test_mujoco_rk4_converges_to_the_exact_solution_at_order_4(p: BookParameters) -> None:
+    dts = [2.5e-3, 1.25e-3, 6.25e-4]
+    errors = [_force_error(p, dt, "RK4") for dt in dts]
+    order = np.polyfit(np.log(dts), np.log(errors), 1)[0]
+    assert abs(order - 4.0) < 0.3, (errors, order)
+    assert errors[-1] < 1e-3  # newtons, out of forces of ~100-400 N
+
+
+def test_mujoco_euler_is_first_order() -> None:
+    p = BookParameters()
+    errors = [_force_error(p, dt, "Euler") for dt in (2.5e-3, 1.25e-3)]
+    assert np.log2(errors[0] / errors[1]) == pytest.approx(1.0, abs=0.3)
+
+
+def test_bench_peer_rows_and_summary() -> None:
+    rows = bench.peer_rows(bench.linear_case(3.0), quick=True, repeats=1, progress=False)
+    assert {r.method for r in rows} == {"mujoco Euler", "mujoco implicitfast", "mujoco RK4"}
+    assert all(r.stable and r.cpu_per_sim_s > 0 for r in rows)
+    text = bench.format_peers(rows)
+    assert "least CPU for a force error ≤ 1e-05 N over 3 s, MuJoCo" in text
+    assert bench.peer_rows(bench.panda_case(1e4), quick=True, progress=False) == []
