@@ -14,7 +14,7 @@ import statistics
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -345,6 +345,14 @@ def write_csv(rows: Sequence[Any], path: Path) -> Path:
     return path
 
 
+def read_csv(path: str | os.PathLike[str]) -> list[Row]:
+    """Rows written by :func:`write_csv` (e.g. to re-plot a finished run)."""
+    types = {f.name: f.type for f in fields(Row)}
+    convert: dict[str, Callable[[str], Any]] = {"str": str, "float": float, "int": int, "bool": lambda x: x == "True"}
+    with open(path, newline="") as f:
+        return [Row(**{k: convert[str(types[k])](v) for k, v in d.items()}) for d in csv.DictReader(f)]
+
+
 def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
     """Log–log wrench error vs CPU per simulated second, one panel per scene; × marks divergence."""
     from .plotting import _pyplot, save_figure
@@ -357,7 +365,8 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
         for method in dict.fromkeys(r.method for r in rows if r.scene == name):
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
-                ax.loglog([r.cpu_per_sim_s for r in pts], [max(r.wrench_error, 1e-16) for r in pts], "o-", label=method, ms=4)
+                style = "x--" if method.startswith("mujoco") else "o-"  # peers dashed
+                ax.loglog([r.cpu_per_sim_s for r in pts], [max(r.wrench_error, 1e-16) for r in pts], style, label=method, ms=4)
             bad = [r for r in rows if r.scene == name and r.method == method and not r.stable]
             for r in bad:
                 n_bad += 1

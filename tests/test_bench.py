@@ -23,6 +23,10 @@ def test_work_precision_rows_and_outputs(tmp_path: Path) -> None:
     assert all(r.n_rhs > 0 and r.cpu_per_sim_s > 0 for r in rows)
     csv = bench.write_csv(rows, tmp_path / "wp.csv")
     assert csv.read_text().splitlines()[0].startswith("scene,method,setting,dt,rtol,position_error")
+    again = bench.read_csv(csv)
+    assert [r.setting for r in again] == [r.setting for r in rows]
+    assert [r.wrench_error for r in again] == [r.wrench_error for r in rows]  # repr round-trips floats
+    assert [r.stable for r in again] == [r.stable for r in rows]
     assert bench.plot_work_precision(rows, tmp_path / "wp.png").stat().st_size > 10_000
     assert "force err [N]" in bench.format_rows(rows)
 
