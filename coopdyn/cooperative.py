@@ -34,10 +34,10 @@ from .scene import Scene
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
-
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b for 3-vectors (np.cross costs ~10× more on the controller's hot path)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
 
 class ObjectReference(NamedTuple):
     """Desired object motion at one instant (world axes)."""
