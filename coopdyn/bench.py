@@ -28,7 +28,7 @@ from .dynamics import Dynamics
 from .errors import DivergenceError, SimulationError
 from .integrators import INTEGRATORS, Integrator, LinearlyImplicitEuler
 from .monitor import EnergyBalanceWarning
-from .reference import BookParameters, linear_book_exact
+from .reference import BookParameters, Drive, linear_book_exact
 from .scene import Scene
 from .simulate import Result, simulate
 from .stability import advise, measure_stable_dt
@@ -47,6 +47,7 @@ class Case:
     v0: np.ndarray
     reference: Callable[[Result], tuple[np.ndarray, np.ndarray]]  #: (object positions, wrench forces) on res.t
     reference_note: str
+    book: tuple[BookParameters, Drive, Drive] | None = None  #: the linear case's parameters and drives (for peers)
 
 
 @dataclass(frozen=True)
@@ -73,16 +74,17 @@ def _forces(res: Result) -> np.ndarray:
 
 def linear_case(t_final: float = 3.0) -> Case:
     """The book's linear system with the grip/lift/oscillate drives; exact reference."""
-    scene = scenes.linear_book()
-    d1, d2 = scenes.book_task()
+    params = BookParameters()
+    scene = scenes.linear_book(**asdict(params))
+    d1, d2 = scenes.book_task(params)
 
     def reference(res: Result) -> tuple[np.ndarray, np.ndarray]:
-        ex = linear_book_exact(res.t, d1, d2)
+        ex = linear_book_exact(res.t, d1, d2, params)
         forces = np.zeros((res.t.size, 2, 3))
         forces[:, 0, 2], forces[:, 1, 2] = ex.Fc1, ex.Fc2
         return np.column_stack([np.zeros_like(ex.t), np.zeros_like(ex.t), ex.Y[:, 1]]), forces
 
-    return Case("linear", scene, scenes.drives_controller(d1, d2), t_final, scene.v0, reference, "exact (expm)")
+    return Case("linear", scene, scenes.drives_controller(d1, d2), t_final, scene.v0, reference, "exact (expm)", (params, d1, d2))
 
 
 def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1e-11) -> Case:
@@ -142,15 +144,12 @@ def work_precision(
             if m == "exponential" and not linear:
                 continue
             plan.extend((case, m, s) for s in _settings(m, quick, linear))
-    bar = _bar(len(plan), "work–precision") if progress else None
     rows = []
-    for case, m, (label, dt, rtol) in plan:
-        rows.append(_measure(case, m, label, dt, rtol, repeats))
-        if bar is not None:
+    with _bar(len(plan), "work–precision", progress) as bar:
+        for case, m, (label, dt, rtol) in plan:
+            rows.append(_measure(case, m, label, dt, rtol, repeats))
             bar.set_postfix_str(f"{case.name} {m} {label}")
             bar.update(1)
-    if bar is not None:
-        bar.close()
     return rows
 
 
@@ -203,18 +202,18 @@ def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeat
 
 
 def peer_rows(case: Case, *, quick: bool = False, repeats: int = 5, progress: bool = True) -> list[Row]:
-    """MuJoCo on the linear case of :func:`linear_case` (the book's parameters and drives; see
-    :mod:`coopdyn.peers`), over the same dt grid as coopdyn's fixed-step methods; empty when
-    MuJoCo is not installed."""
+    """MuJoCo on the linear case (:func:`linear_case`'s parameters and drives; see
+    :mod:`coopdyn.peers`), over the same dt grid as coopdyn's fixed-step methods; empty for other
+    cases and when MuJoCo is not installed."""
     from .peers import MUJOCO_INTEGRATORS, mujoco_available, mujoco_linear_book
 
-    if case.name != "linear" or not mujoco_available():
+    if case.book is None or not mujoco_available():
         return []
-    params = BookParameters()
-    drives = scenes.book_task(params)
+    params, d1, d2 = case.book
+    drives = (d1, d2)
     plan = [(m, s) for m in MUJOCO_INTEGRATORS for s in _settings("rk4", quick, True)]
-    bar = _bar(len(plan), "MuJoCo (linear)") if progress else None
     rows = []
+    bar = _bar(len(plan), "MuJoCo (linear)", progress)
     for integrator, (label, dt, _) in plan:
         save_every = max(1, round(OUTPUT_INTERVAL / dt))
         cpu = []
@@ -242,11 +241,9 @@ def peer_rows(case: Case, *, quick: bool = False, repeats: int = 5, progress: bo
                 False,
             )
         )
-        if bar is not None:
-            bar.set_postfix_str(f"{integrator} {label}")
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+        bar.set_postfix_str(f"{integrator} {label}")
+        bar.update(1)
+    bar.close()
     return rows
 
 
@@ -260,7 +257,7 @@ def stability_sweep(
     """Largest stable dt vs stiffness on the Panda scene: predicted (advise) and measured
     (bisection) for explicit methods; implicit ones are run at 1, 2 and 5 ms."""
     out = []
-    bar = _bar(len(stiffnesses), "stability") if progress else None
+    bar = _bar(len(stiffnesses), "stability", progress)
     for k in stiffnesses:
         scene = scenes.facing_arms("panda", stiffness=k)
         ctrl = GravityCompensationPD(scene, 50.0, 5.0)
@@ -281,10 +278,8 @@ def stability_sweep(
             out.append(
                 {"k": k, "method": m, "predicted_dt": math.inf, "measured_dt": max(ok) if ok else 0.0, "omega_max": adv.omega_max}
             )
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+        bar.update(1)
+    bar.close()
     return out
 
 
@@ -327,10 +322,11 @@ def rhs_timing(repeats: int = 2000) -> dict[str, dict[str, float]]:
     return {b: {k: statistics.median(x) for k, x in d.items()} for b, d in samples.items()}
 
 
-def _bar(total: int, desc: str) -> Any:
+def _bar(total: int, desc: str, progress: bool) -> Any:
+    """A progress bar (a context manager; silent when ``progress`` is false)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="run")
+    return tqdm(total=total, desc=desc, unit="run", disable=not progress)
 
 
 def write_csv(rows: Sequence[Any], path: Path) -> Path:

@@ -12,13 +12,6 @@ from .errors import SceneError
 from .scene import Scene
 
 
-def _as_slice(index: np.ndarray) -> slice | np.ndarray:
-    """A contiguous index array as a slice (cheaper on the hot path), else unchanged."""
-    if index.size and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
-        return slice(int(index[0]), int(index[0]) + index.size)
-    return index
-
-
 class GravityCompensationPD:
     """``τ = g(q) + Kp (q_d − q) − Kd q̇`` on every arm joint.
 
@@ -42,7 +35,6 @@ class GravityCompensationPD:
                 raise SceneError("q_des is per joint coordinate; give it only for arms of 1-DOF joints (nq = nv)")
             self.q_des[self._q_index] = _validate.finite_array(q_des, "q_des", (n,))
         self._data = scene.model.createData()
-        self._act = _as_slice(scene.actuated)
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """(Kp, Kd) (n_actuated,) [N·m/rad], [N·m·s/rad]: the stiffness and damping the controller
@@ -50,7 +42,7 @@ class GravityCompensationPD:
         return self.kp, self.kd
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        act, model = self._act, self.scene.model
+        act, model = self.scene.actuated_index, self.scene.model
         g = pin.computeGeneralizedGravity(model, self._data, q)[act]
         g += self.kp * pin.difference(model, q, self.q_des)[act]
         g -= self.kd * v[act]

@@ -58,12 +58,8 @@ class Dynamics:
         for arm in scene.arms:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
-        act = scene.actuated
-        contiguous = act.size > 0 and np.array_equal(act, np.arange(act[0], act[0] + act.size))
-        #: the arm joints in v: a slice when they are contiguous (cheaper to index on the hot path)
-        self.actuated_index: slice | np.ndarray = slice(int(act[0]), int(act[0]) + act.size) if contiguous else act
-        #: power dissipated [W] at the state of the last :meth:`acceleration` call
-        self.last_dissipation = 0.0
+        self.actuated_index = scene.actuated_index
+        self._dissipation = 0.0
         self.backend = _backend.resolve(backend)
         self._kernel = None
         if self.backend == "native":
@@ -72,9 +68,15 @@ class Dynamics:
                 self.data,
                 [(t, g, K, D) for t, g, K, D, _ in self._hot],
                 self._damping,
-                np.asarray(act, dtype=np.int32),
+                np.asarray(scene.actuated, dtype=np.int32),
                 scene.object_frame,
             )
+
+    @property
+    def last_dissipation(self) -> float:
+        """Power dissipated by dampers [W] at the state of the last right-hand side or implicit
+        evaluation."""
+        return self._kernel.last_dissipation if self._kernel is not None else self._dissipation
 
     # -- interconnections ---------------------------------------------------------------------
     def _springs(self) -> list[SpringState]:
@@ -136,7 +138,7 @@ class Dynamics:
             Q += pin.getFrameJacobian(model, data, fo, LOCAL).T @ local
         if self._has_damping:
             p_diss += v @ (self._damping * v)
-        self.last_dissipation = p_diss
+        self._dissipation = p_diss
         return Q
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
@@ -148,9 +150,7 @@ class Dynamics:
         moving each wrench to its joint as an external force.
         """
         if self._kernel is not None:
-            a = self._kernel.acceleration(q, v, tau, object_wrench)
-            self.last_dissipation = self._kernel.last_dissipation
-            return a
+            return self._kernel.acceleration(q, v, tau, object_wrench)
         t = self._interconnections(q, v, False, object_wrench)
         t[self.actuated_index] += tau
         if self._has_damping:
@@ -164,9 +164,7 @@ class Dynamics:
         ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the matrices of
         :meth:`stiffness` (nv, nv)."""
         if self._kernel is not None:
-            terms = self._kernel.implicit_terms(q, v, tau, object_wrench)
-            self.last_dissipation = self._kernel.last_dissipation
-            return terms
+            return self._kernel.implicit_terms(q, v, tau, object_wrench)
         model, data = self.model, self.data
         f = self._interconnections(q, v, True, object_wrench)
         f[self.actuated_index] += tau
@@ -190,14 +188,16 @@ class Dynamics:
         joint PD gains ``kp``, ``kd`` (n_actuated,) [N·m/rad], [N·m·s/rad] and f is that of
         :meth:`implicit_terms`. One kinematics pass and one Cholesky factorisation."""
         if self._kernel is not None:
-            v_new = self._kernel.implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)
-            self.last_dissipation = self._kernel.last_dissipation
-            return v_new
+            return self._kernel.implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)
         f, M, K, D = self.implicit_terms(q, v, tau, object_wrench)
+        self.add_joint_gains(K, D, kp, kd)
+        return v + h * np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))
+
+    def add_joint_gains(self, K: np.ndarray, D: np.ndarray, kp: np.ndarray, kd: np.ndarray) -> None:
+        """Add joint PD gains (n_actuated,) to the diagonals of K̃ and D̃ (nv, nv), in place."""
         act = self.scene.actuated
         K[act, act] += kp
         D[act, act] += kd
-        return v + h * np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Σ (J_Gᵀ G_f_G + J_Tᵀ T_f_T), the interconnections' generalized force (nv,)."""

@@ -55,10 +55,6 @@ class EnergyMonitor:
         self.first_violation: float | None = None
         self.max_excess = 0.0
 
-    def before_step(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
-        """Call right before stepping from (t, q, v)."""
-        self.system.begin_step()
-
     def after_step(self, t0: float, q0: np.ndarray, v0: np.ndarray, h: float, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """Call right after a step from (t0, q0, v0) of length h [s] to (t, q, v)."""
         self._close_interval(self.system.power_at(t0, q0, v0), h)

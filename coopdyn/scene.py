@@ -59,6 +59,8 @@ class Scene:
         q0, v0: the initial state, (nq,) and (nv,).
         actuated: indices in ``v`` of all arm joints, in scene order; a controller returns one
             torque/force per entry [N·m or N].
+        actuated_index: the same as a slice when the indices are contiguous (cheaper to index
+            with on hot paths), else ``actuated``.
         object_joint: joint id of the object; ``object_q``/``object_v`` its coordinates.
     """
 
@@ -137,6 +139,9 @@ class Scene:
         self.object_q = np.arange(jo.idx_q, jo.idx_q + jo.nq)
         self.object_v = np.arange(jo.idx_v, jo.idx_v + jo.nv)
         self.actuated = np.concatenate([a.v_index for a in self.arms])
+        first, n = int(self.actuated[0]) if self.actuated.size else 0, self.actuated.size
+        contiguous = n > 0 and np.array_equal(self.actuated, np.arange(first, first + n))
+        self.actuated_index: slice | np.ndarray = slice(first, first + n) if contiguous else self.actuated
         self.q0 = q0
         self.v0 = np.zeros(model.nv)
         self.gravity = np.array(model.gravity.linear)

@@ -136,16 +136,25 @@ class _Run:
         self.t: list[float] = []
         self.q: list[np.ndarray] = []
         self.v: list[np.ndarray] = []
-        self.tau: list[np.ndarray] = []
+        self.tau: list[np.ndarray | None] = []  # None: pending, see save()
         self.n_accepted = 0
         self.n_rejected = 0
         self.cpu_time = 0.0
 
-    def save(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+    def save(self, t: float, q: np.ndarray, v: np.ndarray, step_follows: bool = True) -> None:
+        """Keep a sample. When a step from it follows, its torque is taken from that step's own
+        controller call by :meth:`settle_torque` instead of calling the controller twice."""
         self.t.append(t)
         self.q.append(q)
         self.v.append(v)
-        self.tau.append(self.system.torque(t, q, v))
+        self.tau.append(None if step_follows else self.system.torque(t, q, v))
+
+    def settle_torque(self) -> None:
+        """Fill the last sample's pending torque: reused from the step just taken from it, or
+        computed when that step recorded no evaluation there (``exponential`` evaluates no dynamics)."""
+        if self.tau and self.tau[-1] is None:
+            tau = self.system.recorded_torque(self.q[-1], self.v[-1])
+            self.tau[-1] = self.system.torque(self.t[-1], self.q[-1], self.v[-1]) if tau is None else tau
 
     def check(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> None:
         """Raise DivergenceError when (q, v) is not finite or too fast."""
@@ -181,6 +190,7 @@ class _Run:
 
     def result(self, status: str = "completed") -> Result:
         s = self.system
+        self.settle_torque()  # a run stopped right after a save
         n = len(self.t)
         return Result(
             scene=self.scene,
@@ -205,13 +215,13 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
     t, every = 0.0, run.save_every
     for k in range(n_steps + 1):
         if k % every == 0 or k == n_steps:
-            run.save(t, q, v)
+            run.save(t, q, v, step_follows=k < n_steps)
         if k == n_steps:
             break
         h = min(dt, run.t_final - k * dt)
-        if monitor is not None:
-            monitor.before_step(t, q, v)
+        system.begin_step()
         q_new, v_new = method.step(system, t, q, v, h)
+        run.settle_torque()
         t_new = run.t_final if k + 1 == n_steps else (k + 1) * dt
         run.check(t_new, q_new, v_new, h)
         if monitor is not None:
@@ -241,9 +251,9 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             h_try = min(h, t_out - t)
             if t + h_try * (1.0 + 1e-9) >= t_out:  # land exactly on the output time
                 h_try = t_out - t
-            if monitor is not None:
-                monitor.before_step(t, q, v)
+            system.begin_step()
             out = method.attempt(system, t, q, v, h_try)
+            run.settle_torque()
             h = method.next_step(h_try, out.error)
             if not (out.error <= 1.0):  # also rejects NaN
                 run.n_rejected += 1
@@ -260,7 +270,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 monitor.after_step(t, q, v, h_try, t_new, out.q, out.v)
             t, q, v = t_new, out.q, out.v
             run.n_accepted += 1
-        run.save(t, q, v)
+        run.save(t, q, v, step_follows=t < run.t_final)
         if bar is not None:
             bar.update(t - bar.n)
     if monitor is not None:

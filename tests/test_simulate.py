@@ -86,3 +86,24 @@ def test_divergence_raises_instead_of_returning_nan() -> None:
     )
     partial = info.value.result
     assert isinstance(partial, cd.Result) and 0 < partial.t[-1] < 5.0 and np.all(np.isfinite(partial.q))
+
+
+@pytest.mark.parametrize("method", ["symplectic_euler", "rk4", "implicit_euler", "ros2", "dopri5", "exponential"])
+def test_saved_torques_are_the_controllers_without_extra_calls(book: cd.Scene, method: str) -> None:
+    """Result.tau is the controller's output at each saved state; a saved sample reuses the torque of
+    the step taken from it, so saving every step costs no controller calls beyond the integrator's."""
+    d1, d2 = cd.scenes.book_task()
+    drives = cd.scenes.drives_controller(d1, d2)
+    calls = [0]
+
+    def ctrl(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        calls[0] += 1
+        return drives(t, q, v) + 10.0 * v[book.actuated]  # state feedback: a stale torque would show
+
+    res = cd.simulate(book, 0.6, controller=ctrl, integrator=method, dt=0.01, energy_check="off")
+    if method == "exponential":  # no dynamics evaluation to reuse: one extra call per saved sample
+        assert calls[0] == res.n_rhs + res.t.size
+    else:  # the integrator's calls (n_rhs counts them) + the final state's sample
+        assert calls[0] <= res.n_rhs + 1
+    expected = np.array([drives(t, q, v) + 10.0 * v[book.actuated] for t, q, v in zip(res.t, res.q, res.v, strict=True)])
+    np.testing.assert_array_equal(res.tau, expected)

@@ -27,6 +27,7 @@ from ..dynamics import Dynamics
 from ..errors import ControllerError
 
 Controller = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+_Record = tuple[np.ndarray, np.ndarray, float, np.ndarray]
 
 
 class System:
@@ -62,12 +63,12 @@ class System:
         self.cache: dict[Any, Any] = {}
         self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self.model.joints[1:] if j.nv > 1]
         self._act = dynamics.actuated_index
-        self._first: tuple[np.ndarray, np.ndarray, float] | None = None
-        self._last: tuple[np.ndarray, np.ndarray, float] | None = None
-        self._previous_last: tuple[np.ndarray, np.ndarray, float] | None = None
+        # (q, v, net power [W], τ) of evaluations: the step's first and last, the previous step's last
+        self._first: _Record | None = None
+        self._last: _Record | None = None
+        self._previous_last: _Record | None = None
         gains = getattr(controller, "gains", None)
         self._gains = gains() if callable(gains) else None
-        self._gains_or_zero = self._gains if self._gains is not None else (self._zero, self._zero)
 
     def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The controller output, checked: (n_actuated,) finite floats."""
@@ -96,12 +97,30 @@ class System:
         return a
 
     def _record(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> None:
-        """Keep the net power ``τ·q̇ + external − dissipation`` [W] of the state just evaluated."""
-        p_ext = 0.0 if w is None else self._object_power(w)
-        record = (q, v, p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation)
+        """Keep the torque and the net power of the state just evaluated."""
+        record = (q, v, self._net_power(v, tau, w), tau)
         if self._first is None:
             self._first = record
         self._last = record
+
+    def _net_power(self, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> float:
+        """``τ·q̇ + external − dissipation`` [W] at the state of the last dynamics evaluation."""
+        p_ext = 0.0 if w is None else self._object_power(w)
+        return p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation
+
+    def _recorded(self, q: np.ndarray, v: np.ndarray) -> _Record | None:
+        """The evaluation at exactly these state arrays (the current step's first, or the previous
+        step's last for first-same-as-last methods), if kept."""
+        for record in (self._first, self._previous_last):
+            if record is not None and record[0] is q and record[1] is v:
+                return record
+        return None
+
+    def recorded_torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+        """The controller output an integrator step already computed at (q, v), else ``None``
+        (lets the saved trajectory reuse it instead of calling the controller again)."""
+        record = self._recorded(q, v)
+        return None if record is None else record[3]
 
     def _wrench(self, t: float) -> np.ndarray:
         assert self.object_wrench is not None
@@ -111,21 +130,21 @@ class System:
         return w
 
     def begin_step(self) -> None:
-        """Mark the start of a step (for :meth:`power_at`)."""
+        """Mark the start of a step (for :meth:`power_at` and :meth:`recorded_torque`); the
+        simulation loops call it before every step or attempt."""
         self._previous_last, self._first = self._last, None
 
     def power_at(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
         """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
         reused from the step's own first evaluation there (or the previous step's last one, for
         first-same-as-last methods), computed when no evaluation was made at that state."""
-        for record in (self._first, self._previous_last):
-            if record is not None and record[0] is q and record[1] is v:
-                return record[2]
+        record = self._recorded(q, v)
+        if record is not None:
+            return record[2]
         tau = self.torque(t, q, v)
         w = None if self.object_wrench is None else self._wrench(t)
         self.dynamics.acceleration(q, v, tau, w)
-        p_ext = 0.0 if w is None else self._object_power(w)
-        return p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation
+        return self._net_power(v, tau, w)
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
@@ -137,9 +156,7 @@ class System:
         w = None if self.object_wrench is None else self._wrench(t)
         f, M, K, D = self.dynamics.implicit_terms(q, v, tau, w)
         if self._gains is not None:
-            act = self.scene.actuated
-            K[act, act] += self._gains[0]
-            D[act, act] += self._gains[1]
+            self.dynamics.add_joint_gains(K, D, *self._gains)
         self._record(q, v, tau, w)
         return f, M, K, D
 
@@ -153,7 +170,7 @@ class System:
         self.n_factor += 1
         tau = self.torque(t, q, v)
         w = None if self.object_wrench is None else self._wrench(t)
-        kp, kd = self._gains_or_zero
+        kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
         v_new = self.dynamics.implicit_euler_velocity(q, v, tau, h, kp, kd, w)
         self._record(q, v, tau, w)
         return v_new
@@ -163,9 +180,7 @@ class System:
         self.n_jac += 1
         M, K, D = self.dynamics.stiffness(q, v)
         if self._gains is not None:
-            act = self.scene.actuated
-            K[act, act] += self._gains[0]
-            D[act, act] += self._gains[1]
+            self.dynamics.add_joint_gains(K, D, *self._gains)
         return M, K, D
 
     def _object_power(self, wrench: np.ndarray) -> float:

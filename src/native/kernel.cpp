@@ -93,9 +93,7 @@ public:
 
   // (f, M, K̃, D̃): f = Sτ + Q − Bq̇ − b(q, q̇) = M q̈ and the stiffness matrices (without gains).
   bp::tuple implicit_terms(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
-    generalized_force(q, v, tau, wrench, true);
-    tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
-    mass_matrix(q);
+    implicit_parts(q, v, tau, wrench);
     return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
   }
 
@@ -105,9 +103,7 @@ public:
                                    const RefVec & kp, const RefVec & kd, bp::object wrench) {
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
-    generalized_force(q, v, tau, wrench, true);
-    tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
-    mass_matrix(q);
+    implicit_parts(q, v, tau, wrench);
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
       K_t_(actuated_[i], actuated_[i]) += kp[i];
       D_t_(actuated_[i], actuated_[i]) += kd[i];
@@ -136,8 +132,11 @@ public:
   double last_dissipation() const { return last_dissipation_; }
 
 private:
-  // data_.M = M(q), both triangles (crba fills the upper one).
-  void mass_matrix(const RefVec & q) {
+  // What the implicit methods need at (q, v): tau_full_ = f = Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_
+  // and data_.M = M(q) with both triangles (crba fills the upper one).
+  void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+    generalized_force(q, v, tau, wrench, true);
+    tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
     pinocchio::crba(model_, data_, q);
     data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
   }
