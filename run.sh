@@ -17,10 +17,11 @@ setup() {
       "$PY" -m virtualenv --quiet "$VENV"
     fi
   fi
-  # (Re)install when the project definition or the compiled kernel's sources changed since the
-  # last install (the install compiles coopdyn._native: about 2 minutes).
+  # (Re)install when the project definition, the compiled kernel's sources or the list of the
+  # package's modules changed since the last install (the editable install maps each module file;
+  # the install compiles coopdyn._native: about 2 minutes).
   stamp="$VENV/.coopdyn-installed"
-  want=$(cat pyproject.toml CMakeLists.txt src/native/* | sha256sum | cut -d' ' -f1)
+  want=$({ cat pyproject.toml CMakeLists.txt src/native/*; find coopdyn -name '*.py' | LC_ALL=C sort; } | sha256sum | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     echo "[run.sh] installing coopdyn and its dependencies into $VENV (compiles the C++ kernel)" >&2
     "$VENV/bin/python" -m pip install --quiet --upgrade pip

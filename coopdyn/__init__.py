@@ -1,23 +1,23 @@
 """coopdyn: dynamics and control of multi-arm cooperating robots with elastic interconnections."""
 
-from . import backend, control, integrators, reference, scenes
-from .arm import Arm
-from .body import RigidObject
-from .dynamics import Dynamics, Energy
+from . import control, cooperative, integrators, reference, scenes
+from .bench.stability import measure_stable_dt
+from .dynamics import Dynamics, Energy, backend
 from .errors import (
     ControllerError,
     CoopdynError,
     DivergenceError,
+    EnergyBalanceError,
+    EnergyBalanceWarning,
     ModelLoadError,
     SceneError,
     SimulationError,
     SimulationInterrupted,
 )
-from .interconnection import Interconnection, axial, diagonal
-from .monitor import EnergyBalanceError, EnergyBalanceWarning
-from .scene import Scene
-from .simulate import Result, simulate
-from .stability import Advice, advise, measure_stable_dt
+from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal
+from .result import Result
+from .simulate import simulate
+from .stability import Advice, advise
 
 __all__ = [
     "Advice",
@@ -41,6 +41,7 @@ __all__ = [
     "axial",
     "backend",
     "control",
+    "cooperative",
     "diagonal",
     "integrators",
     "measure_stable_dt",

@@ -15,9 +15,9 @@ from .errors import CoopdynError, SimulationInterrupted
 
 def _book(args: argparse.Namespace) -> int:
     from . import scenes
-    from .plotting import book_figure
-    from .reference import BookParameters, linear_book_exact
+    from .problems.linear_book import BookParameters, linear_book_exact
     from .simulate import simulate
+    from .viz.plotting import book_figure
 
     params = BookParameters()
     scene = scenes.linear_book()
@@ -49,15 +49,15 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .scenefile import load, run
+    from .io.scenefile import load, run
 
     run(load(args.scene_file), folder=args.out)
     return 0
 
 
 def _view(args: argparse.Namespace) -> int:
-    from .scenefile import load, load_result
-    from .viewer import export_html, view
+    from .io.scenefile import load, load_result
+    from .viz.viewer import export_html, view
 
     loaded = load(args.scene_file)
     result = load_result(loaded, args.result)

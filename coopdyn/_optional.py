@@ -5,11 +5,7 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-from .errors import CoopdynError
-
-
-class MissingDependencyError(CoopdynError, ImportError):
-    """A dependency a feature needs is not installed."""
+from .errors import MissingDependencyError
 
 
 def require(module: str, feature: str, pip: str) -> ModuleType:

@@ -9,7 +9,7 @@ import pinocchio as pin
 
 from . import _validate
 from .errors import SceneError
-from .scene import Scene
+from .model.scene import Scene
 
 
 class GravityCompensationPD:

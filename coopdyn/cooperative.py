@@ -29,7 +29,7 @@ import pinocchio as pin
 from . import _validate
 from .errors import SceneError
 from .grasp import grasp_matrix, squeeze_directions
-from .scene import Scene
+from .model.scene import Scene
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 

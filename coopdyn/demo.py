@@ -9,12 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from . import scenes
 from .cooperative import GripLiftOscillate, ObjectImpedance
 from .errors import DivergenceError, SimulationInterrupted
-from .plotting import cooperative_figure
-from .scenes import object_start
-from .simulate import save_partial, simulate
+from .problems.facing_arms import facing_arms, object_start
+from .result import save_partial
+from .simulate import simulate
+from .viz.plotting import cooperative_figure
 
 STIFFNESS = 1e4  #: interconnection stiffness [N/m]; rotational 1e2 [N·m/rad]
 DAMPING = 0.002  #: interconnection damping / stiffness [s]
@@ -32,7 +32,7 @@ def run_demo(
 ) -> dict[str, Any]:
     """Simulate, print a summary, write plot / HTML / trajectory to ``out``; return the summary."""
     out_dir = Path(out)
-    scene = scenes.facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
+    scene = facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
     controller = ObjectImpedance(scene, task)
     wall0 = time.perf_counter()
@@ -70,7 +70,7 @@ def run_demo(
     cooperative_figure(res, task, out_dir / "demo.png")
     files.append(out_dir / "demo.png")
     if html:
-        from .viewer import export_html
+        from .viz.viewer import export_html
 
         files.append(export_html(res, out_dir / "demo.html"))
     print(f"two Pandas, {STIFFNESS:g} N/m interconnections, {res.integrator} at dt = {dt:g} s, {t_final:g} s simulated")

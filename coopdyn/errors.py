@@ -45,6 +45,30 @@ class ControllerError(SimulationError):
     """A controller returned something that is not a finite torque vector of the right length."""
 
 
+class SceneFileError(SceneError):
+    """A scene file is malformed; the message names the file, the key and its line."""
+
+
+class MissingDependencyError(CoopdynError, ImportError):
+    """A dependency a feature needs is not installed."""
+
+
+class BackendError(CoopdynError, RuntimeError):
+    """The requested backend cannot be used."""
+
+
+class EnergyBalanceError(CoopdynError, RuntimeError):
+    """Raised instead of :class:`EnergyBalanceWarning` with ``energy_check="raise"``."""
+
+
+class EnergyBalanceWarning(UserWarning):
+    """Total energy grew more than the net input work explains."""
+
+
+class NativeBackendWarning(UserWarning):
+    """The compiled kernel is unavailable; the (slower) Python path runs instead."""
+
+
 def did_you_mean(name: str, candidates: Iterable[str], *, n: int = 3) -> str:
     """Return ``" Did you mean 'a', 'b'?"`` for the closest candidates, or ``""``."""
     close = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.5)

@@ -9,16 +9,8 @@ import warnings
 
 import numpy as np
 
-from .errors import CoopdynError
-from .integrators import System
-
-
-class EnergyBalanceWarning(UserWarning):
-    """Total energy grew more than the net input work explains."""
-
-
-class EnergyBalanceError(CoopdynError, RuntimeError):
-    """Raised instead of :class:`EnergyBalanceWarning` with ``energy_check="raise"``."""
+from .closed_loop import System
+from .errors import EnergyBalanceError, EnergyBalanceWarning
 
 
 class EnergyMonitor:

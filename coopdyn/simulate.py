@@ -4,22 +4,19 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from functools import cached_property
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
-from .dynamics import Dynamics, Energy
+from .closed_loop import Controller, System
+from .dynamics import Dynamics
 from .errors import DivergenceError, SimulationError, SimulationInterrupted
-from .integrators import AdaptiveIntegrator, Controller, Integrator, System, get_integrator
+from .integrators import AdaptiveIntegrator, Integrator, get_integrator
+from .model.scene import Scene
 from .monitor import EnergyMonitor
-from .scene import Scene
+from .result import Result
 
 
 def simulate(
@@ -294,191 +291,3 @@ def _progress_bar(t_final: float, desc: str) -> Any:
     return tqdm(
         total=t_final, desc=desc, unit="s", leave=False, bar_format="{l_bar}{bar}| {n:.3f}/{total:.3f} s [{elapsed}<{remaining}]"
     )
-
-
-@dataclass(frozen=True, eq=False)
-class Result:
-    """A saved trajectory and its readouts.
-
-    Attributes:
-        scene: the simulated scene.
-        t: sample times (n,) [s].
-        q, v: configurations (n, nq) and velocities (n, nv).
-        tau: controller output at the samples (n, n_actuated) [N·m or N].
-        integrator: name of the method; dt: its step (adaptive: output interval) [s].
-        n_rhs: right-hand-side evaluations; cpu_time: CPU time of the integration loop [s].
-        n_jac, n_factor: Jacobian evaluations and factorisations (implicit methods).
-        n_steps, n_rejected: accepted and rejected steps.
-    """
-
-    scene: Scene
-    t: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    tau: np.ndarray
-    integrator: str
-    dt: float
-    n_rhs: int
-    cpu_time: float
-    n_jac: int = 0
-    n_factor: int = 0
-    n_steps: int = 0
-    n_rejected: int = 0
-    status: str = "completed"  #: "completed", "interrupted" (Ctrl-C) or "diverged"
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
-
-    @cached_property
-    def _dynamics(self) -> Dynamics:
-        return Dynamics(self.scene)
-
-    def _link(self, i: int) -> int:
-        n = len(self.scene.links)
-        if not -n <= i < n:
-            raise SimulationError(f"interconnection index {i} out of range: the scene has {n}")
-        return i % n
-
-    def _springs(self) -> list[list[Any]]:
-        if "springs" not in self._cache:
-            dyn = self._dynamics
-            self._cache["springs"] = [dyn.springs(q, v) for q, v in zip(self.q, self.v, strict=True)]
-        return self._cache["springs"]
-
-    def _frame_rotations(self, frame: int) -> np.ndarray:
-        model, data = self.scene.model, self._dynamics.data
-        out = np.empty((len(self.t), 3, 3))
-        for k, q in enumerate(self.q):
-            pin.forwardKinematics(model, data, q)
-            out[k] = pin.updateFramePlacement(model, data, frame).rotation
-        return out
-
-    def _world(self, frame: int, local: np.ndarray) -> np.ndarray:
-        R = self._frame_rotations(frame)
-        return np.concatenate([np.einsum("nij,nj->ni", R, local[:, :3]), np.einsum("nij,nj->ni", R, local[:, 3:])], axis=1)
-
-    def wrench(self, i: int) -> np.ndarray:
-        """Wrench of interconnection i on the object (n, 6) [N, N·m]: force, then moment about the
-        grasp point, in world-aligned axes."""
-        i = self._link(i)
-        local = np.array([s[i].G_f_G for s in self._springs()])
-        return self._world(self.scene.links[i].grasp_frame, local)
-
-    def arm_wrench(self, i: int) -> np.ndarray:
-        """Wrench of interconnection i on its arm (n, 6) [N, N·m], about the tip point, world axes."""
-        i = self._link(i)
-        local = np.array([s[i].T_f_T for s in self._springs()])
-        return self._world(self.scene.links[i].tip_frame, local)
-
-    def deformation(self, i: int) -> np.ndarray:
-        """Deformation e = log6(T_M_G) of interconnection i (n, 6) [m, rad], in tip-frame axes."""
-        i = self._link(i)
-        return np.array([s[i].e for s in self._springs()])
-
-    def elastic_energy(self, i: int) -> np.ndarray:
-        """½ eᵀ K e of interconnection i (n,) [J]."""
-        e = self.deformation(i)
-        K = self.scene.links[self._link(i)].K
-        return 0.5 * np.einsum("ni,ij,nj->n", e, K, e)
-
-    def energy(self) -> Energy:
-        """Kinetic, gravity and elastic energy along the trajectory, each (n,) [J]."""
-        dyn = self._dynamics
-        parts = np.array([dyn.energy(q, v) for q, v in zip(self.q, self.v, strict=True)])
-        return Energy(parts[:, 0], parts[:, 1], parts[:, 2])
-
-    def frame_position(self, frame: str | int) -> np.ndarray:
-        """World position of a frame of the scene model (n, 3) [m]."""
-        model = self.scene.model
-        if isinstance(frame, str):
-            if not model.existFrame(frame):
-                from .errors import did_you_mean
-
-                raise SimulationError(f"no frame {frame!r} in the scene.{did_you_mean(frame, [f.name for f in model.frames])}")
-            frame = int(model.getFrameId(frame))
-        data = self._dynamics.data
-        out = np.empty((len(self.t), 3))
-        for k, q in enumerate(self.q):
-            pin.forwardKinematics(model, data, q)
-            out[k] = pin.updateFramePlacement(model, data, frame).translation
-        return out
-
-    def grasp_points(self) -> np.ndarray:
-        """World positions of the grasp frames (n, N, 3) [m]."""
-        return np.stack([self.frame_position(lk.grasp_frame) for lk in self.scene.links], axis=1)
-
-    def wrenches(self) -> np.ndarray:
-        """Every interconnection's wrench on the object (n, N, 6) [N, N·m] (see :meth:`wrench`)."""
-        return np.stack([self.wrench(i) for i in range(len(self.scene.links))], axis=1)
-
-    def wrench_split(self) -> tuple[np.ndarray, np.ndarray]:
-        """The interconnection wrenches on the object split into the part that moves the object
-        and the internal part (:func:`coopdyn.grasp.split`), each (n, N, 6) [N, N·m]."""
-        from .grasp import grasp_matrix, split
-
-        W, P = self.wrenches(), self.grasp_points()
-        parts = [split(grasp_matrix(p), w) for p, w in zip(P, W, strict=True)]
-        return np.array([s.moving for s in parts]), np.array([s.internal for s in parts])
-
-    def squeeze(self) -> np.ndarray:
-        """Internal (squeeze) force at each grasp (n, N) [N], positive = compression."""
-        from .grasp import squeeze_force
-
-        return np.array([squeeze_force(p, w) for p, w in zip(self.grasp_points(), self.wrenches(), strict=True)])
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the trajectory atomically (temporary file, then rename): ``.npz`` (t, q, v, tau
-        and the interconnection wrenches) or ``.csv`` (one row per sample). Returns the path."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp")
-        W = self.wrenches().reshape(len(self.t), -1)
-        if path.suffix == ".npz":
-            with open(tmp, "wb") as f:
-                np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, integrator=self.integrator, dt=self.dt)
-        elif path.suffix == ".csv":
-            qn = [f"q[{i}]" for i in range(self.scene.nq)]
-            vn = [f"v[{i}]" for i in range(self.scene.nv)]
-            joints = [name for a in self.scene.arms for name in a.joint_names]
-            taun = [f"tau[{joints[i] if len(joints) == self.scene.n_actuated else i}]" for i in range(self.scene.n_actuated)]
-            wn = [f"link{i}_{c}" for i in range(len(self.scene.links)) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
-            header = ",".join(["t", *qn, *vn, *taun, *wn])
-            np.savetxt(tmp, np.column_stack([self.t, self.q, self.v, self.tau, W]), delimiter=",", header=header, comments="")
-        else:
-            raise SimulationError(f"unknown result format {path.suffix!r}: use .npz or .csv")
-        os.replace(tmp, path)
-        return path
-
-    def tracking_error(self, reference: Callable[[float], Any]) -> np.ndarray:
-        """Object position error ‖p − p_d‖ (n,) [m] against ``reference(t).position`` (e.g. a
-        :class:`coopdyn.cooperative.GripLiftOscillate`) or ``reference(t)`` returning (3,)."""
-        desired = []
-        for t in self.t:
-            ref = reference(float(t))
-            desired.append(np.asarray(getattr(ref, "position", ref), dtype=float))
-        return np.linalg.norm(self.object_position() - np.array(desired), axis=1)
-
-    def tip_position(self, arm: int | str) -> np.ndarray:
-        """World position of an arm's tip frame (n, 3) [m]."""
-        return self.frame_position(self.scene.arms[self.scene.arm_index(arm)].tip_frame)
-
-    def object_position(self) -> np.ndarray:
-        """World position of the object frame origin (n, 3) [m]."""
-        return self.frame_position(self.scene.object_frame)
-
-
-def save_partial(error: BaseException, folder: str | os.PathLike[str]) -> list[Path]:
-    """After a ``DivergenceError`` or ``SimulationInterrupted``: write the trajectory it carries
-    (``trajectory.npz``, ``trajectory.csv``) and the message (``diagnosis.txt``) to ``folder``,
-    atomically. Returns the paths written."""
-    result = getattr(error, "result", None)
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    if isinstance(result, Result) and len(result.t):
-        written += [result.save(folder / "trajectory.npz"), result.save(folder / "trajectory.csv")]
-    note = folder / "diagnosis.txt"
-    tmp = note.with_name(".diagnosis.txt.tmp")
-    advice = getattr(error, "advice", None)
-    tmp.write_text(f"{type(error).__name__}: {error}\n" + (f"\n{advice}\n" if advice is not None else ""))
-    os.replace(tmp, note)
-    written.append(note)
-    return written

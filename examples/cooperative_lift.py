@@ -8,8 +8,8 @@ import numpy as np
 
 import coopdyn as cd
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
-from coopdyn.plotting import cooperative_figure
 from coopdyn.scenes import object_start
+from coopdyn.viz.plotting import cooperative_figure
 
 N_ARMS = 3
 T_FINAL = 5.0  # [s]

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 
 import coopdyn as cd
-from coopdyn.plotting import book_figure
+from coopdyn.viz.plotting import book_figure
 
 T_FINAL = 3.0  # [s]
 DT = 1e-4  # [s]

@@ -23,7 +23,7 @@ def test_malformed_urdf(tmp_path: Path) -> None:
 
 
 def test_missing_dependency_names_the_install(monkeypatch: pytest.MonkeyPatch, book: cd.Scene) -> None:
-    from coopdyn.plotting import book_figure
+    from coopdyn.viz.plotting import book_figure
 
     res = cd.simulate(book, 0.01, dt=1e-3)
     monkeypatch.setitem(sys.modules, "matplotlib.pyplot", None)  # as if matplotlib were not installed

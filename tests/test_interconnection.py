@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 import coopdyn as cd
-from coopdyn.interconnection import spring
+from coopdyn.model.interconnection import spring
 
 
 def _anisotropic(rng: np.random.Generator, scale_lin: float, scale_ang: float) -> np.ndarray:

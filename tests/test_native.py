@@ -12,8 +12,7 @@ import pinocchio as pin
 import pytest
 
 import coopdyn as cd
-from coopdyn import backend
-from coopdyn.dynamics import Dynamics
+from coopdyn.dynamics import Dynamics, backend
 
 pytestmark = pytest.mark.skipif(not backend.native_available(), reason="coopdyn._native is not built")
 

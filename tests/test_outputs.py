@@ -13,8 +13,8 @@ import pytest
 
 import coopdyn as cd
 from coopdyn.__main__ import main
-from coopdyn.scenefile import SceneFileError, load, load_result
-from coopdyn.viewer import export_html
+from coopdyn.io.scenefile import SceneFileError, load, load_result
+from coopdyn.viz.viewer import export_html
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
 

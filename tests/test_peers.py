@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from coopdyn import bench, scenes
-from coopdyn.peers import mujoco_linear_book
+from coopdyn.bench.peers import mujoco_linear_book
 from coopdyn.reference import BookParameters, linear_book_exact
 
 pytest.importorskip("mujoco")

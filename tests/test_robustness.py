@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import coopdyn as cd
+from coopdyn.io.scenefile import load
 from coopdyn.resources import urdf_path
-from coopdyn.scenefile import load
 
 SLIDER = str(urdf_path("slider_z.urdf"))
 

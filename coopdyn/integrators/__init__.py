@@ -18,8 +18,9 @@ name                          order  adaptive  per step
 
 from __future__ import annotations
 
+from ..closed_loop import Controller, System
 from ..errors import SimulationError
-from .base import AdaptiveIntegrator, Attempt, Controller, Integrator, System
+from .base import AdaptiveIntegrator, Attempt, Integrator
 from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
 from .exponential import Exponential, LinearForm, linear_form, nonlinearity
 from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler

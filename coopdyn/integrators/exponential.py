@@ -18,7 +18,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import SimulationError
-from ..scene import Scene
+from ..model.scene import Scene
 from .base import Integrator, System
 
 #: Pinocchio joints along which the dynamics stay linear.

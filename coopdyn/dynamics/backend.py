@@ -21,24 +21,16 @@ from types import ModuleType
 
 import pinocchio as pin
 
-from .errors import CoopdynError
+from ..errors import BackendError, NativeBackendWarning
 
 BACKENDS = ("auto", "native", "python")
-
-
-class NativeBackendWarning(UserWarning):
-    """The compiled kernel is unavailable; the (slower) Python path runs instead."""
-
-
-class BackendError(CoopdynError, RuntimeError):
-    """The requested backend cannot be used."""
 
 
 @cache
 def _load() -> tuple[ModuleType | None, str]:
     """(the kernel module or None, why not)."""
     try:
-        from . import _native
+        from .. import _native
     except ImportError as exc:
         return None, f"coopdyn._native did not import ({exc}); reinstall coopdyn with a C++17 compiler available"
     built = getattr(_native, "PINOCCHIO_VERSION", "?")

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import _validate
-from .errors import SceneError
+from .. import _validate
+from ..errors import SceneError
 
 #: Root joints an object may have, and the Pinocchio joint each one builds.
 OBJECT_JOINTS = ("freeflyer", "prismatic", "planar")

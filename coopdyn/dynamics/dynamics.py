@@ -15,9 +15,9 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from ..model.interconnection import SpringState, spring
+from ..model.scene import Scene
 from . import backend as _backend
-from .interconnection import SpringState, spring
-from .scene import Scene
 
 LOCAL = pin.ReferenceFrame.LOCAL
 

@@ -18,15 +18,15 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .arm import load_arm
-from .scene import Scene
-from .simulate import Result
+from ..model.arm import load_arm
+from ..model.scene import Scene
+from ..result import Result
 
 FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
 
 
 def _meshcat() -> Any:
-    from ._optional import require
+    from .._optional import require
 
     require("meshcat.geometry", "meshcat visualisation", "meshcat")
     return require("meshcat", "meshcat visualisation", "meshcat")

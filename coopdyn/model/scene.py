@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import _validate
+from .. import _validate
+from ..errors import SceneError, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
 from .body import RigidObject
-from .errors import SceneError, did_you_mean
 from .interconnection import Interconnection
 
 

@@ -8,12 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from .reference import BookSolution
-from .simulate import Result
+from ..problems.linear_book import BookSolution
+from ..result import Result
 
 
 def _pyplot() -> Any:
-    from ._optional import require
+    from .._optional import require
 
     require("matplotlib", "plotting", "matplotlib").use("Agg")
     return require("matplotlib.pyplot", "plotting", "matplotlib")
@@ -25,7 +25,7 @@ def book_figure(result: Result, exact: BookSolution | None = None, path: str | o
     With ``exact`` (the solution at ``result.t``) a fourth panel shows the pipeline's deviation
     from it. Returns the figure; writes a PNG when ``path`` is given.
     """
-    from .scenes import book_positions
+    from ..problems.linear_book import book_positions
 
     plt = _pyplot()
     n = 4 if exact is not None else 3

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from ._optional import require
-from .reference import BookParameters, Drive
+from .._optional import require
+from ..problems.linear_book import BookParameters, Drive
 
 #: MuJoCo integrators swept by the benchmark (mjtIntegrator names)
 MUJOCO_INTEGRATORS = ("Euler", "implicitfast", "RK4")

@@ -16,23 +16,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import scenes
-from .control import ComputedTorque, GravityCompensationPD
-from .cooperative import GripLiftOscillate, ObjectImpedance
-from .errors import CoopdynError, SceneError
-from .integrators import INTEGRATORS
-from .reference import BookParameters
-from .scene import Scene
-from .scenes import object_start
+from .. import scenes
+from ..control import ComputedTorque, GravityCompensationPD
+from ..cooperative import GripLiftOscillate, ObjectImpedance
+from ..errors import CoopdynError, SceneFileError
+from ..integrators import INTEGRATORS
+from ..model.scene import Scene
+from ..problems.facing_arms import object_start
+from ..problems.linear_book import BookParameters
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-
-
-class SceneFileError(SceneError):
-    """A scene file is malformed; the message names the file, the key and its line."""
 
 
 #: [scene] builder → function; [controller] type → class; [task] type → class
@@ -247,9 +243,10 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
     """Simulate a loaded scene file and write its outputs; returns the Result."""
     import numpy as np
 
-    from .errors import DivergenceError, SimulationInterrupted
-    from .plotting import book_figure, cooperative_figure
-    from .simulate import save_partial, simulate
+    from ..errors import DivergenceError, SimulationInterrupted
+    from ..result import save_partial
+    from ..simulate import simulate
+    from ..viz.plotting import book_figure, cooperative_figure
 
     out = Path(folder or loaded.output["folder"])
     try:
@@ -285,7 +282,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
             cooperative_figure(res, loaded.task, png)
         written.append(png)
     if loaded.output["html"]:
-        from .viewer import export_html
+        from ..viz.viewer import export_html
 
         written.append(export_html(res, out / "animation.html"))
     print(f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s")
@@ -307,7 +304,7 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
     """The Result saved by :func:`run` for this scene file (``trajectory.npz``)."""
     import numpy as np
 
-    from .simulate import Result
+    from ..result import Result
 
     path = Path(path) if path is not None else Path(loaded.output["folder"]) / "trajectory.npz"
     if not path.is_file():

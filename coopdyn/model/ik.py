@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..errors import SceneError
 from .arm import Arm, load_arm
-from .errors import SceneError
 
 
 def solve_ik(

@@ -17,9 +17,9 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from . import _validate
+from .. import _validate
+from ..errors import SceneError
 from .body import axis_vector
-from .errors import SceneError
 
 
 def diagonal(linear: float | Sequence[float], angular: float | Sequence[float]) -> np.ndarray:

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import _validate
-from .errors import ModelLoadError, SceneError, did_you_mean
+from .. import _validate
+from ..errors import ModelLoadError, SceneError, did_you_mean
 
 #: Tool frames of well-known example-robot-data arms, used when ``tip_frame`` is not given.
 DEFAULT_TIP_FRAMES: dict[str, str] = {

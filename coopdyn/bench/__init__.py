@@ -1,0 +1,76 @@
+"""Work–precision and stability benchmarks (docs/physics.md, "Work–precision protocol").
+
+``coopdyn bench`` (or :func:`run_benchmarks`) sweeps integrators × step sizes / tolerances on
+named scenes, measures CPU time (median of repeated runs) and machine-independent counters,
+compares with a reference of a *different* method, and writes a table (CSV) and charts (PNG).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from ..dynamics.backend import resolve
+from .cases import Case, Row, linear_case, panda_case
+from .measure import _implicit_cost, peer_rows, rhs_timing, stability_sweep, work_precision
+from .report import (
+    format_implicit_cost,
+    format_peers,
+    format_rows,
+    format_stability,
+    format_timing,
+    plot_stability,
+    plot_work_precision,
+    read_csv,
+    write_csv,
+)
+from .stability import is_stable_at, measure_stable_dt
+
+
+def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:
+    """The whole benchmark: work–precision, stability, timings; prints tables, writes files."""
+    out_dir = Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stiffnesses = [1e4, 1e5, 1e6]
+    cases = [linear_case(3.0)] + [panda_case(k, 0.1 if quick else 0.2) for k in stiffnesses]
+    methods = ["symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "ros2_adaptive", "exponential"]
+    rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
+    rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
+    stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)
+    timing = rhs_timing(200 if quick else 2000)
+    implicit_cost = _implicit_cost([1e4, 1e7] if quick else [1e4, 1e5, 1e6, 1e7], 0.2 if quick else 1.0)
+    files = {
+        "rows": write_csv(rows, out_dir / "work_precision.csv"),
+        "stability": write_csv(stab, out_dir / "stability.csv"),
+        "chart": plot_work_precision(rows, out_dir / "work_precision.png"),
+        "stability_chart": plot_stability(stab, out_dir / "stability.png"),
+    }
+    print(f"work–precision and stability runs: {resolve()} backend")
+    print(format_rows(rows))
+    print()
+    print(format_stability(stab))
+    print()
+    print(format_timing(timing))
+    print()
+    print(format_implicit_cost(implicit_cost))
+    print()
+    print(format_peers(rows))
+    for name, path in files.items():
+        print(f"wrote {path}  ({name})")
+    return {"rows": rows, "stability": stab, "timing": timing, "implicit_cost": implicit_cost, "files": files}
+
+
+__all__ = [
+    "Case",
+    "Row",
+    "is_stable_at",
+    "linear_case",
+    "measure_stable_dt",
+    "panda_case",
+    "read_csv",
+    "rhs_timing",
+    "run_benchmarks",
+    "stability_sweep",
+    "work_precision",
+]

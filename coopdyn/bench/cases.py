@@ -1,0 +1,97 @@
+"""Benchmark cases: scenes with their controllers and reference trajectories, and the row type
+of the work–precision table."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..control import GravityCompensationPD
+from ..errors import SimulationError
+from ..integrators import INTEGRATORS
+from ..model.scene import Scene
+from ..problems.facing_arms import facing_arms
+from ..problems.linear_book import BookParameters, Drive, book_task, drives_controller, linear_book, linear_book_exact
+from ..result import Result
+from ..simulate import simulate
+
+OUTPUT_INTERVAL = 0.01  #: errors are compared on this output grid [s]
+
+
+@dataclass(frozen=True)
+class Case:
+    """A benchmark scene with its controller and its reference trajectory."""
+
+    name: str
+    scene: Scene
+    controller: Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+    t_final: float
+    v0: np.ndarray
+    reference: Callable[[Result], tuple[np.ndarray, np.ndarray]]  #: (object positions, wrench forces) on res.t
+    reference_note: str
+    book: tuple[BookParameters, Drive, Drive] | None = None  #: the linear case's parameters and drives (for peers)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One point of the work–precision chart."""
+
+    scene: str
+    method: str
+    setting: str  #: "dt=…" or "rtol=…"
+    dt: float
+    rtol: float
+    position_error: float  #: max |Δ object position| over the output grid [m] (inf: diverged)
+    wrench_error: float  #: max |Δ interconnection force| over the output grid [N]
+    cpu_per_sim_s: float  #: median CPU seconds per simulated second
+    n_rhs: int
+    n_factor: int
+    stable: bool
+    energy_flag: bool  #: the energy monitor warned
+
+
+def _forces(res: Result) -> np.ndarray:
+    return np.stack([res.wrench(i)[:, :3] for i in range(len(res.scene.links))], axis=1)
+
+
+def linear_case(t_final: float = 3.0) -> Case:
+    """The book's linear system with the grip/lift/oscillate drives; exact reference."""
+    params = BookParameters()
+    scene = linear_book(**asdict(params))
+    d1, d2 = book_task(params)
+
+    def reference(res: Result) -> tuple[np.ndarray, np.ndarray]:
+        ex = linear_book_exact(res.t, d1, d2, params)
+        forces = np.zeros((res.t.size, 2, 3))
+        forces[:, 0, 2], forces[:, 1, 2] = ex.Fc1, ex.Fc2
+        return np.column_stack([np.zeros_like(ex.t), np.zeros_like(ex.t), ex.Y[:, 1]]), forces
+
+    return Case("linear", scene, drives_controller(d1, d2), t_final, scene.v0, reference, "exact (expm)", (params, d1, d2))
+
+
+def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1e-11) -> Case:
+    """Two Pandas holding a 2 kg box, joint PD 50/5 + gravity compensation, perturbed start;
+    reference: Dormand–Prince at a tight tolerance."""
+    scene = facing_arms("panda", stiffness=stiffness)
+    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
+    ref = simulate(
+        scene,
+        t_final,
+        controller=ctrl,
+        integrator=INTEGRATORS["dopri5"](rtol=reference_rtol, atol=reference_rtol * 1e-2),  # type: ignore[call-arg]
+        dt=OUTPUT_INTERVAL,
+        v0=v0,
+        energy_check="off",
+    )
+    ref_pos, ref_forces = ref.object_position(), _forces(ref)
+
+    def reference(res: Result) -> tuple[np.ndarray, np.ndarray]:
+        if res.t.size != ref.t.size or np.max(np.abs(res.t - ref.t)) > 1e-9:
+            raise SimulationError("benchmark runs must save on the reference's output grid")
+        return ref_pos, ref_forces
+
+    note = f"dopri5 rtol={reference_rtol:g}"
+    return Case(f"pandas k={stiffness:.0e}", scene, ctrl, t_final, v0, reference, note)

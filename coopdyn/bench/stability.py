@@ -1,0 +1,85 @@
+"""Measured stability: the largest stable step of a fixed-step method, by bisection on real
+simulations (the prediction from the linearised system is :func:`coopdyn.advise`)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..closed_loop import Controller
+from ..errors import SimulationError
+from ..integrators import Integrator, ScipyReference, get_integrator
+from ..model.scene import Scene
+from ..simulate import simulate
+
+
+def is_stable_at(
+    scene: Scene,
+    integrator: str | Integrator,
+    dt: float,
+    *,
+    controller: Controller | None = None,
+    n_steps: int = 3000,
+    v0: Any = None,
+    growth: float = 1e3,
+) -> bool:
+    """Run ``n_steps`` of ``integrator`` at ``dt`` [s]; stable when the state stays finite and the
+    largest velocity stays below ``growth·(1 + max|v₀|)``."""
+    method = get_integrator(integrator)
+    if isinstance(method, ScipyReference) or method.adaptive:
+        raise SimulationError("measure the stability of fixed-step methods only")
+    v_start = scene.v0 if v0 is None else np.asarray(v0, dtype=float)
+    limit = growth * (1.0 + float(np.max(np.abs(v_start))))
+    try:
+        res = simulate(
+            scene,
+            n_steps * dt,
+            controller=controller,
+            integrator=method,
+            dt=dt,
+            v0=v_start,
+            save_every=max(1, n_steps // 50),
+            max_speed=limit,
+            energy_check="off",
+        )
+    except SimulationError:
+        return False
+    return bool(np.max(np.abs(res.v)) < limit)
+
+
+def measure_stable_dt(
+    scene: Scene,
+    integrator: str | Integrator,
+    *,
+    controller: Controller | None = None,
+    guess: float = 1e-3,
+    rel_tol: float = 0.03,
+    n_steps: int = 3000,
+    v0: Any = None,
+) -> float:
+    """Largest stable step [s] of a fixed-step method on ``scene``, by bisection on simulations
+    (:func:`is_stable_at`); ``guess`` is a starting bracket point [s]."""
+    method = get_integrator(integrator)
+
+    def stable(h: float) -> bool:
+        return is_stable_at(scene, method, h, controller=controller, n_steps=n_steps, v0=v0)
+
+    lo = hi = guess
+    if stable(guess):
+        while stable(hi * 2.0):
+            hi *= 2.0
+            if hi > 1.0:
+                return math.inf
+        lo, hi = hi, hi * 2.0
+    else:
+        while not stable(lo / 2.0):
+            lo /= 2.0
+            if lo < 1e-9:
+                return 0.0
+        lo, hi = lo / 2.0, lo
+    while hi / lo > 1.0 + rel_tol:
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo

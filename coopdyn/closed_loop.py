@@ -1,0 +1,188 @@
+"""The closed loop :class:`System`: the scene dynamics, a controller and an external object wrench,
+with work counters — what integrators advance (they see it through the protocol
+:class:`coopdyn.integrators.base.Problem`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from .dynamics import Dynamics
+from .errors import ControllerError
+
+Controller = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+_Record = tuple[np.ndarray, np.ndarray, float, np.ndarray]
+
+
+class System:
+    """The closed loop ``q̈ = a(t, q, v)``: dynamics plus controller, with work counters.
+
+    Args:
+        dynamics: the scene dynamics.
+        controller: ``controller(t, q, v) -> τ`` (n_actuated,) [N·m or N]; ``None`` means τ = 0.
+            A controller with a method ``gains() -> (Kp, Kd)`` (each (n_actuated,) [N·m/rad],
+            [N·m·s/rad]) has its joint PD gains included in the implicit methods' Jacobian.
+        object_wrench: ``object_wrench(t) -> (6,)`` external wrench on the object [N, N·m],
+            world axes, at the object frame origin (a disturbance, a contact, a load).
+
+    Attributes:
+        n_rhs, n_jac, n_factor: right-hand-side evaluations, Jacobian (stiffness) evaluations
+            and matrix factorisations so far.
+        cache: scratch for integrators (reset per run).
+    """
+
+    def __init__(
+        self, dynamics: Dynamics, controller: Controller | None = None, object_wrench: Callable[[float], np.ndarray] | None = None
+    ) -> None:
+        self.dynamics = dynamics
+        self.scene = dynamics.scene
+        self.model = dynamics.model
+        self.controller = controller
+        self.object_wrench = object_wrench
+        self.n_actuated = dynamics.scene.n_actuated
+        self._zero = np.zeros(self.n_actuated)
+        self.n_rhs = 0
+        self.n_jac = 0
+        self.n_factor = 0
+        self.cache: dict[Any, Any] = {}
+        self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self.model.joints[1:] if j.nv > 1]
+        self._act = dynamics.actuated_index
+        # (q, v, net power [W], τ) of evaluations: the step's first and last, the previous step's last
+        self._first: _Record | None = None
+        self._last: _Record | None = None
+        self._previous_last: _Record | None = None
+        gains = getattr(controller, "gains", None)
+        self._gains = gains() if callable(gains) else None
+
+    def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The controller output, checked: (n_actuated,) finite floats."""
+        if self.controller is None:
+            return self._zero
+        tau = np.asarray(self.controller(t, q, v), dtype=float)
+        if tau.shape != (self.n_actuated,):
+            raise ControllerError(
+                f"the controller returned shape {tau.shape} at t = {t:.6g} s; it must return one torque/force per "
+                f"arm joint, shape ({self.n_actuated},), in scene order"
+            )
+        if not math.isfinite(float(tau @ tau)):  # one dot product; NaN, ±inf (and overflow) fail it
+            bad = np.flatnonzero(~np.isfinite(tau)).tolist()
+            if bad:
+                raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")
+        return tau
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """q̈ (nv,) at (t, q, v); counts one right-hand-side evaluation and records the net power
+        ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
+        self.n_rhs += 1
+        tau = self.torque(t, q, v)
+        w = None if self.object_wrench is None else self._wrench(t)
+        a = self.dynamics.acceleration(q, v, tau, w)
+        self._record(q, v, tau, w)
+        return a
+
+    def _record(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> None:
+        """Keep the torque and the net power of the state just evaluated."""
+        record = (q, v, self._net_power(v, tau, w), tau)
+        if self._first is None:
+            self._first = record
+        self._last = record
+
+    def _net_power(self, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> float:
+        """``τ·q̇ + external − dissipation`` [W] at the state of the last dynamics evaluation."""
+        p_ext = 0.0 if w is None else self._object_power(w)
+        return p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation
+
+    def _recorded(self, q: np.ndarray, v: np.ndarray) -> _Record | None:
+        """The evaluation at exactly these state arrays (the current step's first, or the previous
+        step's last for first-same-as-last methods), if kept."""
+        for record in (self._first, self._previous_last):
+            if record is not None and record[0] is q and record[1] is v:
+                return record
+        return None
+
+    def recorded_torque(self, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+        """The controller output an integrator step already computed at (q, v), else ``None``
+        (lets the saved trajectory reuse it instead of calling the controller again)."""
+        record = self._recorded(q, v)
+        return None if record is None else record[3]
+
+    def _wrench(self, t: float) -> np.ndarray:
+        assert self.object_wrench is not None
+        w = np.asarray(self.object_wrench(t), dtype=float)
+        if w.shape != (6,) or not math.isfinite(w.sum()):
+            raise ControllerError(f"object_wrench(t) must return 6 finite numbers [N, N·m] at t = {t:.6g} s, got {w!r}")
+        return w
+
+    def begin_step(self) -> None:
+        """Mark the start of a step (for :meth:`power_at` and :meth:`recorded_torque`); the
+        simulation loops call it before every step or attempt."""
+        self._previous_last, self._first = self._last, None
+
+    def power_at(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
+        """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
+        reused from the step's own first evaluation there (or the previous step's last one, for
+        first-same-as-last methods), computed when no evaluation was made at that state."""
+        record = self._recorded(q, v)
+        if record is not None:
+            return record[2]
+        tau = self.torque(t, q, v)
+        w = None if self.object_wrench is None else self._wrench(t)
+        self.dynamics.acceleration(q, v, tau, w)
+        return self._net_power(v, tau, w)
+
+    def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
+        matrices of :meth:`stiffness` with the controller's PD gains. Counts one RHS and one
+        Jacobian, and records the net power like :meth:`acceleration`."""
+        self.n_rhs += 1
+        self.n_jac += 1
+        tau = self.torque(t, q, v)
+        w = None if self.object_wrench is None else self._wrench(t)
+        f, M, K, D = self.dynamics.implicit_terms(q, v, tau, w)
+        if self._gains is not None:
+            self.dynamics.add_joint_gains(K, D, *self._gains)
+        self._record(q, v, tau, w)
+        return f, M, K, D
+
+    def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
+        """v⁺ of one linearly implicit Euler step of ``h`` [s] from (t, q, v) (see
+        :meth:`Dynamics.implicit_euler_velocity`), with the controller's PD gains in the matrix.
+        Counts one RHS, one Jacobian and one factorisation; records the net power like
+        :meth:`acceleration`."""
+        self.n_rhs += 1
+        self.n_jac += 1
+        self.n_factor += 1
+        tau = self.torque(t, q, v)
+        w = None if self.object_wrench is None else self._wrench(t)
+        kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
+        v_new = self.dynamics.implicit_euler_velocity(q, v, tau, h, kp, kd, w)
+        self._record(q, v, tau, w)
+        return v_new
+
+    def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains; counts one Jacobian."""
+        self.n_jac += 1
+        M, K, D = self.dynamics.stiffness(q, v)
+        if self._gains is not None:
+            self.dynamics.add_joint_gains(K, D, *self._gains)
+        return M, K, D
+
+    def _object_power(self, wrench: np.ndarray) -> float:
+        """Power [W] of a world-aligned wrench at the object origin, at the last evaluated state."""
+        model, data = self.model, self.dynamics.data
+        V = pin.getFrameVelocity(model, data, self.scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).vector
+        return float(wrench @ V)
+
+    def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ."""
+        if not self._chart:
+            return v
+        J = pin.dIntegrate(self.model, q0, delta, pin.ArgumentPosition.ARG1)
+        out = v.copy()
+        for s in self._chart:
+            out[s] = np.linalg.solve(J[s, s], v[s])
+        return out

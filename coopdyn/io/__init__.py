@@ -1,0 +1,1 @@
+"""Scene files (TOML): a whole run described in one file."""
