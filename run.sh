@@ -21,7 +21,7 @@ setup() {
   # package's modules changed since the last install (the editable install maps each module file;
   # the install compiles coopdyn._native: about 2 minutes).
   stamp="$VENV/.coopdyn-installed"
-  want=$({ cat pyproject.toml CMakeLists.txt src/native/*; find coopdyn -name '*.py' | LC_ALL=C sort; } | sha256sum | cut -d' ' -f1)
+  want=$({ cat pyproject.toml CMakeLists.txt $(find src -type f | LC_ALL=C sort); find coopdyn -name '*.py' | LC_ALL=C sort; } | sha256sum | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     echo "[run.sh] installing coopdyn and its dependencies into $VENV (compiles the C++ kernel)" >&2
     "$VENV/bin/python" -m pip install --quiet --upgrade pip

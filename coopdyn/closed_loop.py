@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +20,9 @@ _Record = tuple[np.ndarray, np.ndarray, float, np.ndarray]
 class System:
     """The closed loop ``q̈ = a(t, q, v)``: dynamics plus controller, with work counters.
 
+    It is what integrators advance, through the protocol
+    :class:`coopdyn.integrators.base.Problem` (integrators never see the scene or the dynamics).
+
     Args:
         dynamics: the scene dynamics.
         controller: ``controller(t, q, v) -> τ`` (n_actuated,) [N·m or N]; ``None`` means τ = 0.
@@ -32,24 +34,26 @@ class System:
     Attributes:
         n_rhs, n_jac, n_factor: right-hand-side evaluations, Jacobian (stiffness) evaluations
             and matrix factorisations so far.
-        cache: scratch for integrators (reset per run).
+        nv, n_actuated: sizes of the velocity and of the controller output.
+        neutral: the neutral configuration (nq,) (the origin of error scales).
     """
 
     def __init__(
         self, dynamics: Dynamics, controller: Controller | None = None, object_wrench: Callable[[float], np.ndarray] | None = None
     ) -> None:
         self.dynamics = dynamics
-        self.scene = dynamics.scene
-        self.model = dynamics.model
+        self._scene = dynamics.scene
+        self._model = dynamics.model
         self.controller = controller
         self.object_wrench = object_wrench
-        self.n_actuated = dynamics.scene.n_actuated
+        self.nv = self._scene.nv
+        self.n_actuated = self._scene.n_actuated
+        self.neutral = pin.neutral(self._model)
         self._zero = np.zeros(self.n_actuated)
         self.n_rhs = 0
         self.n_jac = 0
         self.n_factor = 0
-        self.cache: dict[Any, Any] = {}
-        self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self.model.joints[1:] if j.nv > 1]
+        self._chart = [slice(j.idx_v, j.idx_v + j.nv) for j in self._model.joints[1:] if j.nv > 1]
         self._act = dynamics.actuated_index
         # (q, v, net power [W], τ) of evaluations: the step's first and last, the previous step's last
         self._first: _Record | None = None
@@ -57,6 +61,20 @@ class System:
         self._previous_last: _Record | None = None
         gains = getattr(controller, "gains", None)
         self._gains = gains() if callable(gains) else None
+
+    @property
+    def has_object_wrench(self) -> bool:
+        """Whether an external object wrench is applied."""
+        return self.object_wrench is not None
+
+    @property
+    def q0(self) -> np.ndarray:
+        """The scene's initial configuration (nq,)."""
+        return self._scene.q0
+
+    def nonlinearity(self) -> str | None:
+        """Why the dynamics are not linear, or ``None`` (see :meth:`coopdyn.Scene.nonlinearity`)."""
+        return self._scene.nonlinearity()
 
     def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The controller output, checked: (n_actuated,) finite floats."""
@@ -83,6 +101,10 @@ class System:
         a = self.dynamics.acceleration(q, v, tau, w)
         self._record(q, v, tau, w)
         return a
+
+    def free_acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """q̈ (nv,) for given torques, without the controller or the object wrench (not counted)."""
+        return self.dynamics.acceleration(q, v, tau)
 
     def _record(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> None:
         """Keep the torque and the net power of the state just evaluated."""
@@ -136,22 +158,36 @@ class System:
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
-        matrices of :meth:`stiffness` with the controller's PD gains. Counts one RHS and one
-        Jacobian, and records the net power like :meth:`acceleration`."""
+        interconnections' stiffness and damping (without the controller's gains, which
+        :meth:`factor` adds). Counts one RHS and one Jacobian, and records the net power like
+        :meth:`acceleration`."""
         self.n_rhs += 1
         self.n_jac += 1
         tau = self.torque(t, q, v)
         w = None if self.object_wrench is None else self._wrench(t)
-        f, M, K, D = self.dynamics.implicit_terms(q, v, tau, w)
-        if self._gains is not None:
-            self.dynamics.add_joint_gains(K, D, *self._gains)
+        terms = self.dynamics.implicit_terms(q, v, tau, w)
         self._record(q, v, tau, w)
-        return f, M, K, D
+        return terms
+
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
+        """Factorise the step matrix ``M + γh D̃ + (γh)² K̃`` with the controller's PD gains added
+        (see :meth:`coopdyn.Dynamics.factor`); counts one factorisation.
+
+        Raises:
+            StepMatrixError: the matrix is not positive definite.
+        """
+        self.n_factor += 1
+        kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
+        self.dynamics.factor(M, K, D, gh, kp, kd)
+
+    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(k_q, k_v)`` of ``(I − γhJ) k = (f_q, f_v)`` with the last :meth:`factor`, given ``M f_v``."""
+        return self.dynamics.solve(f_q, Mf_v)
 
     def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
         """v⁺ of one linearly implicit Euler step of ``h`` [s] from (t, q, v) (see
-        :meth:`Dynamics.implicit_euler_velocity`), with the controller's PD gains in the matrix.
-        Counts one RHS, one Jacobian and one factorisation; records the net power like
+        :meth:`coopdyn.Dynamics.implicit_euler_velocity`), with the controller's PD gains in the
+        matrix. Counts one RHS, one Jacobian and one factorisation; records the net power like
         :meth:`acceleration`."""
         self.n_rhs += 1
         self.n_jac += 1
@@ -173,15 +209,24 @@ class System:
 
     def _object_power(self, wrench: np.ndarray) -> float:
         """Power [W] of a world-aligned wrench at the object origin, at the last evaluated state."""
-        model, data = self.model, self.dynamics.data
-        V = pin.getFrameVelocity(model, data, self.scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).vector
+        V = pin.getFrameVelocity(
+            self._model, self.dynamics.data, self._scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        ).vector
         return float(wrench @ V)
+
+    def integrate(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """``q ⊕ dq`` on the configuration Lie group (dq (nv,) a tangent displacement)."""
+        return pin.integrate(self._model, q, dq)
+
+    def difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        """``q1 ⊖ q0`` (nv,): the tangent displacement from q0 to q1."""
+        return pin.difference(self._model, q0, q1)
 
     def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
         """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ."""
         if not self._chart:
             return v
-        J = pin.dIntegrate(self.model, q0, delta, pin.ArgumentPosition.ARG1)
+        J = pin.dIntegrate(self._model, q0, delta, pin.ArgumentPosition.ARG1)
         out = v.copy()
         for s in self._chart:
             out[s] = np.linalg.solve(J[s, s], v[s])

@@ -154,7 +154,13 @@ class ObjectImpedance:
         self.reference = reference if reference is not None else (lambda t: hold)
         self.mass = scene.object.mass
         self._com = np.asarray(scene.object.com, dtype=float)
-        self._links = [(lk.grasp_frame, lk.tip_frame, scene.arms[lk.arm]) for lk in scene.links]
+        fixtures = [lk.name for lk in scene.links if lk.arm is None]
+        if fixtures or not scene.links:
+            raise SceneError(
+                f"ObjectImpedance distributes the object wrench over arms; interconnections {fixtures} hold the "
+                "object to the world (fixtures), which it cannot command"
+            )
+        self._links = [(lk.grasp_frame, lk.tip_frame, scene.arms[lk.arm]) for lk in scene.links if lk.arm is not None]
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""

@@ -41,6 +41,20 @@ class SimulationInterrupted(KeyboardInterrupt):
         self.result = result
 
 
+class StepMatrixError(SimulationError):
+    """The step matrix of a linearly implicit step, M + γh·D̃ + (γh)²·K̃, is not positive definite
+    (a negative gain or stiffness, or a state that is no longer finite). Raised by ``simulate``
+    with the time and the method, and ``result`` holding the trajectory up to there."""
+
+    def __init__(self, message: str, *, result: object = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+class KernelError(SimulationError):
+    """The compiled kernel refused a call (wrong shapes or types reaching it)."""
+
+
 class ControllerError(SimulationError):
     """A controller returned something that is not a finite torque vector of the right length."""
 
@@ -63,6 +77,10 @@ class EnergyBalanceError(CoopdynError, RuntimeError):
 
 class EnergyBalanceWarning(UserWarning):
     """Total energy grew more than the net input work explains."""
+
+
+class LogMapWarning(UserWarning):
+    """A deformation's rotation neared π, where the SE(3) logarithm jumps."""
 
 
 class NativeBackendWarning(UserWarning):

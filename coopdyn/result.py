@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import Dynamics, Energy
+from .dynamics.dynamics import Readouts
 from .errors import SimulationError
 from .model.scene import Scene
 
@@ -46,65 +47,52 @@ class Result:
     n_steps: int = 0
     n_rejected: int = 0
     status: str = "completed"  #: "completed", "interrupted" (Ctrl-C) or "diverged"
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+    backend: str | None = None  #: the dynamics backend of the run; readouts use the same
 
     @cached_property
     def _dynamics(self) -> Dynamics:
-        return Dynamics(self.scene)
+        return Dynamics(self.scene, self.backend)
+
+    @cached_property
+    def readouts(self) -> Readouts:
+        """Every interconnection's readouts along the trajectory, from one pass through the
+        elements on the run's backend (computed on first use, then kept)."""
+        return self._dynamics.readouts(self.q, self.v)
 
     def _link(self, i: int) -> int:
         n = len(self.scene.links)
-        if not -n <= i < n:
-            raise SimulationError(f"interconnection index {i} out of range: the scene has {n}")
-        return i % n
-
-    def _springs(self) -> list[list[Any]]:
-        if "springs" not in self._cache:
-            dyn = self._dynamics
-            self._cache["springs"] = [dyn.springs(q, v) for q, v in zip(self.q, self.v, strict=True)]
-        return self._cache["springs"]
-
-    def _frame_rotations(self, frame: int) -> np.ndarray:
-        model, data = self.scene.model, self._dynamics.data
-        out = np.empty((len(self.t), 3, 3))
-        for k, q in enumerate(self.q):
-            pin.forwardKinematics(model, data, q)
-            out[k] = pin.updateFramePlacement(model, data, frame).rotation
-        return out
-
-    def _world(self, frame: int, local: np.ndarray) -> np.ndarray:
-        R = self._frame_rotations(frame)
-        return np.concatenate([np.einsum("nij,nj->ni", R, local[:, :3]), np.einsum("nij,nj->ni", R, local[:, 3:])], axis=1)
+        if isinstance(i, bool) or not isinstance(i, int | np.integer) or not -n <= i < n:
+            raise SimulationError(f"interconnection index must be an integer in [{-n}, {n}), got {i!r}")
+        return int(i) % n
 
     def wrench(self, i: int) -> np.ndarray:
         """Wrench of interconnection i on the object (n, 6) [N, N·m]: force, then moment about the
         grasp point, in world-aligned axes."""
-        i = self._link(i)
-        local = np.array([s[i].G_f_G for s in self._springs()])
-        return self._world(self.scene.links[i].grasp_frame, local)
+        return self.readouts.object_wrench[:, self._link(i)]
 
     def arm_wrench(self, i: int) -> np.ndarray:
-        """Wrench of interconnection i on its arm (n, 6) [N, N·m], about the tip point, world axes."""
-        i = self._link(i)
-        local = np.array([s[i].T_f_T for s in self._springs()])
-        return self._world(self.scene.links[i].tip_frame, local)
+        """Wrench of interconnection i on its arm (or fixture) (n, 6) [N, N·m], about the tip
+        point, world axes."""
+        return self.readouts.arm_wrench[:, self._link(i)]
 
     def deformation(self, i: int) -> np.ndarray:
-        """Deformation e = log6(T_M_G) of interconnection i (n, 6) [m, rad], in tip-frame axes."""
+        """Deformation of interconnection i (n, size) in tip-frame axes: ``log6(T_M_G)`` (n, 6)
+        [m, rad] for an SE(3) spring, the grasp point's offset (n, 3) [m] for a ball spring."""
         i = self._link(i)
-        return np.array([s[i].e for s in self._springs()])
+        return self.readouts.deformation[:, i, : self.scene.links[i].element.deformation_size]
 
     def elastic_energy(self, i: int) -> np.ndarray:
-        """½ eᵀ K e of interconnection i (n,) [J]."""
-        e = self.deformation(i)
-        K = self.scene.links[self._link(i)].K
-        return 0.5 * np.einsum("ni,ij,nj->n", e, K, e)
+        """Elastic energy of interconnection i (n,) [J]."""
+        return self.readouts.energy[:, self._link(i)]
+
+    def dissipated_power(self, i: int) -> np.ndarray:
+        """Power dissipated by interconnection i's damping (n,) [W]."""
+        return self.readouts.power[:, self._link(i)]
 
     def energy(self) -> Energy:
         """Kinetic, gravity and elastic energy along the trajectory, each (n,) [J]."""
-        dyn = self._dynamics
-        parts = np.array([dyn.energy(q, v) for q, v in zip(self.q, self.v, strict=True)])
-        return Energy(parts[:, 0], parts[:, 1], parts[:, 2])
+        r = self.readouts
+        return Energy(r.kinetic, r.potential, r.energy.sum(axis=1))
 
     def frame_position(self, frame: str | int) -> np.ndarray:
         """World position of a frame of the scene model (n, 3) [m]."""
@@ -115,7 +103,7 @@ class Result:
 
                 raise SimulationError(f"no frame {frame!r} in the scene.{did_you_mean(frame, [f.name for f in model.frames])}")
             frame = int(model.getFrameId(frame))
-        data = self._dynamics.data
+        data = model.createData()
         out = np.empty((len(self.t), 3))
         for k, q in enumerate(self.q):
             pin.forwardKinematics(model, data, q)
@@ -124,11 +112,11 @@ class Result:
 
     def grasp_points(self) -> np.ndarray:
         """World positions of the grasp frames (n, N, 3) [m]."""
-        return np.stack([self.frame_position(lk.grasp_frame) for lk in self.scene.links], axis=1)
+        return self.readouts.grasp_position
 
     def wrenches(self) -> np.ndarray:
         """Every interconnection's wrench on the object (n, N, 6) [N, N·m] (see :meth:`wrench`)."""
-        return np.stack([self.wrench(i) for i in range(len(self.scene.links))], axis=1)
+        return self.readouts.object_wrench
 
     def wrench_split(self) -> tuple[np.ndarray, np.ndarray]:
         """The interconnection wrenches on the object split into the part that moves the object
@@ -183,7 +171,7 @@ class Result:
 
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
-        return self.frame_position(self.scene.object_frame)
+        return self.readouts.object_position
 
 
 def save_partial(error: BaseException, folder: str | os.PathLike[str]) -> list[Path]:

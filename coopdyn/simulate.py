@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -12,11 +13,12 @@ import numpy as np
 
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
-from .errors import DivergenceError, SimulationError, SimulationInterrupted
+from .errors import DivergenceError, LogMapWarning, SimulationError, SimulationInterrupted, StepMatrixError
 from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import EnergyMonitor
 from .result import Result
+from .stability import advise
 
 
 def simulate(
@@ -137,6 +139,8 @@ class _Run:
         self.n_accepted = 0
         self.n_rejected = 0
         self.cpu_time = 0.0
+        self.ws = method.workspace(system)  # the method's own per-run scratch
+        self._warned_links: set[int] = set()
 
     def save(self, t: float, q: np.ndarray, v: np.ndarray, step_follows: bool = True) -> None:
         """Keep a sample. When a step from it follows, its torque is taken from that step's own
@@ -161,8 +165,6 @@ class _Run:
             return
         if (not v.size or np.abs(v).max() <= self.max_speed) and np.all(np.isfinite(q)):
             return
-        from .stability import advise
-
         what = (
             "non-finite"
             if not np.all(np.isfinite(v)) or not np.all(np.isfinite(q))
@@ -185,6 +187,40 @@ class _Run:
             advice=advice,
         )
 
+    def after_step(self, t: float) -> None:
+        """Warn (once per interconnection) when a deformation's rotation passed 0.9π [rad] during
+        the step that ended at ``t`` [s]: at π the SE(3) logarithm jumps, and with it the elastic
+        energy of an anisotropic or coupled K."""
+        dynamics = self.system.dynamics
+        alarm = dynamics.rotation_alarm()
+        if alarm is None:
+            return
+        dynamics.clear_rotation_alarm()
+        link, theta = alarm
+        if link in self._warned_links:
+            return
+        self._warned_links.add(link)
+        name = self.scene.links[link].name
+        warnings.warn(
+            f"interconnection {name!r} (index {link}): its rotation deformation reached {theta:.3f} rad "
+            f"({theta / math.pi:.2f}π) at t ≈ {t:.6g} s. At π the SE(3) logarithm jumps: the wrench flips and, "
+            "with an anisotropic or coupled K, the elastic energy jumps too. A real grasp twisted this far has "
+            "let go; check the scene (stiffness, controller) or use an isotropic rotational K",
+            LogMapWarning,
+            stacklevel=4,
+        )
+
+    def step_failed(self, exc: StepMatrixError, t: float, h: float) -> StepMatrixError:
+        """The step-matrix error with the time, the method and what to change."""
+        partial = self.result("diverged")
+        return StepMatrixError(
+            f"{exc} at t = {t:.6g} s ({self.method.name}, dt = {h:g} s). M is positive definite and the "
+            "interconnections' K̃, D̃ are positive semi-definite, so a negative joint gain from the controller's "
+            "gains() or a state that is no longer finite made it so: check the controller's gains, or run an "
+            "explicit method (rk4, dopri5) to see where the state goes. The trajectory so far is in .result",
+            result=partial,
+        )
+
     def result(self, status: str = "completed") -> Result:
         s = self.system
         self.settle_torque()  # a run stopped right after a save
@@ -204,6 +240,7 @@ class _Run:
             n_steps=self.n_accepted,
             n_rejected=self.n_rejected,
             status=status,
+            backend=s.dynamics.backend,
         )
 
 
@@ -217,10 +254,14 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
             break
         h = min(dt, run.t_final - k * dt)
         system.begin_step()
-        q_new, v_new = method.step(system, t, q, v, h)
+        try:
+            q_new, v_new = method.step(system, t, q, v, h, run.ws)
+        except StepMatrixError as exc:
+            raise run.step_failed(exc, t, h) from None
         run.settle_torque()
         t_new = run.t_final if k + 1 == n_steps else (k + 1) * dt
         run.check(t_new, q_new, v_new, h)
+        run.after_step(t_new)
         if monitor is not None:
             monitor.after_step(t, q, v, h, t_new, q_new, v_new)
         t, q, v = t_new, q_new, v_new
@@ -249,10 +290,14 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             if t + h_try * (1.0 + 1e-9) >= t_out:  # land exactly on the output time
                 h_try = t_out - t
             system.begin_step()
-            out = method.attempt(system, t, q, v, h_try)
+            try:
+                out = method.attempt(system, t, q, v, h_try, run.ws)
+            except StepMatrixError as exc:
+                raise run.step_failed(exc, t, h_try) from None
             run.settle_torque()
             h = method.next_step(h_try, out.error)
             if not (out.error <= 1.0):  # also rejects NaN
+                system.dynamics.clear_rotation_alarm()  # a rejected attempt's stages may go anywhere
                 run.n_rejected += 1
                 if h < method.h_min or not np.isfinite(out.error):
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
@@ -263,6 +308,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 continue
             t_new = t_out if h_try == t_out - t else t + h_try
             run.check(t_new, out.q, out.v, h_try)
+            run.after_step(t_new)
             if monitor is not None:
                 monitor.after_step(t, q, v, h_try, t_new, out.q, out.v)
             t, q, v = t_new, out.q, out.v

@@ -18,7 +18,7 @@ import numpy as np
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import SimulationError
-from .integrators import Integrator, get_integrator, nonlinearity
+from .integrators import Integrator, get_integrator
 from .model.scene import Scene
 
 #: Methods :func:`advise` reports on by default.
@@ -120,7 +120,7 @@ def advise(
     zeta = float(-lam[k].real / lam_max) if lam_max > 0 else 1.0
     M_inv_K = -A[n:, :n]
     omega_max = float(math.sqrt(max(np.max(np.linalg.eigvals(M_inv_K).real), 0.0)))
-    why_nonlinear = nonlinearity(scene)
+    why_nonlinear = scene.nonlinearity()
     advice = []
     for name in methods:
         method = get_integrator(name)

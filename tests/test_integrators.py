@@ -8,8 +8,9 @@ import pinocchio as pin
 import pytest
 
 import coopdyn as cd
+from coopdyn.closed_loop import System
 from coopdyn.control import GravityCompensationPD
-from coopdyn.integrators import INTEGRATORS, Exponential, System, get_integrator
+from coopdyn.integrators import INTEGRATORS, Exponential, get_integrator
 from coopdyn.reference import Drive, linear_book_exact
 
 pytestmark = pytest.mark.filterwarnings("ignore::coopdyn.EnergyBalanceWarning")  # coarse steps on purpose

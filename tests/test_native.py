@@ -1,8 +1,10 @@
 """The compiled kernel computes the same physics as the Python reference, to round-off.
 
-Each quantity is compared on scenes that exercise every branch of the kernel: free-flying box
-with two Pandas (6-D springs, interconnection and joint damping, an external wrench), three
-arms, and the book's prismatic linear case (1-D springs, no free-flyer).
+Each quantity — dynamics, implicit terms, every element's evaluation and every trajectory
+readout — is compared on scenes that exercise every element and every branch of the kernel:
+free-flying box with two Pandas (SE(3) springs, interconnection and joint damping, an external
+wrench), the same with ball springs, three arms, a box hung from the world by one spring (a
+fixture, no arm), and the book's prismatic linear case (1-D springs, no free-flyer).
 """
 
 from __future__ import annotations
@@ -13,14 +15,35 @@ import pytest
 
 import coopdyn as cd
 from coopdyn.dynamics import Dynamics, backend
+from coopdyn.errors import KernelError, StepMatrixError
 
 pytestmark = pytest.mark.skipif(not backend.native_available(), reason="coopdyn._native is not built")
+
+
+def _ball_pandas() -> cd.Scene:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    rng = np.random.default_rng(3)
+    links = []
+    for ic in base.interconnection_specs:
+        L = rng.normal(size=(3, 3))
+        links.append(
+            cd.Interconnection(ic.arm, stiffness=L @ L.T * 1e3 + np.eye(3) * 1e4, damping=np.eye(3) * 20.0, element="ball")
+        )
+    return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
+
+
+def _hung_box() -> cd.Scene:
+    box = cd.RigidObject.box(2.0, (0.2, 0.1, 0.3), pose=[0.1, -0.2, 1.0])
+    K = cd.diagonal([1e3, 2e3, 3e3], [10.0, 20.0, 30.0])
+    return cd.Scene([], box, [cd.Interconnection(None, stiffness=K, damping=0.01 * K, grasp=[0.0, 0.0, 0.15])])
 
 
 def _scenes() -> dict[str, cd.Scene]:
     return {
         "pandas_damped": cd.scenes.facing_arms("panda", stiffness=1e5, damping=30.0, joint_damping=0.5),
+        "pandas_ball": _ball_pandas(),
         "three_pandas": cd.scenes.facing_arms("panda", stiffness=1e4, n_arms=3),
+        "hung_box": _hung_box(),
         "book": cd.scenes.linear_book(),
     }
 
@@ -87,7 +110,7 @@ def test_implicit_euler_velocity_matches_python(name: str) -> None:
         K[act, act] += kp
         D[act, act] += kd
         for h in (1e-4, 1e-3, 1e-2):
-            # Cholesky (kernel) vs LU (Python) agree to the solve's conditioning times round-off.
+            # Two Cholesky solves (Eigen vs numpy) agree to the conditioning times round-off.
             kappa = np.linalg.cond(M + h * D + h * h * K)
             a = nat.implicit_euler_velocity(q, v, tau, h, kp, kd)
             b = py.implicit_euler_velocity(q, v, tau, h, kp, kd)
@@ -133,19 +156,66 @@ def test_implicit_euler_runs_agree_across_backends(pandas: cd.Scene) -> None:
     np.testing.assert_allclose(runs[0].wrench(0), runs[1].wrench(0), atol=1e-6)
 
 
-def test_bad_sizes_are_value_errors(pandas: cd.Scene) -> None:
+def test_what_the_kernel_refuses_reaches_the_user_as_a_coopdyn_error(pandas: cd.Scene) -> None:
     nat = Dynamics(pandas, backend="native")
     q, v, tau = pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated)
-    with pytest.raises(ValueError, match="tau has 3 entries, expected 14"):
+    with pytest.raises(KernelError, match="tau has 3 entries, expected 14"):
         nat.acceleration(q, v, np.zeros(3))
-    with pytest.raises(ValueError, match="v has 4 entries"):
+    with pytest.raises(KernelError, match="v has 4 entries"):
         nat.acceleration(q, np.zeros(4), tau)
-    with pytest.raises(ValueError, match="q has"):
+    with pytest.raises(KernelError, match="q has"):
         nat.acceleration(q[:-1], v, tau)
-    with pytest.raises(ValueError, match="object wrench must have 6 entries"):
+    with pytest.raises(KernelError, match="object wrench must have 6 entries"):
         nat.acceleration(q, v, tau, np.zeros(5))
-    with pytest.raises(ValueError, match="kp has"):
+    with pytest.raises(KernelError, match="kp has"):
         nat.implicit_euler_velocity(q, v, tau, 1e-3, np.zeros(2), np.zeros(pandas.n_actuated))
+    with pytest.raises(KernelError, match="refused acceleration"):  # Boost.Python.ArgumentError inside
+        nat.acceleration("abc", v, tau)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["native", "python"])
+def test_a_step_matrix_that_is_not_positive_definite_raises_on_both_backends(pandas: cd.Scene, name: str) -> None:
+    dyn = Dynamics(pandas, backend=name)
+    q, v, tau = pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated)
+    with pytest.raises(StepMatrixError, match="not positive definite"):
+        dyn.implicit_euler_velocity(q, v, tau, 1e-2, np.full(pandas.n_actuated, -1e6), np.zeros(pandas.n_actuated))
+
+
+def test_simulate_names_the_time_and_the_method_when_the_step_matrix_fails(pandas: cd.Scene) -> None:
+    class NegativeGains:
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return np.zeros(pandas.n_actuated)
+
+        def gains(self) -> tuple[np.ndarray, np.ndarray]:
+            return np.full(pandas.n_actuated, -1e6), np.zeros(pandas.n_actuated)
+
+    for method in ("implicit_euler", "ros2"):
+        with pytest.raises(StepMatrixError, match=rf"at t = 0 s \({method}, dt = 0.01 s\).*controller's gains") as info:
+            cd.simulate(pandas, 0.1, controller=NegativeGains(), integrator=method, dt=1e-2)
+        assert info.value.result is not None and info.value.result.status == "diverged"
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_element_states_match_python(name: str) -> None:
+    """Every element's evaluation (energy, deformation, wrench, power, S_K, S_D) on both backends."""
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    for q, v, _ in _states(scene):
+        for a, b in zip(nat.element_states(q, v), py.element_states(q, v), strict=True):
+            for x, y in zip(a, b, strict=True):
+                _close(np.asarray(x), np.asarray(y))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_readouts_match_python(name: str) -> None:
+    """The trajectory readouts (wrenches on object and arm, deformations, energies, positions)."""
+    scene = SCENES[name]
+    nat, py = _pair(scene)
+    states = _states(scene, 6)
+    Q, V = np.array([s[0] for s in states]), np.array([s[1] for s in states])
+    for a, b in zip(nat.readouts(Q, V), py.readouts(Q, V), strict=True):
+        _close(a, b)
+    assert np.max(np.abs(py.readouts(Q, V).object_wrench)) > 1.0  # not comparing zeros
 
 
 def test_backend_choice(monkeypatch: pytest.MonkeyPatch, pandas: cd.Scene) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -116,3 +118,53 @@ def test_duplicate_arm_names() -> None:
     arm = cd.Arm("a", urdf_path("slider_z.urdf"), tip_frame="tip")
     with pytest.raises(cd.SceneError, match=r"arm names must be unique, got \['a', 'a'\]"):
         cd.Scene([arm, arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
+def test_a_scene_is_immutable_and_its_arrays_read_only(pandas: cd.Scene) -> None:
+    with pytest.raises(cd.SceneError, match="a Scene is immutable"):
+        pandas.q0 = pandas.q0  # type: ignore[misc]
+    for array in (pandas.q0, pandas.v0, pandas.actuated, pandas.gravity, pandas.arms[0].v_index, pandas.links[0].element.K):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 1.0
+
+
+def test_a_scene_pickles_without_reading_any_urdf(pandas: cd.Scene) -> None:
+    import pickle
+
+    from coopdyn.model import arm
+
+    before = arm._parsed.cache_info().misses
+    copy = pickle.loads(pickle.dumps(pandas))
+    assert arm._parsed.cache_info().misses == before
+    np.testing.assert_array_equal(copy.q0, pandas.q0)
+    q, v = pandas.q0, np.full(pandas.nv, 0.1)
+    tau = np.zeros(pandas.n_actuated)
+    np.testing.assert_array_equal(cd.Dynamics(copy).acceleration(q, v, tau), cd.Dynamics(pandas).acceleration(q, v, tau))
+
+
+def test_each_urdf_is_parsed_once(tmp_path: Path) -> None:
+    """Two arms from one URDF file, the IK of facing_arms and the viewer's geometry: one parse."""
+    from coopdyn.model import arm
+
+    urdf = tmp_path / "slider.urdf"
+    urdf.write_text(urdf_path("slider_z.urdf").read_text())
+    before = arm._parsed.cache_info().misses
+    arms = [cd.Arm(n, urdf, tip_frame="tip", q0=[z]) for n, z in (("a", 0.15), ("b", 0.25))]
+    box = cd.RigidObject(1.0, np.eye(3) * 0.01, pose=[0.0, 0.0, 0.2], joint="prismatic")
+    links = [cd.Interconnection("a", cd.axial(1e3)), cd.Interconnection("b", cd.axial(1e3))]
+    cd.Scene(arms, box, links)
+    cd.Scene(arms, box, links)
+    assert arm._parsed.cache_info().misses == before + 1
+
+
+def test_two_pandas_hold_a_box_with_ball_springs_on_the_native_backend(pandas: cd.Scene) -> None:
+    links = [
+        cd.Interconnection(ic.arm, stiffness=[1e4, 2e4, 3e4], damping=20.0, element="ball") for ic in pandas.interconnection_specs
+    ]
+    scene = cd.Scene(pandas.arm_specs, pandas.object, links, gravity=pandas.gravity)
+    ctrl = cd.control.GravityCompensationPD(scene, 50.0, 5.0)
+    res = cd.simulate(scene, 0.5, controller=ctrl, integrator="implicit_euler", dt=1e-3, backend="native", save_every=50)
+    assert res.backend == "native" and res.deformation(0).shape == (res.t.size, 3)
+    # a point grasp: no moment on the object about the grasp point, and the box is carried
+    np.testing.assert_allclose(res.wrench(0)[:, 3:], 0.0, atol=1e-12)
+    assert res.wrench(0)[-1, 2] + res.wrench(1)[-1, 2] == pytest.approx(2.0 * 9.81, rel=0.2)

@@ -3,7 +3,7 @@
 * ``"native"`` — the compiled kernel ``coopdyn._native`` (C++ on Pinocchio's C++ API, built when
   coopdyn is installed): the right-hand side, the implicit-method terms and the implicit Euler
   solve in one call each.
-* ``"python"`` — the same equations with Pinocchio's Python bindings (:mod:`coopdyn.dynamics`);
+* ``"python"`` — the same equations with Pinocchio's Python bindings (:mod:`coopdyn.dynamics.dynamics`);
   the reference the kernel is tested against, and the fallback when the kernel is missing.
 
 The default (``"auto"``) takes the kernel when it imports and was built against the installed
@@ -18,8 +18,12 @@ import os
 import warnings
 from functools import cache
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import pinocchio as pin
+
+if TYPE_CHECKING:
+    from ..model.scene import Scene
 
 from ..errors import BackendError, NativeBackendWarning
 
@@ -47,11 +51,15 @@ def native_available() -> bool:
     return _load()[0] is not None
 
 
-def resolve(backend: str | None = None) -> str:
+def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
     """The backend that runs for a request: ``None`` reads ``COOPDYN_BACKEND`` (default ``"auto"``).
 
+    With a ``scene``, an interconnection element without a C++ twin (see
+    :data:`coopdyn.model.elements.ELEMENTS`) sends ``"auto"`` to Python with one warning.
+
     Raises:
-        BackendError: for an unknown name, or ``"native"`` when the kernel is unavailable.
+        BackendError: for an unknown name, or ``"native"`` when the kernel is unavailable or
+            lacks an element of the scene.
     """
     name = os.environ.get("COOPDYN_BACKEND", "auto") if backend is None else backend
     if name not in BACKENDS:
@@ -64,6 +72,15 @@ def resolve(backend: str | None = None) -> str:
             raise BackendError(f"the native backend was requested but {why}")
         _warn_once(why)
         return "python"
+    if scene is not None:
+        known = set(getattr(module, "ELEMENTS", ()))
+        missing = sorted({lk.element.kind for lk in scene.links if lk.native is None or lk.native not in known})
+        if missing:
+            why = f"the interconnection element(s) {missing} have no C++ twin in the kernel"
+            if name == "native":
+                raise BackendError(f"the native backend was requested but {why}; use backend='python'")
+            _warn_once(f"{why}; this scene runs on the Python dynamics")
+            return "python"
     return "native"
 
 

@@ -1,25 +1,38 @@
-"""The right-hand side of the cooperative system and its readouts.
+"""The right-hand side of the cooperative system, its implicit terms and its readouts.
 
-Arm and object equations (DESIGN §1–§2), all in one merged model::
+Arm and object equations, all in one merged model (docs/physics.md)::
 
-    H(q) q̈ + h(q, q̇) = S τ − B q̇ + Σ_i (J_Gᵢᵀ G_f_G + J_Tᵢᵀ T_f_T)
+    H(q) q̈ + h(q, q̇) = S τ − B q̇ + Q,   Q = Σ_i Jr_iᵀ G_f_G,i
 
-with S selecting the arm joints, B the viscous joint damping, and the interconnection wrenches
-of :func:`coopdyn.interconnection.spring` mapped to joint space by the frame Jacobians.
+with S selecting the arm joints, B the viscous joint damping, ``Jr = J_G − Ad(T_M_G⁻¹) J_T``
+the relative Jacobian of interconnection i (LOCAL frame Jacobians of its frames T and G) and
+``G_f_G`` the wrench its element (:mod:`coopdyn.model.elements`) puts on G. Everything below —
+dynamics, implicit terms, energies and the trajectory readouts — evaluates the elements through
+:meth:`Element.evaluate`; the compiled kernel (:mod:`.native`) does the same with the elements'
+C++ twins.
+
+:class:`Dynamics` holds scratch only (``pin.Data`` and buffers): nothing a later call reads
+from what an earlier one left behind, except the factorisation :meth:`Dynamics.factor` makes
+for :meth:`Dynamics.solve`.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
-from ..model.interconnection import SpringState, spring
+from ..errors import KernelError, StepMatrixError
+from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
 
 LOCAL = pin.ReferenceFrame.LOCAL
+
+#: Rotation of a deformation [rad] above which the SE(3) logarithm nears its jump at π.
+ROTATION_ALARM = 0.9 * math.pi
 
 
 class Energy(NamedTuple):
@@ -27,7 +40,7 @@ class Energy(NamedTuple):
 
     kinetic: Any  #: float, or (n,) along a trajectory
     potential: Any  #: gravity, zero at the world origin
-    elastic: Any  #: Σ ½ eᵀ K e over the interconnections
+    elastic: Any  #: Σ of the elements' elastic energies
 
     @property
     def total(self) -> Any:
@@ -35,143 +48,89 @@ class Energy(NamedTuple):
         return self.kinetic + self.potential + self.elastic
 
 
+class Readouts(NamedTuple):
+    """Every interconnection's readouts along a trajectory of n samples and L interconnections."""
+
+    deformation: np.ndarray  #: (n, L, 6), each element's deformation, zero-padded to 6
+    energy: np.ndarray  #: (n, L) elastic energy [J]
+    power: np.ndarray  #: (n, L) power dissipated by the element's damping [W]
+    object_wrench: np.ndarray  #: (n, L, 6) wrench on the object at G, world axes [N, N·m]
+    arm_wrench: np.ndarray  #: (n, L, 6) wrench on the arm at T, world axes [N, N·m]
+    grasp_position: np.ndarray  #: (n, L, 3) world position of G [m]
+    tip_position: np.ndarray  #: (n, L, 3) world position of T [m]
+    object_position: np.ndarray  #: (n, 3) world position of the object frame [m]
+    kinetic: np.ndarray  #: (n,) kinetic energy [J]
+    potential: np.ndarray  #: (n,) gravity energy [J]
+
+
 class Dynamics:
     """Scratch space and evaluation of the scene's dynamics (one instance per thread).
 
+    ``Dynamics(scene, backend)`` builds a :class:`PythonDynamics` (the reference) or a
+    :class:`coopdyn.dynamics.native.NativeDynamics` (the compiled kernel) — same interface,
+    same results to round-off.
+
     Args:
         scene: the scene; not modified.
-        backend: ``"native"``, ``"python"`` or ``"auto"`` (see :mod:`coopdyn.backend`); ``None``
-            reads the environment variable ``COOPDYN_BACKEND`` (default ``"auto"``).
+        backend: ``"native"``, ``"python"`` or ``"auto"`` (see :mod:`coopdyn.dynamics.backend`);
+            ``None`` reads the environment variable ``COOPDYN_BACKEND`` (default ``"auto"``).
+            A scene with an element that has no C++ twin runs on Python (``"auto"``: one warning).
 
     Attributes:
         backend: the backend that runs, ``"native"`` or ``"python"``.
     """
 
+    backend: str
+
+    def __new__(cls, scene: Scene, backend: str | None = None) -> Dynamics:
+        if cls is not Dynamics:
+            return super().__new__(cls)
+        name = _backend.resolve(backend, scene)
+        if name == "native":
+            from .native import NativeDynamics
+
+            return super().__new__(NativeDynamics)
+        return super().__new__(PythonDynamics)
+
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         self.scene = scene
-        model = scene.model
-        self.model = model
-        self.data = model.createData()
-        # Per link: (T frame, G frame, K, D, whether D ≠ 0)
-        self._hot = [(lk.tip_frame, lk.grasp_frame, lk.K, lk.D, bool(np.any(lk.D))) for lk in scene.links]
-        self._damping = np.zeros(model.nv)
+        self.model = scene.model
+        self.data = scene.model.createData()
+        self._damping = np.zeros(scene.nv)
         for arm in scene.arms:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
         self.actuated_index = scene.actuated_index
-        self._dissipation = 0.0
-        self.backend = _backend.resolve(backend)
-        self._kernel = None
-        if self.backend == "native":
-            self._kernel = _backend.kernel_module().Kernel(
-                model,
-                self.data,
-                [(t, g, K, D) for t, g, K, D, _ in self._hot],
-                self._damping,
-                np.asarray(scene.actuated, dtype=np.int32),
-                scene.object_frame,
-            )
+        self._frames = [(lk.tip_frame, lk.grasp_frame, lk.element) for lk in scene.links]
 
-    @property
-    def last_dissipation(self) -> float:
-        """Power dissipated by dampers [W] at the state of the last right-hand side or implicit
-        evaluation."""
-        return self._kernel.last_dissipation if self._kernel is not None else self._dissipation
-
-    # -- interconnections ---------------------------------------------------------------------
-    def _springs(self) -> list[SpringState]:
-        """Spring states after ``forwardKinematics(q, v)`` has run."""
-        model, data = self.model, self.data
-        out = []
-        for t_id, g_id, K, D, _ in self._hot:
-            oMT = pin.updateFramePlacement(model, data, t_id)
-            oMG = pin.updateFramePlacement(model, data, g_id)
-            T_v_T = pin.getFrameVelocity(model, data, t_id, LOCAL).vector
-            G_v_G = pin.getFrameVelocity(model, data, g_id, LOCAL).vector
-            out.append(spring(oMT, oMG, T_v_T, G_v_G, K, D))
-        return out
-
-    def springs(self, q: np.ndarray, v: np.ndarray) -> list[SpringState]:
-        """The state of every interconnection at (q, v), in scene order."""
-        pin.forwardKinematics(self.model, self.data, q, v)
-        return self._springs()
-
-    def _interconnections(
-        self, q: np.ndarray, v: np.ndarray, matrices: bool, object_wrench: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Run kinematics at (q, v) and return the interconnections' generalized force Q (nv,).
-
-        With the LOCAL frame Jacobians, ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` maps q̇ to the relative
-        twist ξ and ``A = Jlog6(T_M_G) Jr`` maps q̇ to ė, so ``Q = −Σ Aᵀ (K e + D A q̇)`` — the
-        same as ``J_Gᵀ G_f_G + J_Tᵀ T_f_T``. Also sets ``last_dissipation`` and, with
-        ``matrices``, ``self.K_t = Σ Aᵀ K A`` and ``self.D_t = Σ Aᵀ D A + B``.
-        """
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)  # forward kinematics (positions) + joint Jacobians
-        Q = np.zeros(model.nv)
-        p_diss = 0.0
-        if matrices:
-            K_t = np.zeros((model.nv, model.nv))
-            D_t = np.diag(self._damping)
-        for t_id, g_id, K, D, has_d in self._hot:
-            T_M_G = pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))
-            J_G = pin.getFrameJacobian(model, data, g_id, LOCAL)
-            J_T = pin.getFrameJacobian(model, data, t_id, LOCAL)
-            A = pin.Jlog6(T_M_G) @ (J_G - T_M_G.toActionMatrixInverse() @ J_T)
-            w = K @ pin.log6(T_M_G).vector
-            if has_d:
-                e_dot = A @ v
-                D_e_dot = D @ e_dot
-                p_diss += e_dot @ D_e_dot
-                w += D_e_dot
-            Q -= A.T @ w
-            if matrices:
-                K_t += A.T @ K @ A
-                if has_d:
-                    D_t += A.T @ D @ A
-        if matrices:
-            self.K_t, self.D_t = K_t, D_t
-        if object_wrench is not None:  # world-aligned wrench at the object frame origin → LOCAL
-            fo = self.scene.object_frame
-            R = pin.updateFramePlacement(model, data, fo).rotation
-            local = np.concatenate([R.T @ object_wrench[:3], R.T @ object_wrench[3:]])
-            Q += pin.getFrameJacobian(model, data, fo, LOCAL).T @ local
-        if self._has_damping:
-            p_diss += v @ (self._damping * v)
-        self._dissipation = p_diss
-        return Q
-
+    # -- the interface (implemented by both backends) --------------------------------------------
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
         """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N] and an
-        optional external wrench on the object (6,) [N, N·m] (world axes, at the object frame origin).
-
-        This is the hot path: the interconnection wrenches enter ABA as the generalized force
-        ``Q`` (see :meth:`_interconnections`), which costs fewer Python-level operations than
-        moving each wrench to its joint as an external force.
-        """
-        if self._kernel is not None:
-            return self._kernel.acceleration(q, v, tau, object_wrench)
-        t = self._interconnections(q, v, False, object_wrench)
-        t[self.actuated_index] += tau
-        if self._has_damping:
-            t -= self._damping * v
-        return pin.aba(self.model, self.data, q, v, t).copy()
+        optional external wrench on the object (6,) [N, N·m] (world axes, at the object frame origin)."""
+        raise NotImplementedError
 
     def implicit_terms(
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
-    ) -> tuple[np.ndarray, ...]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What a linearly implicit step needs at (q, v), from one kinematics pass:
-        ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the matrices of
-        :meth:`stiffness` (nv, nv)."""
-        if self._kernel is not None:
-            return self._kernel.implicit_terms(q, v, tau, object_wrench)
-        model, data = self.model, self.data
-        f = self._interconnections(q, v, True, object_wrench)
-        f[self.actuated_index] += tau
-        if self._has_damping:
-            f -= self._damping * v
-        f -= pin.nonLinearEffects(model, data, q, v)
-        return f, pin.crba(model, data, q).copy(), self.K_t, self.D_t
+        ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the (nv, nv)
+        mass matrix, Gauss–Newton stiffness ``K̃ = Σ Jrᵀ S_K Jr`` and damping
+        ``D̃ = Σ Jrᵀ S_D Jr + B`` (the force-proportional geometric stiffness is left out)."""
+        raise NotImplementedError
+
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
+        """Factorise the step matrix ``S = M + γh (D̃ + Kd) + (γh)² (K̃ + Kp)`` (Cholesky) for
+        :meth:`solve`; ``kp``, ``kd`` (n_actuated,) are joint PD gains [N·m/rad], [N·m·s/rad].
+
+        Raises:
+            StepMatrixError: S is not positive definite.
+        """
+        raise NotImplementedError
+
+    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(k_q, k_v)`` solving ``(I − γhJ) k = (f_q, f_v)`` with the last :meth:`factor`, given
+        ``M f_v``: ``S k_v = M f_v − γh (K̃ + Kp) f_q``, ``k_q = f_q + γh k_v``."""
+        raise NotImplementedError
 
     def implicit_euler_velocity(
         self,
@@ -184,62 +143,62 @@ class Dynamics:
         object_wrench: np.ndarray | None = None,
     ) -> np.ndarray:
         """The velocity after one linearly implicit Euler step of ``h`` [s] from (q, v):
-        ``v⁺ = v + h k`` with ``(M + h D̃ + h² K̃) k = f − h K̃ v``, where K̃ and D̃ include the
-        joint PD gains ``kp``, ``kd`` (n_actuated,) [N·m/rad], [N·m·s/rad] and f is that of
-        :meth:`implicit_terms`. One kinematics pass and one Cholesky factorisation."""
-        if self._kernel is not None:
-            return self._kernel.implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)
+        :meth:`implicit_terms`, :meth:`factor` with γh = h, and :meth:`solve` of (v, f):
+        ``v⁺ = v + h k_v``."""
         f, M, K, D = self.implicit_terms(q, v, tau, object_wrench)
-        self.add_joint_gains(K, D, kp, kd)
-        return v + h * np.linalg.solve(M + h * D + (h * h) * K, f - h * (K @ v))
+        self.factor(M, K, D, h, kp, kd)
+        return v + h * self.solve(v, f)[1]
 
+    def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
+        """Every interconnection element's evaluation at (q, v), with its S_K, S_D, in scene order."""
+        raise NotImplementedError
+
+    def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
+        """The interconnections' readouts along a trajectory Q (n, nq), V (n, nv) (one pass)."""
+        raise NotImplementedError
+
+    def elastic_energy(self, q: np.ndarray) -> np.ndarray:
+        """Elastic energy of each interconnection (n_links,) [J]."""
+        pin.forwardKinematics(self.model, self.data, q)
+        return self._elastic()
+
+    def _elastic(self) -> np.ndarray:
+        raise NotImplementedError
+
+    @property
+    def last_dissipation(self) -> float:
+        """Power dissipated by dampers [W] at the state of the last right-hand side or implicit
+        evaluation."""
+        raise NotImplementedError
+
+    def rotation_alarm(self) -> tuple[int, float] | None:
+        """``(link, θ)`` of the first interconnection whose deformation rotated beyond 0.9π [rad]
+        in the evaluations since the last :meth:`clear_rotation_alarm`, else ``None``."""
+        raise NotImplementedError
+
+    def clear_rotation_alarm(self) -> None:
+        """Forget a raised rotation alarm."""
+        raise NotImplementedError
+
+    # -- built on the interface ------------------------------------------------------------------
     def add_joint_gains(self, K: np.ndarray, D: np.ndarray, kp: np.ndarray, kd: np.ndarray) -> None:
         """Add joint PD gains (n_actuated,) to the diagonals of K̃ and D̃ (nv, nv), in place."""
         act = self.scene.actuated
         K[act, act] += kp
         D[act, act] += kd
 
-    def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Σ (J_Gᵀ G_f_G + J_Tᵀ T_f_T), the interconnections' generalized force (nv,)."""
-        model, data = self.model, self.data
-        states = self.springs(q, v)
-        pin.computeJointJacobians(model, data, q)
-        out = np.zeros(model.nv)
-        for (t_id, g_id, *_), s in zip(self._hot, states, strict=True):
-            out += pin.getFrameJacobian(model, data, g_id, LOCAL).T @ s.G_f_G
-            out += pin.getFrameJacobian(model, data, t_id, LOCAL).T @ s.T_f_T
-        return out
-
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Mass matrix and the interconnections' stiffness and damping in joint space at (q, v).
+        """(M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad], at (q, v):
+        the matrices of :meth:`implicit_terms`."""
+        _, M, K, D = self.implicit_terms(q, v, np.zeros(self.scene.n_actuated))
+        return M, K, D
 
-        With ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` (LOCAL frame Jacobians) and ``A = Jlog6(T_M_G) Jr``:
-        ``K̃ = Σ Aᵀ K A`` and ``D̃ = Σ Aᵀ D A + B`` (B: joint damping). This is the Gauss–Newton
-        part of the Hessian of the elastic energy (the force-proportional geometric stiffness is
-        left out), which is what linearly implicit methods need (DESIGN §2).
-
-        Returns:
-            (M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad].
-        """
-        self._interconnections(q, v, matrices=True)
-        return pin.crba(self.model, self.data, q).copy(), self.K_t, self.D_t
-
-    # -- readouts -----------------------------------------------------------------------------
-    def elastic_energy(self, q: np.ndarray) -> np.ndarray:
-        """½ eᵀ K e of each interconnection (n_links,) [J]."""
-        pin.forwardKinematics(self.model, self.data, q)
-        return self._elastic()
-
-    def _elastic(self) -> np.ndarray:
-        """Elastic energies after forward kinematics."""
-        if self._kernel is not None:
-            return self._kernel.elastic_energies()
-        model, data = self.model, self.data
-        out = []
-        for t_id, g_id, K, _, _ in self._hot:
-            e = pin.log6(pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))).vector
-            out.append(0.5 * e @ K @ e)
-        return np.array(out)
+    def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``Q = Σ Jrᵀ G_f_G``, the interconnections' generalized force (nv,) at (q, v)."""
+        zero = np.zeros(self.scene.n_actuated)
+        if self._has_damping:  # the joint damping is not an interconnection force
+            return self.implicit_terms(q, v, zero)[0] + pin.nonLinearEffects(self.model, self.data, q, v) + self._damping * v
+        return self.implicit_terms(q, v, zero)[0] + pin.nonLinearEffects(self.model, self.data, q, v)
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
         """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
@@ -250,6 +209,157 @@ class Dynamics:
 
     def dissipation(self, q: np.ndarray, v: np.ndarray) -> float:
         """Power dissipated by interconnection and joint damping [W] (≥ 0)."""
-        states = self.springs(q, v)
-        p = sum(float(s.e_dot @ lk.D @ s.e_dot) for s, lk in zip(states, self.scene.links, strict=True))
-        return p + float(v @ (self._damping * v))
+        states = self.element_states(q, v)
+        return sum(s.power for s in states) + float(v @ (self._damping * v))
+
+
+class PythonDynamics(Dynamics):
+    """The reference implementation, on Pinocchio's Python bindings and the elements' Python laws."""
+
+    backend = "python"
+
+    def __init__(self, scene: Scene, backend: str | None = None) -> None:
+        super().__init__(scene, backend)
+        self._dissipation = 0.0
+        self._alarm: tuple[int, float] | None = None
+        self._K: np.ndarray | None = None
+        self._D: np.ndarray | None = None
+        self._step: tuple[np.ndarray, np.ndarray, float] | None = None  # (S⁻¹, K̃ + Kp, γh)
+
+    @property
+    def last_dissipation(self) -> float:
+        return self._dissipation
+
+    def rotation_alarm(self) -> tuple[int, float] | None:
+        return self._alarm
+
+    def clear_rotation_alarm(self) -> None:
+        self._alarm = None
+
+    def _relative(self, t_id: int, g_id: int) -> tuple[pin.SE3, np.ndarray]:
+        """T_M_G and the relative Jacobian Jr (6, nv), after computeJointJacobians."""
+        model, data = self.model, self.data
+        T_M_G = pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))
+        nv = model.nv  # reshape: eigenpy returns a 6×1 Jacobian as a vector
+        J_G = pin.getFrameJacobian(model, data, g_id, LOCAL).reshape(6, nv)
+        J_T = pin.getFrameJacobian(model, data, t_id, LOCAL).reshape(6, nv)
+        return T_M_G, J_G - T_M_G.toActionMatrixInverse() @ J_T
+
+    def _generalized_force(
+        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, matrices: bool, object_wrench: np.ndarray | None
+    ) -> np.ndarray:
+        """Kinematics at (q, v), then ``S τ + Q − B q̇`` (+ the object wrench) (nv,); with
+        ``matrices``, also K̃ and D̃ in ``self._K``, ``self._D``."""
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, q)  # forward kinematics (positions) + joint Jacobians
+        Q = np.zeros(model.nv)
+        p_diss = 0.0
+        if matrices:
+            K_t = np.zeros((model.nv, model.nv))
+            D_t = np.diag(self._damping)
+        for i, (t_id, g_id, element) in enumerate(self._frames):
+            T_M_G, Jr = self._relative(t_id, g_id)
+            ev = element.evaluate(T_M_G, Jr @ v, matrices)
+            Q += Jr.T @ ev.G_f_G
+            p_diss += ev.power
+            if ev.theta > ROTATION_ALARM and self._alarm is None:
+                self._alarm = (i, ev.theta)
+            if matrices:
+                K_t += Jr.T @ ev.S_K @ Jr
+                if element.has_damping:
+                    D_t += Jr.T @ ev.S_D @ Jr
+        if matrices:
+            self._K, self._D = K_t, D_t
+        if object_wrench is not None:  # world-aligned wrench at the object frame origin → LOCAL
+            fo = self.scene.object_frame
+            R = pin.updateFramePlacement(model, data, fo).rotation
+            local = np.concatenate([R.T @ object_wrench[:3], R.T @ object_wrench[3:]])
+            Q += pin.getFrameJacobian(model, data, fo, LOCAL).reshape(6, model.nv).T @ local
+        Q[self.actuated_index] += tau
+        if self._has_damping:
+            Q -= self._damping * v
+            p_diss += v @ (self._damping * v)
+        self._dissipation = p_diss
+        return Q
+
+    def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
+        t = self._generalized_force(q, v, tau, False, object_wrench)
+        return pin.aba(self.model, self.data, q, v, t).copy()
+
+    def implicit_terms(
+        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        model, data = self.model, self.data
+        f = self._generalized_force(q, v, tau, True, object_wrench)
+        f -= pin.nonLinearEffects(model, data, q, v)
+        assert self._K is not None and self._D is not None
+        return f, pin.crba(model, data, q).reshape(model.nv, model.nv).copy(), self._K, self._D
+
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
+        act = self.scene.actuated
+        K_g = K.copy()
+        K_g[act, act] += kp
+        S = M + gh * D + (gh * gh) * K_g
+        S[act, act] += gh * kd
+        try:
+            L = np.linalg.cholesky(S)
+        except np.linalg.LinAlgError:
+            self._step = None
+            raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite") from None
+        # For the small S of a few arms (nv ≲ 50) an explicit inverse from the Cholesky factor and a
+        # matrix–vector product per solve cost less than LAPACK's triangular solves through numpy.
+        L_inv = np.linalg.inv(L)
+        self._step = (L_inv.T @ L_inv, K_g, gh)
+
+    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._step is None:
+            raise KernelError("solve() needs a successful factor() first")
+        S_inv, K_g, gh = self._step
+        k_v = S_inv @ (Mf_v - gh * (K_g @ f_q))
+        return f_q + gh * k_v, k_v
+
+    def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
+        model, data = self.model, self.data
+        pin.forwardKinematics(model, data, q, v)
+        return [self._element(t_id, g_id, element, True) for t_id, g_id, element in self._frames]
+
+    def _element(self, t_id: int, g_id: int, element: Any, jacobians: bool) -> ElementEval:
+        """An element at the kinematics of the last forwardKinematics(q, v)."""
+        model, data = self.model, self.data
+        oMT = pin.updateFramePlacement(model, data, t_id)
+        oMG = pin.updateFramePlacement(model, data, g_id)
+        T_M_G = oMT.actInv(oMG)
+        V_T = pin.getFrameVelocity(model, data, t_id, LOCAL)
+        V_G = pin.getFrameVelocity(model, data, g_id, LOCAL)
+        return element.evaluate(T_M_G, (V_G - T_M_G.actInv(V_T)).vector, jacobians)
+
+    def _elastic(self) -> np.ndarray:
+        model, data = self.model, self.data
+        zero = np.zeros(6)
+        out = []
+        for t_id, g_id, element in self._frames:
+            T_M_G = pin.updateFramePlacement(model, data, t_id).actInv(pin.updateFramePlacement(model, data, g_id))
+            out.append(element.evaluate(T_M_G, zero).energy)
+        return np.array(out)
+
+    def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
+        model, data = self.model, self.data
+        n, L = len(Q), len(self._frames)
+        E, U, P = np.zeros((n, L, 6)), np.zeros((n, L)), np.zeros((n, L))
+        WG, WT, PG, PT = np.zeros((n, L, 6)), np.zeros((n, L, 6)), np.zeros((n, L, 3)), np.zeros((n, L, 3))
+        PO, KE, PE = np.zeros((n, 3)), np.zeros(n), np.zeros(n)
+        for k in range(n):
+            pin.forwardKinematics(model, data, Q[k], V[k])
+            KE[k] = pin.computeKineticEnergy(model, data)
+            PE[k] = pin.computePotentialEnergy(model, data)
+            PO[k] = pin.updateFramePlacement(model, data, self.scene.object_frame).translation
+            for i, (t_id, g_id, element) in enumerate(self._frames):
+                ev = self._element(t_id, g_id, element, False)
+                oMT, oMG = data.oMf[t_id], data.oMf[g_id]
+                f_T = -(oMT.actInv(oMG).act(pin.Force(ev.G_f_G))).vector  # action = reaction, in T
+                E[k, i, : ev.deformation.size] = ev.deformation
+                U[k, i], P[k, i] = ev.energy, ev.power
+                WG[k, i, :3], WG[k, i, 3:] = oMG.rotation @ ev.G_f_G[:3], oMG.rotation @ ev.G_f_G[3:]
+                WT[k, i, :3], WT[k, i, 3:] = oMT.rotation @ f_T[:3], oMT.rotation @ f_T[3:]
+                PG[k, i], PT[k, i] = oMG.translation, oMT.translation
+        return Readouts(E, U, P, WG, WT, PG, PT, PO, KE, PE)

@@ -18,11 +18,10 @@ name                          order  adaptive  per step
 
 from __future__ import annotations
 
-from ..closed_loop import Controller, System
 from ..errors import SimulationError
-from .base import AdaptiveIntegrator, Attempt, Integrator
+from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
-from .exponential import Exponential, LinearForm, linear_form, nonlinearity
+from .exponential import Exponential, LinearForm, linear_form
 from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler
 from .scipy_reference import ScipyReference
 
@@ -50,17 +49,15 @@ __all__ = [
     "AdaptiveROS2",
     "Attempt",
     "ButcherTableau",
-    "Controller",
     "DormandPrince",
     "ExplicitRungeKutta",
     "Exponential",
     "Integrator",
     "LinearForm",
     "LinearlyImplicitEuler",
+    "Problem",
     "ScipyReference",
     "SymplecticEuler",
-    "System",
     "get_integrator",
     "linear_form",
-    "nonlinearity",
 ]

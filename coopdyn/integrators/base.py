@@ -1,27 +1,96 @@
-"""The integrator contract: :class:`System` (the closed loop, with work counters) and
-:class:`Integrator` (configuration + a step function).
+"""The integrator contract: :class:`Problem` (what a method may ask of the closed loop it
+advances) and :class:`Integrator` (configuration + a step function).
 
 A new method subclasses :class:`Integrator` (fixed step: implement ``step``) or
 :class:`AdaptiveIntegrator` (implement ``attempt``), gives itself a ``name`` and an ``order``,
 and, for :func:`coopdyn.advise`, a scalar ``stability_function`` R(z) (or overrides
 ``spectral_radius``). Integrator objects hold settings only; everything that evolves is passed
-in and returned, and per-run scratch (factorisations, discretisations) lives in ``System.cache``.
+in and returned. Per-run scratch (a reused factorisation, a discretisation, the last stage of a
+first-same-as-last pair) is the method's own: :meth:`Integrator.workspace` makes it at the start
+of a run and ``simulate`` hands it to every step as ``ws``; without it (``ws=None``) a step
+computes everything afresh.
 
 States are ``(q, v)`` on the configuration Lie group. Multi-stage methods build their stages in
 a local chart ``q = q₀ ⊕ δ`` around the step's start, where ``δ̇ = dIntegrate(q₀, δ)⁻¹ v``
-(DESIGN §2): the method then keeps its classical order on SE(3) free-flyers, which naive stages
-``q₀ ⊕ h Σ aᵢⱼ vⱼ`` do not.
+(docs/physics.md): the method then keeps its classical order on SE(3) free-flyers, which naive
+stages ``q₀ ⊕ h Σ aᵢⱼ vⱼ`` do not.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
-import pinocchio as pin
 
-from ..closed_loop import System
+
+class Problem(Protocol):
+    """The closed loop as integrators see it (:class:`coopdyn.closed_loop.System` implements it).
+
+    States are (q (nq,), v (nv,)); evaluations count themselves (``n_rhs``, ``n_jac``,
+    ``n_factor``).
+    """
+
+    nv: int  #: size of v
+    n_actuated: int  #: size of the controller output
+    neutral: np.ndarray  #: the neutral configuration (nq,)
+    n_rhs: int
+    n_jac: int
+    n_factor: int
+
+    @property
+    def q0(self) -> np.ndarray:
+        """The scene's initial configuration (nq,)."""
+        ...
+
+    @property
+    def has_object_wrench(self) -> bool:
+        """Whether an external object wrench is applied."""
+        ...
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """q̈ (nv,) of the closed loop at (t, q, v)."""
+        ...
+
+    def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The controller output (n_actuated,) at (t, q, v)."""
+        ...
+
+    def free_acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """q̈ (nv,) for given torques, no controller (not counted)."""
+        ...
+
+    def nonlinearity(self) -> str | None:
+        """Why the dynamics are not linear, or None."""
+        ...
+
+    def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(f = M q̈, M, K̃, D̃) at (t, q, v)."""
+        ...
+
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
+        """Factorise M + γh D̃ + (γh)² K̃ (controller gains added); StepMatrixError if not SPD."""
+        ...
+
+    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(k_q, k_v) of (I − γhJ) k = (f_q, f_v) with the last factorisation, given M f_v."""
+        ...
+
+    def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
+        """v⁺ of one linearly implicit Euler step (one kinematics pass, one factorisation)."""
+        ...
+
+    def integrate(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """q ⊕ dq."""
+        ...
+
+    def difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        """q1 ⊖ q0 (nv,)."""
+        ...
+
+    def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """δ̇ = dIntegrate(q₀, δ)⁻¹ v."""
+        ...
 
 
 class Integrator(ABC):
@@ -36,8 +105,15 @@ class Integrator(ABC):
     a_stable: ClassVar[bool] = False
 
     @abstractmethod
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-        """Advance from (t, q, v) by ``h`` [s]; return the new (q, v)."""
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Advance from (t, q, v) by ``h`` [s]; return the new (q, v). ``ws``: this method's
+        workspace for the run (:meth:`workspace`), or None."""
+
+    def workspace(self, system: Problem) -> Any:
+        """Per-run scratch of this method (None: it needs none); passed to every step as ``ws``."""
+        return None
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) of the method on y' = λy (z = hλ), elementwise. Needed by :func:`coopdyn.advise`."""
@@ -80,23 +156,22 @@ class AdaptiveIntegrator(Integrator):
         self.rtol, self.atol, self.h_min = float(rtol), float(atol), float(h_min)
 
     @abstractmethod
-    def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
+    def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
         """Try a step of ``h`` [s] from (t, q, v)."""
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """A step of exactly ``h`` without error control."""
-        out = self.attempt(system, t, q, v, h)
+        out = self.attempt(system, t, q, v, h, ws)
         return out.q, out.v
 
     def error_norm(
-        self, system: System, e_delta: np.ndarray, e_v: np.ndarray, q0: np.ndarray, v0: np.ndarray, v1: np.ndarray
+        self, system: Problem, e_delta: np.ndarray, e_v: np.ndarray, q0: np.ndarray, v0: np.ndarray, v1: np.ndarray
     ) -> float:
         """RMS of the embedded error scaled by ``atol + rtol·|y|`` (positions: ``q₀ ⊖ neutral``
         in the tangent space; velocities: the larger of start and end)."""
-        neutral = system.cache.get("neutral")
-        if neutral is None:
-            neutral = system.cache["neutral"] = pin.neutral(system.model)
-        sc_d = self.atol + self.rtol * np.abs(pin.difference(system.model, neutral, q0))
+        sc_d = self.atol + self.rtol * np.abs(system.difference(system.neutral, q0))
         sc_v = self.atol + self.rtol * np.maximum(np.abs(v0), np.abs(v1))
         return float(np.sqrt((np.sum((e_delta / sc_d) ** 2) + np.sum((e_v / sc_v) ** 2)) / (2 * e_v.size)))
 

@@ -4,12 +4,11 @@ adaptive Dormand–Prince 5(4) pair. Methods that differ only in coefficients di
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
-import pinocchio as pin
 
-from .base import AdaptiveIntegrator, Attempt, Integrator, System
+from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
 
 class SymplecticEuler(Integrator):
@@ -18,9 +17,11 @@ class SymplecticEuler(Integrator):
     name = "symplectic_euler"
     order = 1
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         v_new = v + h * system.acceleration(t, q, v)
-        return pin.integrate(system.model, q, h * v_new), v_new
+        return system.integrate(q, h * v_new), v_new
 
     def spectral_radius(self, A: np.ndarray, h: float) -> float:
         """The method is partitioned (no scalar R(z)): use its step matrix on x' = A x."""
@@ -51,7 +52,7 @@ def _combine(coefficients: tuple[float, ...], ks: list[np.ndarray]) -> np.ndarra
 
 
 def _stages(
-    tab: ButcherTableau, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float, a0: np.ndarray | None = None
+    tab: ButcherTableau, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, a0: np.ndarray | None = None
 ) -> tuple[list[np.ndarray], list[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Chart rates δ̇ᵢ and accelerations aᵢ of every stage, and (δ, q, v) of the last stage."""
     kd: list[np.ndarray] = []
@@ -61,7 +62,7 @@ def _stages(
         if kd:
             delta = h * _combine(row, kd)
             v_s = v + h * _combine(row, ka)
-            q_s = pin.integrate(system.model, q, delta)
+            q_s = system.integrate(q, delta)
             kd.append(system.chart_velocity(q, delta, v_s))
             ka.append(system.acceleration(t + c * h, q_s, v_s))
             last = (delta, q_s, v_s)
@@ -91,11 +92,13 @@ class ExplicitRungeKutta(Integrator):
 
     tableau: ClassVar[ButcherTableau]
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         tab = self.tableau
         kd, ka, _ = _stages(tab, system, t, q, v, h)
         delta = h * _combine(tab.b, kd)
-        return pin.integrate(system.model, q, delta), v + h * _combine(tab.b, ka)
+        return system.integrate(q, delta), v + h * _combine(tab.b, ka)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _rk_stability(self.tableau, z, self.tableau.b)
@@ -111,6 +114,15 @@ class RK4(ExplicitRungeKutta):
         b=(1 / 6, 1 / 3, 1 / 3, 1 / 6),
         c=(0.0, 0.5, 0.5, 1.0),
     )
+
+
+class _FirstSameAsLast:
+    """Dormand–Prince's workspace: the last stage's acceleration, reused as the next step's first
+    when that step starts from the same state array ``q``."""
+
+    def __init__(self) -> None:
+        self.q: np.ndarray | None = None
+        self.a: np.ndarray | None = None
 
 
 _DP_A = (
@@ -141,14 +153,17 @@ class DormandPrince(AdaptiveIntegrator):
         b_hat=(5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40),
     )
 
-    def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
+    def workspace(self, system: Problem) -> _FirstSameAsLast:
+        return _FirstSameAsLast()
+
+    def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
         tab = self.tableau
-        fsal = system.cache.get("fsal")
-        a0 = fsal[1] if fsal is not None and fsal[0] is q else None
+        a0 = ws.a if ws is not None and ws.q is q else None
         kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the 5th-order solution
         diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
         err = self.error_norm(system, h * _combine(diff, kd), h * _combine(diff, ka), q, v, v_new)
-        system.cache["fsal"] = (q_new, ka[-1])
+        if ws is not None:
+            ws.q, ws.a = q_new, ka[-1]
         return Attempt(q_new, v_new, err)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:

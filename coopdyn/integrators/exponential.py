@@ -12,17 +12,13 @@ order p + 1 for torques interpolated by a degree-p polynomial over the step (``"
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.linalg
 
 from ..errors import SimulationError
-from ..model.scene import Scene
-from .base import Integrator, System
-
-#: Pinocchio joints along which the dynamics stay linear.
-_PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
+from .base import Integrator, Problem
 
 
 class LinearForm(NamedTuple):
@@ -33,38 +29,25 @@ class LinearForm(NamedTuple):
     c: np.ndarray  #: (2nv,)
 
 
-def nonlinearity(scene: Scene) -> str | None:
-    """Why ``scene`` is not linear (``None`` when it is)."""
-    bad = [
-        f"{scene.model.names[i]} ({j.shortname()})"
-        for i, j in enumerate(scene.model.joints)
-        if i and j.shortname() not in _PRISMATIC
-    ]
-    if bad:
-        return "joints that are not prismatic make the mass matrix or the kinematics configuration-dependent: " + ", ".join(bad)
-    return None
-
-
-def linear_form(system: System) -> LinearForm:
+def linear_form(system: Problem) -> LinearForm:
     """The affine dynamics of a linear scene, from unit perturbations of the right-hand side
     (exact up to round-off for an affine map), checked at a random state."""
-    scene = system.scene
-    why = nonlinearity(scene)
+    why = system.nonlinearity()
     if why is not None:
         raise SimulationError(f"the exponential integrator needs a linear scene; this one is not: {why}")
-    dyn, n, m = system.dynamics, scene.nv, scene.n_actuated
-    q0, v0, u0 = scene.q0, np.zeros(n), np.zeros(m)
-    a0 = dyn.acceleration(q0, v0, u0)
+    accel, n, m = system.free_acceleration, system.nv, system.n_actuated
+    q0, v0, u0 = system.q0, np.zeros(n), np.zeros(m)
+    a0 = accel(q0, v0, u0)
     eye_n, eye_m = np.eye(n), np.eye(m)
-    A_q = np.column_stack([dyn.acceleration(q0 + eye_n[i], v0, u0) - a0 for i in range(n)])
-    A_v = np.column_stack([dyn.acceleration(q0, eye_n[i], u0) - a0 for i in range(n)])
-    B = np.column_stack([dyn.acceleration(q0, v0, eye_m[i]) - a0 for i in range(m)])
+    A_q = np.column_stack([accel(q0 + eye_n[i], v0, u0) - a0 for i in range(n)])
+    A_v = np.column_stack([accel(q0, eye_n[i], u0) - a0 for i in range(n)])
+    B = np.column_stack([accel(q0, v0, eye_m[i]) - a0 for i in range(m)])
     F = np.block([[np.zeros((n, n)), eye_n], [A_q, A_v]])
     G = np.vstack([np.zeros((n, m)), B])
     c = np.concatenate([np.zeros(n), a0 - A_q @ q0])
     rng = np.random.default_rng(0)
     dq, v, u = rng.normal(size=n) * 0.01, rng.normal(size=n), rng.normal(size=m) * 10.0
-    a = dyn.acceleration(q0 + dq, v, u)
+    a = accel(q0 + dq, v, u)
     if not np.allclose(a, a0 + A_q @ dq + A_v @ v + B @ u, rtol=1e-9, atol=1e-9 * (1.0 + np.max(np.abs(a)))):
         raise SimulationError("the exponential integrator needs linear dynamics; this scene's right-hand side is not affine")
     return LinearForm(F, G, c)
@@ -74,6 +57,15 @@ _ONE = np.ones(1)
 
 #: hold name → polynomial degree of the torque over a step (p + 1 equally spaced nodes)
 HOLDS = {"zoh": 0, "foh": 1, "cubic": 3}
+
+
+class _Discretisations:
+    """The exponential integrator's workspace: the scene's linear form and one discretisation per
+    step size."""
+
+    def __init__(self) -> None:
+        self.form: LinearForm | None = None
+        self.steps: dict[float, tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]] = {}
 
 
 class Exponential(Integrator):
@@ -100,28 +92,35 @@ class Exponential(Integrator):
             raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {hold!r}")
         self.hold = hold
 
-    def _discrete(self, system: System, h: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
+    def workspace(self, system: Problem) -> _Discretisations:
+        return _Discretisations()
+
+    def _discrete(
+        self, system: Problem, h: float, ws: _Discretisations | None
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
         """For z = (x, u₀, 1): the step ``[Φ Γ₀ γ]``, the stacked predictions of the inner
         nodes' states, ``[Γ₁ … Γ_p]`` acting on the inner nodes' torques, and p."""
-        key = ("exponential", self.hold, h)
-        if key not in system.cache:
-            form = system.cache.get("linear_form")
-            if form is None:
-                form = system.cache["linear_form"] = linear_form(system)
+        ws = _Discretisations() if ws is None else ws
+        if h not in ws.steps:
+            if ws.form is None:
+                ws.form = linear_form(system)
+            form = ws.form
             p = HOLDS[self.hold]
             nodes = np.linspace(0.0, 1.0, p + 1) if p else np.zeros(1)
             Phi, *Gammas, gamma = _polynomial_hold(form, h, nodes)
             step = np.hstack([Phi, Gammas[0], gamma[:, None]])  # acts on z = (x, u₀, 1)
             inner = [np.hstack([P, G, g[:, None]]) for P, G, g in (_polynomial_hold(form, h * s, np.zeros(1)) for s in nodes[1:])]
             predictor = np.vstack(inner) if inner else None  # states at the inner nodes, torque held at u₀
-            system.cache[key] = (step, predictor, np.hstack(Gammas[1:]) if inner else None, p)
+            ws.steps[h] = (step, predictor, np.hstack(Gammas[1:]) if inner else None, p)
             system.n_factor += 1
-        return system.cache[key]
+        return ws.steps[h]
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-        if system.object_wrench is not None:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        if system.has_object_wrench:
             raise SimulationError("the exponential integrator does not take object_wrench (its discretisation has no such input)")
-        step, predictor, inner, p = self._discrete(system, h)
+        step, predictor, inner, p = self._discrete(system, h, ws)
         n = q.size
         u0 = system.torque(t, q, v)
         z = np.concatenate([q, v, u0, _ONE])

@@ -2,36 +2,32 @@
 Baraff & Witkin 1998) and the two-stage L-stable Rosenbrock-W method ROS2 (Verwer et al. 1999).
 
 Both use the Jacobian of the stiff part, ``J = [[0, I], [−M⁻¹K̃, −M⁻¹D̃]]`` with K̃, D̃ from
-:meth:`System.stiffness`, and never form ``M⁻¹``: a stage solve ``(I − γhJ) k = f`` on
+the problem's ``implicit_terms``, and never form ``M⁻¹``: a stage solve ``(I − γhJ) k = f`` on
 ``k = (k_q, k_v)`` is ``S k_v = M f_v − γh K̃ f_q``, ``k_q = f_q + γh k_v`` with the symmetric
-positive definite ``S = M + γh D̃ + (γh)² K̃`` — one Cholesky factorisation per step.
+positive definite ``S = M + γh D̃ + (γh)² K̃`` — one Cholesky factorisation per step. There is
+one implementation of that solve, in the dynamics (``factor`` / ``solve``; the compiled kernel or
+its Python reference); a step matrix that is not positive definite raises
+:class:`coopdyn.errors.StepMatrixError`.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
-from .base import AdaptiveIntegrator, Attempt, Integrator, System
+from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
 
-class _WSolver:
-    """``(I − γhJ)⁻¹`` at one state: ``S = M + γh D̃ + (γh)² K̃`` (symmetric positive definite)
-    inverted once. For the small, well-conditioned S of a few arms (nv ≲ 50) an explicit
-    inverse and a matrix–vector product per solve cost less than LAPACK's triangular solves
-    through scipy's wrappers (measured: ~2 µs vs ~35 µs per solve for nv = 20)."""
+class _Reuse:
+    """The W-method's workspace: the mass matrix of the last refresh, the step it was factored
+    for and the steps taken since (the factorisation itself stays in the dynamics)."""
 
-    def __init__(self, system: System, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
-        self.M, self.K, self.gh = M, K, gh
-        self.S_inv = np.linalg.inv(M + gh * D + (gh * gh) * K)
-        system.n_factor += 1
-
-    def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(k_q, k_v) for the right-hand side (f_q, f_v), given ``M f_v``."""
-        k_v = self.S_inv @ (Mf_v - self.gh * (self.K @ f_q))
-        return f_q + self.gh * k_v, k_v
+    def __init__(self) -> None:
+        self.count = 0
+        self.h = 0.0
+        self.M: np.ndarray | None = None
 
 
 class LinearlyImplicitEuler(Integrator):
@@ -58,22 +54,27 @@ class LinearlyImplicitEuler(Integrator):
             raise SimulationError(f"jacobian_every must be an integer >= 1, got {jacobian_every!r}")
         self.jacobian_every = jacobian_every
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def workspace(self, system: Problem) -> _Reuse | None:
+        return _Reuse() if self.jacobian_every > 1 else None
+
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         if self.jacobian_every == 1:
             v_new = system.implicit_euler_velocity(t, q, v, h)
-            return pin.integrate(system.model, q, h * v_new), v_new
-        cache = system.cache.get("implicit_euler")
-        if cache is None or cache[0] >= self.jacobian_every or cache[1] != h:
+            return system.integrate(q, h * v_new), v_new
+        if ws is None or ws.M is None or ws.count >= self.jacobian_every or ws.h != h:
             f, M, K, D = system.implicit_terms(t, q, v)
-            w = _WSolver(system, M, K, D, h)
-            count = 0
+            system.factor(M, K, D, h)
+            if ws is not None:
+                ws.count, ws.h, ws.M = 0, h, M
         else:
-            count, _, w = cache
-            f = w.M @ system.acceleration(t, q, v)
-        system.cache["implicit_euler"] = (count + 1, h, w)
-        _, k_v = w.solve(v, f)
+            f = ws.M @ system.acceleration(t, q, v)
+        if ws is not None:
+            ws.count += 1
+        _, k_v = system.solve(v, f)
         v_new = v + h * k_v
-        return pin.integrate(system.model, q, h * v_new), v_new
+        return system.integrate(q, h * v_new), v_new
 
     def __repr__(self) -> str:
         return f"LinearlyImplicitEuler(jacobian_every={self.jacobian_every})"
@@ -85,15 +86,15 @@ class LinearlyImplicitEuler(Integrator):
 GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 
 
-def _ros2(system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
+def _ros2(system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
     """One ROS2 step; returns (δ, v⁺, error of δ, error of v⁺) with the embedded first-order estimate."""
     f1, M, K, D = system.implicit_terms(t, q, v)
-    w = _WSolver(system, M, K, D, GAMMA * h)
-    kq1, kv1 = w.solve(v, f1)
+    system.factor(M, K, D, GAMMA * h)
+    kq1, kv1 = system.solve(v, f1)
     d2, v2 = h * kq1, v + h * kv1
-    q2 = pin.integrate(system.model, q, d2)
+    q2 = system.integrate(q, d2)
     a2 = system.acceleration(t + h, q2, v2)
-    kq2, kv2 = w.solve(system.chart_velocity(q, d2, v2) - 2.0 * kq1, M @ (a2 - 2.0 * kv1))
+    kq2, kv2 = system.solve(system.chart_velocity(q, d2, v2) - 2.0 * kq1, M @ (a2 - 2.0 * kv1))
     delta = h * (1.5 * kq1 + 0.5 * kq2)
     v_new = v + h * (1.5 * kv1 + 0.5 * kv2)
     return delta, v_new, 0.5 * h * (kq1 + kq2), 0.5 * h * (kv1 + kv2)
@@ -116,9 +117,11 @@ class ROS2(Integrator):
     order = 2
     a_stable = True
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         delta, v_new, _, _ = _ros2(system, t, q, v, h)
-        return pin.integrate(system.model, q, delta), v_new
+        return system.integrate(q, delta), v_new
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
@@ -132,9 +135,9 @@ class AdaptiveROS2(AdaptiveIntegrator):
     error_order = 1
     a_stable = True
 
-    def attempt(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> Attempt:
+    def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
         delta, v_new, e_d, e_v = _ros2(system, t, q, v, h)
-        return Attempt(pin.integrate(system.model, q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new))
+        return Attempt(system.integrate(q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new))
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)

@@ -7,12 +7,13 @@ implicit methods), meant for references, not for production runs.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-import pinocchio as pin
 from scipy.integrate import solve_ivp
 
 from ..errors import SimulationError
-from .base import Integrator, System
+from .base import Integrator, Problem
 
 _METHODS = ("DOP853", "RK45", "Radau", "BDF", "LSODA")
 
@@ -33,19 +34,21 @@ class ScipyReference(Integrator):
             raise SimulationError(f"unknown scipy method {method!r}; valid: {list(_METHODS)}")
         self.method, self.rtol, self.atol = method, float(rtol), float(atol)
 
-    def step(self, system: System, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         n = v.size
 
         def rhs(s: float, y: np.ndarray) -> np.ndarray:
             delta, vel = y[:n], y[n:]
-            q_s = pin.integrate(system.model, q, delta)
+            q_s = system.integrate(q, delta)
             return np.concatenate([system.chart_velocity(q, delta, vel), system.acceleration(s, q_s, vel)])
 
         sol = solve_ivp(rhs, (t, t + h), np.concatenate([np.zeros(n), v]), method=self.method, rtol=self.rtol, atol=self.atol)
         if not sol.success:
             raise SimulationError(f"scipy {self.method} failed at t = {t:.6g} s: {sol.message}")
         y = sol.y[:, -1]
-        return pin.integrate(system.model, q, y[:n]), y[n:]
+        return system.integrate(q, y[:n]), y[n:]
 
     def __repr__(self) -> str:
         return f"ScipyReference(method={self.method!r}, rtol={self.rtol:g}, atol={self.atol:g})"

@@ -8,6 +8,7 @@ same robot, can be merged into one scene model.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -101,9 +102,10 @@ def _load_urdf(
         if not path.is_file():
             raise ModelLoadError(f"URDF file not found: {path}. Give an existing .urdf path or an example-robot-data name.")
         try:
-            model = pin.buildModelFromUrdf(str(path))
+            model, _ = _parsed(str(path.resolve()), _stamp(path), None)
         except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError with XML details
             raise ModelLoadError(f"could not parse URDF {path}: {exc}") from exc
+        model = model.copy()
         return model, None, _geometry(model, path, [str(p) for p in path.resolve().parents], meshes) if meshes else None
     try:
         from example_robot_data import robots_loader
@@ -121,15 +123,32 @@ def _load_urdf(
         raise ModelLoadError(f"example-robot-data robot {name!r} has no URDF (only SDF); give a URDF path instead")
     rel = os.path.join(loader.path, loader.urdf_subpath, loader.urdf_filename)
     root = robots_loader.getModelPath(rel)
-    model = pin.buildModelFromUrdf(os.path.join(root, rel))
-    visual = _geometry(model, Path(root, rel), [os.path.join(root, "../..")], meshes) if meshes else None
+    urdf = Path(root, rel)
+    srdf = os.path.join(root, loader.path, loader.srdf_subpath, loader.srdf_filename) if loader.srdf_filename else None
+    model, q_ref = _parsed(str(urdf), _stamp(urdf), srdf)
+    model = model.copy()
+    visual = _geometry(model, urdf, [os.path.join(root, "../..")], meshes) if meshes else None
+    return model, None if q_ref is None else q_ref.copy(), visual
+
+
+def _stamp(path: Path) -> tuple[int, int]:
+    """(modification time [ns], size [bytes]) of a file: a changed URDF is parsed again."""
+    st = path.stat()
+    return st.st_mtime_ns, st.st_size
+
+
+@functools.lru_cache(maxsize=64)
+def _parsed(urdf: str, stamp: tuple[int, int], srdf: str | None) -> tuple[pin.Model, np.ndarray | None]:
+    """The model of a URDF file and its SRDF ``default`` posture, parsed once per process and file
+    version (callers copy the model before changing it)."""
+    del stamp  # part of the cache key only
+    model = pin.buildModelFromUrdf(urdf)
     q_ref = None
-    if loader.srdf_filename:
-        srdf = os.path.join(root, loader.path, loader.srdf_subpath, loader.srdf_filename)
+    if srdf is not None:
         pin.loadReferenceConfigurations(model, srdf, False)
         if "default" in model.referenceConfigurations:
             q_ref = np.array(model.referenceConfigurations["default"], dtype=float)
-    return model, q_ref, visual
+    return model, q_ref
 
 
 def _geometry(model: pin.Model, path: Path, package_dirs: list[str], meshes: str) -> pin.GeometryModel:

@@ -1,25 +1,23 @@
-"""Elastic interconnections: an SE(3) spring–damper between an arm tip frame T and an object
-grasp frame G (DESIGN §2).
+"""Interconnections: which two frames an elastic element joins, and with what law.
 
-With ``T_M_G = oMT⁻¹ · oMG`` (pose of G in T) the deformation is ``e = log6(T_M_G)``
-([linear; angular], [m; rad]), the elastic energy ``U = ½ eᵀ K e`` and, with the relative twist
-``ξ = V_G − Ad(T_M_G⁻¹) V_T`` (both LOCAL), ``ė = Jlog6(T_M_G) ξ``. The wrench on the object at G,
-in G, is ``G_f_G = −Jlog6ᵀ (K e + D ė)`` — the exact gradient of U plus the damping — and the
-reaction on the arm at T, in T, is ``T_f_T = −T_M_G · G_f_G``.
+An :class:`Interconnection` joins an arm's tool frame T — or, with ``arm=None``, a fixture frame
+fixed in the world — to a grasp frame G on the object, through an element of
+:mod:`coopdyn.model.elements` (``"se3"``: the 6-DOF SE(3) spring–damper, the default;
+``"ball"``: a translational spring–damper, a point grasp that transmits no moment; or any
+registered kind). The element computes the wrenches from the pose of G relative to T.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from .. import _validate
-from ..errors import SceneError
 from .body import axis_vector
+from .elements import Element, ElementType, lookup
 
 
 def diagonal(linear: float | Sequence[float], angular: float | Sequence[float]) -> np.ndarray:
@@ -40,50 +38,37 @@ def axial(value: float, axis: str | Sequence[float] = "z") -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Interconnection:
-    """An elastic link from the tip of ``arm`` to a grasp frame on the object.
+    """An elastic link from the tip of ``arm`` (or a world fixture) to a grasp frame on the object.
 
     Attributes:
-        arm: name of the arm whose tip frame is T.
-        stiffness: K, a 6x6 symmetric positive semi-definite matrix or a 6-vector diagonal,
-            order [x, y, z, rx, ry, rz] in the tip frame's axes, [N/m] and [N·m/rad] blocks.
-        damping: D, same shape, [N·s/m] and [N·m·s/rad] blocks. Default: none.
-        grasp: pose of the grasp frame G in the object frame; the interconnection is unloaded
-            when T and G coincide. Default: the tip pose at the initial configuration.
+        arm: name of the arm whose tip frame is T; ``None`` attaches T to the world (a fixture).
+        stiffness: K of the element, in the tip frame's axes. ``"se3"``: a 6x6 symmetric positive
+            semi-definite matrix or a 6-vector diagonal, order [x, y, z, rx, ry, rz], [N/m] and
+            [N·m/rad] blocks. ``"ball"``: a scalar, 3-vector diagonal or 3x3 matrix [N/m].
+        damping: D, same shape as K, [N·s/m] and [N·m·s/rad]. Default: none.
+        grasp: pose of the grasp frame G in the object frame (``pin.SE3``, 4x4 or translation [m]);
+            the element is unloaded when T and G coincide. Default: the tip pose at the initial
+            configuration (with ``arm=None``: the object frame itself).
+        element: the element kind (a name in :data:`coopdyn.model.elements.ELEMENTS`, or an
+            :class:`~coopdyn.model.elements.Element` subclass). Default ``"se3"``.
+        fixture: with ``arm=None``, the pose of T in the world. Default: G's initial world pose
+            (the element starts unloaded).
+        name: what readouts and messages call it; default ``"<arm>"`` (or ``"fixture"``) plus its index.
     """
 
-    arm: str
+    arm: str | None
     stiffness: Any
     damping: Any = None
     grasp: Any = None
+    element: str | type[Element] = "se3"
+    fixture: Any = None
+    name: str | None = None
 
-    def matrices(self) -> tuple[np.ndarray, np.ndarray]:
-        """The validated (K, D)."""
-        what = f"interconnection to arm {self.arm!r}"
-        K = _validate.spd6(self.stiffness, f"{what}: stiffness", "N/m, N·m/rad")
-        D = np.zeros((6, 6)) if self.damping is None else _validate.spd6(self.damping, f"{what}: damping", "N·s/m, N·m·s/rad")
-        if not np.any(K) and not np.any(D):
-            raise SceneError(f"{what}: stiffness and damping are both zero; the arm would not touch the object")
-        return K, D
+    def element_type(self) -> ElementType:
+        """The registered element kind (Python class and C++ twin)."""
+        return lookup(self.element)
 
-
-class SpringState(NamedTuple):
-    """What an interconnection computes at one instant (all LOCAL frame quantities)."""
-
-    e: np.ndarray  #: deformation log6(T_M_G), (6,) [m, rad]
-    e_dot: np.ndarray  #: its rate, (6,) [m/s, rad/s]
-    G_f_G: np.ndarray  #: wrench on the object at G, in G, (6,) [N, N·m]
-    T_f_T: np.ndarray  #: wrench on the arm at T, in T, (6,) [N, N·m]
-    T_M_G: pin.SE3  #: pose of G in T
-    J_log: np.ndarray  #: Jlog6(T_M_G), (6, 6)
-
-
-def spring(oMT: pin.SE3, oMG: pin.SE3, T_v_T: np.ndarray, G_v_G: np.ndarray, K: np.ndarray, D: np.ndarray) -> SpringState:
-    """Evaluate the SE(3) spring–damper law for frame poses and LOCAL twists (6,) [m/s, rad/s]."""
-    T_M_G = oMT.actInv(oMG)
-    e = pin.log6(T_M_G).vector
-    J_log = pin.Jlog6(T_M_G)
-    xi = G_v_G - T_M_G.toActionMatrixInverse() @ T_v_T
-    e_dot = J_log @ xi
-    G_f_G = -J_log.T @ (K @ e + D @ e_dot)
-    T_f_T = -(T_M_G.toDualActionMatrix() @ G_f_G)
-    return SpringState(e, e_dot, G_f_G, T_f_T, T_M_G, J_log)
+    def law(self, what: str | None = None) -> Element:
+        """The validated element (its parameters checked); ``what`` names it in messages."""
+        label = what or f"interconnection to arm {self.arm!r}"
+        return self.element_type().python(self.stiffness, self.damping, label)

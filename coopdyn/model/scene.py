@@ -6,6 +6,7 @@ around explicitly and Pinocchio ``Data`` lives in :class:`coopdyn.dynamics.Dynam
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -17,6 +18,7 @@ from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
 from .body import RigidObject
+from .elements import Element
 from .interconnection import Interconnection
 
 
@@ -34,28 +36,36 @@ class ArmInfo:
 
 @dataclass(frozen=True, eq=False)
 class Link:
-    """A compiled interconnection: frame ids and matrices."""
+    """A compiled interconnection: the frames it joins and its element."""
 
-    arm: int  #: index of the arm in ``scene.arms``
-    tip_frame: int  #: T
-    grasp_frame: int  #: G
-    K: np.ndarray  #: (6, 6) stiffness in T/G axes [N/m, N·m/rad]
-    D: np.ndarray  #: (6, 6) damping [N·s/m, N·m·s/rad]
+    name: str  #: what readouts and messages call it
+    arm: int | None  #: index of the arm in ``scene.arms``; ``None`` for a world fixture
+    tip_frame: int  #: T (an arm's tool frame, or a fixture frame on the world)
+    grasp_frame: int  #: G (on the object)
+    element: Element  #: the law (validated, immutable)
+    native: str | None  #: name of the element's C++ twin, or None (Python path only)
 
 
 class Scene:
     """Arms + one rigid object + elastic interconnections, as one Pinocchio model.
 
+    A scene is immutable once built (its attributes cannot be reassigned and its arrays are
+    read-only; treat ``model`` as read-only too), and it keeps what it loaded, so each URDF is
+    parsed once. States ``(q, v)`` are passed around explicitly; ``pin.Data`` lives in
+    :class:`coopdyn.Dynamics`.
+
     Args:
-        arms: the arms; names must be unique.
+        arms: the arms (possibly none: an object held by fixtures only); names must be unique.
         obj: the held object.
-        interconnections: at least one; each names an arm (an arm may have several).
+        interconnections: at least one; each names an arm (an arm may have several) or
+            ``None`` for a world fixture.
         gravity: gravity acceleration in the world, (3,) [m/s²].
 
     Attributes:
         model: the merged ``pin.Model`` (arms in order, then the object's root joint).
         arms: one :class:`ArmInfo` per arm. ``links``: one :class:`Link` per interconnection.
         arm_specs, interconnection_specs, object: the descriptions the scene was built from.
+        loaded_arms: the arms as loaded (:class:`coopdyn.model.arm.LoadedArm`), for display.
         q0, v0: the initial state, (nq,) and (nv,).
         actuated: indices in ``v`` of all arm joints, in scene order; a controller returns one
             torque/force per entry [N·m or N].
@@ -63,6 +73,23 @@ class Scene:
             with on hot paths), else ``actuated``.
         object_joint: joint id of the object; ``object_q``/``object_v`` its coordinates.
     """
+
+    model: pin.Model
+    arms: tuple[ArmInfo, ...]
+    links: tuple[Link, ...]
+    arm_specs: tuple[Arm, ...]
+    interconnection_specs: tuple[Interconnection, ...]
+    loaded_arms: tuple[LoadedArm, ...]
+    object: RigidObject
+    object_joint: int
+    object_frame: int
+    object_q: np.ndarray
+    object_v: np.ndarray
+    actuated: np.ndarray
+    actuated_index: slice | np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+    gravity: np.ndarray
 
     def __init__(
         self,
@@ -73,8 +100,8 @@ class Scene:
     ) -> None:
         if isinstance(arms, Arm):
             arms = [arms]
-        if not arms:
-            raise SceneError("a scene needs at least one arm")
+        if isinstance(interconnections, Interconnection):
+            interconnections = [interconnections]
         for a in arms:
             if not isinstance(a, Arm):
                 raise SceneError(f"arms must be coopdyn.Arm instances, got {type(a).__name__}")
@@ -86,7 +113,7 @@ class Scene:
         if not isinstance(obj, RigidObject):
             raise SceneError(f"obj must be a coopdyn.RigidObject, got {type(obj).__name__}")
         if not interconnections:
-            raise SceneError("a scene needs at least one interconnection (arm tip ↔ object)")
+            raise SceneError("a scene needs at least one interconnection (arm tip or world fixture ↔ object)")
 
         loaded = [load_arm(a) for a in arms]
         model = pin.Model()
@@ -107,44 +134,83 @@ class Scene:
         model.appendBodyToJoint(obj_joint, inertia, pin.SE3.Identity())
         model.addBodyFrame(obj.name, obj_joint, pin.SE3.Identity(), 0)
 
-        self.arms = tuple(_arm_info(model, la) for la in loaded)
+        arm_infos = tuple(_arm_info(model, la) for la in loaded)
         q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
         data = model.createData()
         pin.framesForwardKinematics(model, data, q0)
+        o_frame = model.getFrameId(obj.name)
+        world_M_object = pin.SE3(data.oMf[o_frame])
 
         links = []
         for k, ic in enumerate(interconnections):
             if not isinstance(ic, Interconnection):
                 raise SceneError(f"interconnections[{k}] must be a coopdyn.Interconnection, got {type(ic).__name__}")
-            if not isinstance(ic.arm, str) or ic.arm not in names:
-                hint = did_you_mean(ic.arm, names)
-                raise SceneError(f"interconnections[{k}] names arm {ic.arm!r}, which is not in the scene.{hint} Arms: {names}")
-            K, D = ic.matrices()
-            i_arm = names.index(ic.arm)
-            tip = self.arms[i_arm].tip_frame
-            if ic.grasp is None:
-                o_M_G = data.oMf[model.getFrameId(obj.name)].actInv(data.oMf[tip])
-            else:
+            if ic.arm is not None and (not isinstance(ic.arm, str) or ic.arm not in names):
+                hint = did_you_mean(ic.arm, names) if isinstance(ic.arm, str) else ""
+                raise SceneError(
+                    f"interconnections[{k}] names arm {ic.arm!r}, which is not in the scene.{hint} "
+                    f"Arms: {names} (or arm=None for a world fixture)"
+                )
+            name = ic.name if ic.name is not None else (ic.arm or "fixture")
+            if not isinstance(name, str) or not name:
+                raise SceneError(f"interconnections[{k}].name must be a non-empty string, got {name!r}")
+            element_type = ic.element_type()
+            law = ic.law(f"interconnections[{k}] ({name})")
+            if ic.grasp is not None:
                 o_M_G = _validate.se3(ic.grasp, f"interconnections[{k}].grasp")
-            g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{ic.arm}", obj_joint, o_M_G, pin.FrameType.OP_FRAME))
-            links.append(Link(arm=i_arm, tip_frame=tip, grasp_frame=g_id, K=K, D=D))
-        self.links = tuple(links)
-        self.arm_specs = tuple(arms)
-        self.interconnection_specs = tuple(interconnections)
-        self.model = model
-        self.object = obj
-        self.object_joint = int(obj_joint)
+            elif ic.arm is not None:
+                o_M_G = world_M_object.actInv(data.oMf[arm_infos[names.index(ic.arm)].tip_frame])
+            else:
+                o_M_G = pin.SE3.Identity()
+            if ic.arm is not None:
+                i_arm: int | None = names.index(ic.arm)
+                tip = arm_infos[names.index(ic.arm)].tip_frame
+                if ic.fixture is not None:
+                    raise SceneError(
+                        f"interconnections[{k}]: fixture is for arm=None (a world fixture); this one names arm {ic.arm!r}"
+                    )
+            else:
+                i_arm = None
+                w_M_T = (
+                    world_M_object * o_M_G if ic.fixture is None else _validate.se3(ic.fixture, f"interconnections[{k}].fixture")
+                )
+                tip = model.addFrame(pin.Frame(f"world/fixture{k}", 0, w_M_T, pin.FrameType.OP_FRAME))
+            g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", obj_joint, o_M_G, pin.FrameType.OP_FRAME))
+            links.append(Link(name, i_arm, int(tip), int(g_id), law, element_type.native))
+        link_names = [lk.name for lk in links]
+        if len(set(link_names)) != len(link_names):  # an arm with several links: number them
+            links = [dataclasses.replace(lk, name=f"{lk.name}{k}") for k, lk in enumerate(links)]
+
         jo = model.joints[obj_joint]
-        self.object_frame = int(model.getFrameId(obj.name))
-        self.object_q = np.arange(jo.idx_q, jo.idx_q + jo.nq)
-        self.object_v = np.arange(jo.idx_v, jo.idx_v + jo.nv)
-        self.actuated = np.concatenate([a.v_index for a in self.arms])
-        first, n = int(self.actuated[0]) if self.actuated.size else 0, self.actuated.size
-        contiguous = n > 0 and np.array_equal(self.actuated, np.arange(first, first + n))
-        self.actuated_index: slice | np.ndarray = slice(first, first + n) if contiguous else self.actuated
-        self.q0 = q0
-        self.v0 = np.zeros(model.nv)
-        self.gravity = np.array(model.gravity.linear)
+        actuated = np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
+        first, n = int(actuated[0]) if actuated.size else 0, actuated.size
+        contiguous = n > 0 and np.array_equal(actuated, np.arange(first, first + n))
+        set_ = object.__setattr__
+        set_(self, "model", model)
+        set_(self, "arms", arm_infos)
+        set_(self, "links", tuple(links))
+        set_(self, "arm_specs", tuple(arms))
+        set_(self, "interconnection_specs", tuple(interconnections))
+        set_(self, "loaded_arms", tuple(loaded))
+        set_(self, "object", obj)
+        set_(self, "object_joint", int(obj_joint))
+        set_(self, "object_frame", int(o_frame))
+        set_(self, "object_q", _frozen(np.arange(jo.idx_q, jo.idx_q + jo.nq)))
+        set_(self, "object_v", _frozen(np.arange(jo.idx_v, jo.idx_v + jo.nv)))
+        set_(self, "actuated", _frozen(actuated))
+        set_(self, "actuated_index", slice(first, first + n) if contiguous else self.actuated)
+        set_(self, "q0", _frozen(q0))
+        set_(self, "v0", _frozen(np.zeros(model.nv)))
+        set_(self, "gravity", _frozen(np.array(model.gravity.linear)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise SceneError(f"a Scene is immutable: build a new one instead of setting {name!r}")
+
+    def __delattr__(self, name: str) -> None:
+        raise SceneError(f"a Scene is immutable: cannot delete {name!r}")
+
+    def __reduce__(self) -> Any:
+        return (_rebuilt, (self.__dict__,))
 
     @property
     def nq(self) -> int:
@@ -186,10 +252,42 @@ class Scene:
             raise SceneError("q is not a valid configuration (a quaternion is not of unit norm); use pin.normalize")
         return q, v
 
+    def nonlinearity(self) -> str | None:
+        """Why the scene's dynamics are not linear (``None`` when they are: every joint, arms and
+        object, prismatic — a constant mass matrix, no Coriolis terms, translations only)."""
+        bad = [
+            f"{self.model.names[i]} ({j.shortname()})"
+            for i, j in enumerate(self.model.joints)
+            if i and j.shortname() not in _PRISMATIC
+        ]
+        if bad:
+            return "joints that are not prismatic make the mass matrix or the kinematics configuration-dependent: " + ", ".join(
+                bad
+            )
+        if any(not lk.element.linear for lk in self.links):
+            return "an interconnection element is not linear in the relative translation"
+        return None
+
     def __repr__(self) -> str:
         arms = ", ".join(a.name for a in self.arms)
         obj = f"{self.object.name!r} ({self.object.joint})"
         return f"Scene(arms=[{arms}], object={obj}, links={len(self.links)}, nq={self.nq}, nv={self.nv})"
+
+
+#: Pinocchio joints along which the dynamics stay linear.
+_PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def _rebuilt(state: dict[str, Any]) -> Scene:
+    """Unpickle a scene: its state restored without running the builder (no URDF is read)."""
+    scene = Scene.__new__(Scene)
+    scene.__dict__.update(state)
+    return scene
 
 
 def _neutral(jmodel: pin.JointModel) -> np.ndarray:
@@ -209,8 +307,8 @@ def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
     return ArmInfo(
         name=la.spec.name,
         joint_names=joint_names,
-        q_index=np.array(q_index),
-        v_index=np.array(v_index),
+        q_index=_frozen(np.array(q_index, dtype=int)),
+        v_index=_frozen(np.array(v_index, dtype=int)),
         tip_frame=int(model.getFrameId(la.tip_frame)),
-        damping=la.damping,
+        damping=_frozen(np.array(la.damping, dtype=float)),
     )

@@ -86,13 +86,13 @@ def cooperative_figure(result: Result, reference: Any = None, path: str | os.Pat
     axes[0].set_ylabel("position [m]")
     W = result.wrenches()
     for i, lk in enumerate(result.scene.links):
-        name = result.scene.arms[lk.arm].name
+        name = lk.name
         for k, c in enumerate("xyz"):
             axes[1].plot(t, W[:, i, k], label=f"{name} F{c}")
     axes[1].set_ylabel("interconnection force\non the object [N]")
     sq = result.squeeze()
     for i, lk in enumerate(result.scene.links):
-        axes[2].plot(t, sq[:, i], label=f"{result.scene.arms[lk.arm].name}")
+        axes[2].plot(t, sq[:, i], label=lk.name)
     if reference is not None:
         axes[2].plot(t, [reference(s).squeeze for s in t], "k--", lw=1, label="commanded")
     axes[2].set_ylabel("internal (squeeze)\nforce [N]")

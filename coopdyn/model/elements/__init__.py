@@ -1,0 +1,56 @@
+"""Interconnection elements and their registry.
+
+:data:`ELEMENTS` maps an element kind (``Interconnection(..., element=kind)``) to its Python
+class — the reference implementation — and the name of its C++ twin in ``coopdyn._native``
+(``None``: the element runs on the Python path only; a scene using it falls back to the Python
+dynamics with one warning). docs/adding-an-element.md says how to add one.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from ...errors import SceneError, did_you_mean
+from .ball_spring import BallSpring
+from .base import Element, ElementEval
+from .se3_spring import SE3Spring
+
+
+class ElementType(NamedTuple):
+    """A registered element kind."""
+
+    python: type[Element]  #: the reference implementation
+    native: str | None  #: name of the C++ twin in coopdyn._native, or None
+
+
+#: kind → (Python class, C++ twin)
+ELEMENTS: dict[str, ElementType] = {
+    "se3": ElementType(SE3Spring, "se3"),
+    "ball": ElementType(BallSpring, "ball"),
+}
+
+
+def register(cls: type[Element], native: str | None = None) -> type[Element]:
+    """Register an element class under ``cls.kind`` (``native``: its C++ twin, if the kernel has
+    one). Returns ``cls`` (usable as a class decorator)."""
+    if not (isinstance(cls, type) and issubclass(cls, Element)):
+        raise SceneError(f"register() takes a subclass of coopdyn.model.elements.Element, got {cls!r}")
+    kind = getattr(cls, "kind", None)
+    if not isinstance(kind, str) or not kind:
+        raise SceneError(f"{cls.__name__} needs a class attribute kind = '<name>' to be registered")
+    ELEMENTS[kind] = ElementType(cls, native)
+    return cls
+
+
+def lookup(kind: str | type[Element]) -> ElementType:
+    """The registered element for a kind name (or an Element subclass, registered or not)."""
+    if isinstance(kind, type) and issubclass(kind, Element):
+        known = ELEMENTS.get(kind.kind)
+        return known if known is not None and known.python is kind else ElementType(kind, None)
+    if not isinstance(kind, str) or kind not in ELEMENTS:
+        hint = did_you_mean(kind, ELEMENTS) if isinstance(kind, str) else ""
+        raise SceneError(f"unknown interconnection element {kind!r}.{hint} Registered: {sorted(ELEMENTS)}")
+    return ELEMENTS[kind]
+
+
+__all__ = ["ELEMENTS", "BallSpring", "Element", "ElementEval", "ElementType", "SE3Spring", "lookup", "register"]

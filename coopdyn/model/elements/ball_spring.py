@@ -1,0 +1,93 @@
+"""The translational (ball) spring–damper: a point grasp that transmits no moment to the object.
+
+The deformation is the position of G's origin in T, ``p = T_M_G.translation`` (3,) [m], in the
+tip frame's axes; ``U = ½ pᵀ K p`` with K and D 3×3 [N/m], [N·s/m]. Its rate is ``ṗ = R ξ_v``
+(R = T_M_G.rotation, ξ_v the linear part of the relative twist), and the wrench on the object
+at G, in G axes, is ``G_f_G = −[Rᵀ (K p + D ṗ); 0]``: a pure force through the grasp point.
+The reaction on the arm is that force at G, so about T it carries the moment p × f.
+``S_K = Aᵀ K A`` and ``S_D = Aᵀ D A`` with ``A = [R 0]`` (3, 6). With an isotropic K the arm
+feels no moment either; an anisotropic K turns with the tool. C++ twin:
+``src/native/ball_spring.hpp``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from ... import _validate
+from ...errors import SceneError
+from .base import Element, ElementEval, read_only
+
+
+def _spd3(value: Any, name: str, unit: str) -> np.ndarray:
+    """A symmetric positive semi-definite 3×3 matrix from a 3×3 array, a 3-vector diagonal or a scalar."""
+    arr = _validate.finite_array(value, name)
+    if arr.ndim == 0:
+        arr = np.eye(3) * float(arr)
+    elif arr.shape == (3,):
+        arr = np.diag(arr)
+    if arr.shape != (3, 3):
+        raise SceneError(
+            f"{name} must be a scalar, a 3-vector diagonal or a 3×3 matrix [{unit}] (x, y, z), got shape {arr.shape}"
+        )
+    scale = max(float(np.max(np.abs(arr))), 1e-300)
+    if np.max(np.abs(arr - arr.T)) > 1e-9 * scale:
+        raise SceneError(f"{name} must be symmetric; max |{name} − {name}ᵀ| = {np.max(np.abs(arr - arr.T)):.3g}")
+    arr = 0.5 * (arr + arr.T)
+    if np.linalg.eigvalsh(arr)[0] < -1e-9 * scale:
+        raise SceneError(f"{name} must be positive semi-definite; its smallest eigenvalue is {np.linalg.eigvalsh(arr)[0]:.6g}")
+    return arr
+
+
+class BallSpring(Element):
+    """A 3-DOF translational spring–damper between T and G (see the module docstring).
+
+    Args:
+        stiffness: K [N/m], a scalar, a 3-vector diagonal or a symmetric 3×3 matrix (tip axes).
+        damping: D [N·s/m], the same shapes; default none.
+        name: what messages call it.
+    """
+
+    kind: ClassVar[str] = "ball"
+    deformation_size: ClassVar[int] = 3
+    linear: ClassVar[bool] = True  # with translations only, the deformation is the relative translation
+    deformation_units: ClassVar[str] = "m, m, m"
+
+    def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
+        self.K = read_only(_spd3(stiffness, f"{name}: stiffness", "N/m"))
+        self.D = read_only(np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m"))
+        if not np.any(self.K) and not np.any(self.D):
+            raise SceneError(f"{name}: stiffness and damping are both zero; the arm would not touch the object")
+        self._damped = bool(np.any(self.D))
+
+    def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+        R, p = T_M_G.rotation, T_M_G.translation
+        f = self.K @ p
+        power = 0.0
+        if self._damped:
+            p_dot = R @ xi[:3]
+            D_p_dot = self.D @ p_dot
+            power = float(p_dot @ D_p_dot)
+            f = f + D_p_dot
+        G_f_G = np.zeros(6)
+        G_f_G[:3] = -(R.T @ f)
+        S_K = S_D = None
+        if jacobians:
+            S_K, S_D = np.zeros((6, 6)), np.zeros((6, 6))
+            S_K[:3, :3] = R.T @ self.K @ R
+            S_D[:3, :3] = R.T @ self.D @ R
+        theta = float(np.linalg.norm(pin.log3(R)))
+        return ElementEval(0.5 * float(p @ self.K @ p), p.copy(), G_f_G, power, S_K, S_D, theta)
+
+    @property
+    def has_damping(self) -> bool:
+        return self._damped
+
+    def native_parameters(self) -> tuple[np.ndarray, ...]:
+        return (np.asarray(self.K), np.asarray(self.D))
+
+    def __repr__(self) -> str:
+        return f"BallSpring(K diag {np.diag(self.K).tolist()}, D diag {np.diag(self.D).tolist()})"

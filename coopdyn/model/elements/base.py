@@ -1,0 +1,85 @@
+"""What an interconnection element is: a law between two frames of the scene model.
+
+An element joins a frame T (an arm's tool frame, or a fixture on the world) and a frame G (a
+grasp frame on the object). Everything it contributes follows from the pose of G in T,
+``T_M_G = oMT⁻¹·oMG``, and the relative body twist ``ξ = V_G − Ad(T_M_G⁻¹) V_T`` (both LOCAL,
+so ``d/dt T_M_G = T_M_G ξ^``) [m/s, rad/s]:
+
+* its elastic energy U(T_M_G) [J] and a deformation vector (its own size and units);
+* the wrench on G at G, in G axes, ``G_f_G = −∂U/∂ξ − (damping)`` [N, N·m] — the exact
+  gradient of U along the relative motion, plus a damping force; the reaction on T, in T axes,
+  is ``T_f_T = −T_M_G.act(G_f_G)`` (action = reaction), so an element never computes it;
+* the power its damping dissipates [W] (≥ 0);
+* for linearly implicit integrators, the Gauss–Newton stiffness and damping in relative-twist
+  coordinates, ``S_K`` and ``S_D`` (6, 6): the dynamics add ``Jrᵀ S_K Jr`` and ``Jrᵀ S_D Jr``
+  to K̃ and D̃, with ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` the relative Jacobian (6, nv).
+
+Elements are immutable: their constructor validates the parameters and keeps them as read-only
+arrays. The same :meth:`Element.evaluate` serves the dynamics, the implicit terms and every
+readout. docs/adding-an-element.md walks through writing one.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+
+class ElementEval(NamedTuple):
+    """What an element contributes at one relative pose and twist."""
+
+    energy: float  #: elastic energy U [J]
+    deformation: np.ndarray  #: the element's deformation (Element.deformation_size,)
+    G_f_G: np.ndarray  #: wrench on G at G, in G axes (6,) [N, N·m]: elastic + damping
+    power: float  #: power dissipated by the damping [W], ≥ 0
+    S_K: np.ndarray | None  #: Gauss–Newton stiffness in relative-twist coordinates (6, 6), or None
+    S_D: np.ndarray | None  #: damping in relative-twist coordinates (6, 6), or None
+    theta: float  #: rotation angle of T_M_G [rad] (for the log-map warning near π)
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """``array`` with its write flag cleared (a parameter of an immutable element)."""
+    array.setflags(write=False)
+    return array
+
+
+class Element(ABC):
+    """Base class of interconnection elements (see the module docstring).
+
+    A subclass sets :attr:`kind` (its registry name), :attr:`deformation_size` and
+    :attr:`deformation_units`, validates its parameters in ``__init__(stiffness, damping,
+    name)`` and implements :meth:`evaluate`. An element with a C++ twin also implements
+    :meth:`native_parameters`. Register it with :func:`coopdyn.model.elements.register`.
+    """
+
+    kind: ClassVar[str]
+    deformation_size: ClassVar[int]
+    deformation_units: ClassVar[str]
+    #: True when, with translations only (prismatic joints), the law is linear in the relative
+    #: translation and velocity (the exponential integrator needs it).
+    linear: ClassVar[bool] = False
+
+    @abstractmethod
+    def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
+        """Validate and keep the parameters (raise :class:`coopdyn.SceneError` naming ``name``)."""
+
+    @abstractmethod
+    def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+        """Energy, deformation, wrench on G, dissipated power and (with ``jacobians``) S_K, S_D
+        at the relative pose ``T_M_G`` and relative twist ``xi`` (6,) [m/s, rad/s]."""
+
+    @property
+    def has_damping(self) -> bool:
+        """Whether the element dissipates (``False`` lets the dynamics skip its S_D term)."""
+        return True
+
+    def native_parameters(self) -> tuple[np.ndarray, ...]:
+        """The parameters of the C++ twin, in the order its constructor in src/native/elements.hpp
+        takes them (only elements registered with a twin need it)."""
+        raise NotImplementedError(f"{type(self).__name__} has no C++ twin")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"

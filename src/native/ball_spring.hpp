@@ -1,0 +1,44 @@
+// The translational (ball) spring–damper: the C++ twin of coopdyn/model/elements/ball_spring.py.
+#pragma once
+
+#include "element.hpp"
+
+namespace coopdyn {
+
+class BallSpring : public Element {
+public:
+  BallSpring(const Matrix3 & K, const Matrix3 & D) : K_(K), D_(D), damped_(!D.isZero(0.0)) {}
+
+  bool damped() const override { return damped_; }
+
+  void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const override {
+    const Matrix3 & R = T_M_G.rotation();
+    const Vector3 & p = T_M_G.translation();
+    Vector3 f = K_ * p;
+    out.power = 0.0;
+    if (damped_) {
+      const Vector3 p_dot = R * xi.head<3>();
+      const Vector3 Dp = D_ * p_dot;
+      out.power = p_dot.dot(Dp);
+      f += Dp;
+    }
+    out.energy = 0.5 * p.dot(K_ * p);
+    out.deformation.setZero();
+    out.deformation.head<3>() = p;
+    out.f.setZero();
+    out.f.head<3>().noalias() = -R.transpose() * f;
+    if (jacobians) {
+      out.SK.setZero();
+      out.SD.setZero();
+      out.SK.topLeftCorner<3, 3>().noalias() = R.transpose() * (K_ * R);
+      out.SD.topLeftCorner<3, 3>().noalias() = R.transpose() * (D_ * R);
+    }
+    out.theta = pinocchio::log3(R).norm();
+  }
+
+private:
+  Matrix3 K_, D_;
+  bool damped_;
+};
+
+}  // namespace coopdyn

@@ -1,0 +1,42 @@
+// The SE(3) spring–damper: the C++ twin of coopdyn/model/elements/se3_spring.py.
+#pragma once
+
+#include "element.hpp"
+
+namespace coopdyn {
+
+class SE3Spring : public Element {
+public:
+  SE3Spring(const Matrix6 & K, const Matrix6 & D) : K_(K), D_(D), damped_(!D.isZero(0.0)) {}
+
+  bool damped() const override { return damped_; }
+
+  void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const override {
+    Vector6 e;
+    out.theta = log6(T_M_G, e);
+    jlog6(T_M_G, e, out.theta, J_);
+    Vector6 w = K_ * e;
+    out.power = 0.0;
+    if (damped_) {
+      const Vector6 e_dot = J_ * xi;
+      const Vector6 De = D_ * e_dot;
+      out.power = e_dot.dot(De);
+      w += De;
+    }
+    out.energy = 0.5 * e.dot(K_ * e);
+    out.deformation = e;
+    out.f.noalias() = -J_.transpose() * w;
+    if (jacobians) {
+      out.SK.noalias() = J_.transpose() * (K_ * J_);
+      if (damped_) out.SD.noalias() = J_.transpose() * (D_ * J_);
+      else out.SD.setZero();
+    }
+  }
+
+private:
+  Matrix6 K_, D_;
+  bool damped_;
+  mutable Matrix6 J_;  // scratch
+};
+
+}  // namespace coopdyn
