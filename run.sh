@@ -41,6 +41,7 @@ case "$job" in
     "$VENV/bin/ruff" check coopdyn tests examples
     "$VENV/bin/ruff" format --check coopdyn tests examples
     "$VENV/bin/mypy"
+    "$VENV/bin/lint-imports" --no-cache >/dev/null || "$VENV/bin/lint-imports" --no-cache  # the layer contract (pyproject.toml); details only when broken
     exec "$VENV/bin/python" -m pytest "$@"
     ;;
   *)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from collections.abc import Sequence
@@ -42,16 +43,16 @@ def _book(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from .demo import run_demo
+    from .demo import format_summary, run_demo
 
-    run_demo(args.out, t_final=args.t_final, dt=args.dt, integrator=args.integrator, html=not args.no_html)
+    print(format_summary(run_demo(args.out, t_final=args.t_final, dt=args.dt, integrator=args.integrator, html=not args.no_html)))
     return 0
 
 
 def _simulate(args: argparse.Namespace) -> int:
     from .io.scenefile import load, run
 
-    run(load(args.scene_file), folder=args.out)
+    print(run(load(args.scene_file), folder=args.out))
     return 0
 
 
@@ -71,8 +72,14 @@ def _view(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from .bench import run_benchmarks
 
-    run_benchmarks(args.out, quick=args.quick)
+    print(run_benchmarks(args.out, quick=args.quick)["report"])
     return 0
+
+
+def _print_saved(exc: BaseException) -> None:
+    """The files a failed run saved (set as ``saved`` by the demo and scene-file runs)."""
+    for path in getattr(exc, "saved", ()):
+        print(f"  wrote {path} (what the run had)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -107,13 +114,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     bench.add_argument("--quick", action="store_true", help="few points, short runs, one repetition (CI)")
     bench.set_defaults(func=_bench)
     args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     t0 = time.perf_counter()
     try:
         code = int(args.func(args))
     except CoopdynError as exc:
+        _print_saved(exc)
         print(f"coopdyn: error: {exc}", file=sys.stderr)
         return 2
     except SimulationInterrupted as exc:
+        _print_saved(exc)
         print(f"coopdyn: {exc}", file=sys.stderr)
         return 130
     print(f"done in {time.perf_counter() - t0:.1f} s")

@@ -30,7 +30,9 @@ def run_demo(
     html: bool = True,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Simulate, print a summary, write plot / HTML / trajectory to ``out``; return the summary."""
+    """Simulate, write plot / HTML / trajectory to ``out``; return the summary (figures and the
+    files written; :func:`format_summary` makes it text). On a divergence or Ctrl-C the
+    trajectory so far is written and the error re-raised with those paths in ``saved``."""
     out_dir = Path(out)
     scene = facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
@@ -47,8 +49,7 @@ def run_demo(
             progress=progress,
         )
     except (DivergenceError, SimulationInterrupted) as exc:
-        for path in save_partial(exc, out_dir):
-            print(f"  wrote {path} (what the run had)")
+        exc.saved = save_partial(exc, out_dir)  # type: ignore[union-attr]
         raise
     wall = time.perf_counter() - wall0
     tracking = res.tracking_error(task)
@@ -64,6 +65,7 @@ def run_demo(
         "commanded_internal_force_N": SQUEEZE,
         "cpu_s": res.cpu_time,
         "real_time_factor": t_final / wall,
+        "wall_s": wall,
         "rhs_evaluations": res.n_rhs,
     }
     files = [res.save(out_dir / "trajectory.npz"), res.save(out_dir / "trajectory.csv")]
@@ -73,17 +75,22 @@ def run_demo(
         from .viz.viewer import export_html
 
         files.append(export_html(res, out_dir / "demo.html"))
-    print(f"two Pandas, {STIFFNESS:g} N/m interconnections, {res.integrator} at dt = {dt:g} s, {t_final:g} s simulated")
-    print(
-        f"  object tracking error: max {summary['tracking_error_max_m'] * 1e3:.2f} mm, "
-        f"rms {summary['tracking_error_rms_m'] * 1e3:.2f} mm"
-    )
-    print(
-        f"  internal force: peak {summary['peak_internal_force_N']:.2f} N, at the end "
-        f"{', '.join(f'{s:.3f}' for s in squeeze[-1])} N (commanded {SQUEEZE:g} N)"
-    )
-    print(f"  CPU {res.cpu_time:.2f} s, wall {wall:.2f} s: real-time factor {summary['real_time_factor']:.2f}")
-    print(f"output folder: {out_dir.resolve()}")
-    for f in files:
-        print(f"  wrote {f}")
+    summary["files"] = [str(f) for f in files]
+    summary["output_folder"] = str(out_dir.resolve())
     return summary
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """The demo's summary as the lines ``coopdyn demo`` prints."""
+    lines = [
+        f"two Pandas, {STIFFNESS:g} N/m interconnections, {summary['integrator']} at dt = {summary['dt_s']:g} s, "
+        f"{summary['duration_s']:g} s simulated",
+        f"  object tracking error: max {summary['tracking_error_max_m'] * 1e3:.2f} mm, "
+        f"rms {summary['tracking_error_rms_m'] * 1e3:.2f} mm",
+        f"  internal force: peak {summary['peak_internal_force_N']:.2f} N, at the end "
+        f"{', '.join(f'{s:.3f}' for s in summary['internal_force_at_end_N'])} N (commanded {SQUEEZE:g} N)",
+        f"  CPU {summary['cpu_s']:.2f} s, wall {summary['wall_s']:.2f} s: real-time factor {summary['real_time_factor']:.2f}",
+        f"output folder: {summary['output_folder']}",
+    ]
+    lines += [f"  wrote {f}" for f in summary["files"]]
+    return "\n".join(lines)

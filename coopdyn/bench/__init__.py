@@ -29,7 +29,8 @@ from .stability import is_stable_at, measure_stable_dt
 
 
 def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:
-    """The whole benchmark: work–precision, stability, timings; prints tables, writes files."""
+    """The whole benchmark: work–precision, stability, timings; writes CSV and charts and returns
+    the measurements with ``"report"``, the tables as text (``coopdyn bench`` prints it)."""
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     stiffnesses = [1e4, 1e5, 1e6]
@@ -46,19 +47,17 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
         "chart": plot_work_precision(rows, out_dir / "work_precision.png"),
         "stability_chart": plot_stability(stab, out_dir / "stability.png"),
     }
-    print(f"work–precision and stability runs: {resolve()} backend")
-    print(format_rows(rows))
-    print()
-    print(format_stability(stab))
-    print()
-    print(format_timing(timing))
-    print()
-    print(format_implicit_cost(implicit_cost))
-    print()
-    print(format_peers(rows))
-    for name, path in files.items():
-        print(f"wrote {path}  ({name})")
-    return {"rows": rows, "stability": stab, "timing": timing, "implicit_cost": implicit_cost, "files": files}
+    report = "\n\n".join(
+        [
+            f"work–precision and stability runs: {resolve()} backend\n" + format_rows(rows),
+            format_stability(stab),
+            format_timing(timing),
+            format_implicit_cost(implicit_cost),
+            format_peers(rows),
+            "\n".join(f"wrote {path}  ({name})" for name, path in files.items()),
+        ]
+    )
+    return {"rows": rows, "stability": stab, "timing": timing, "implicit_cost": implicit_cost, "files": files, "report": report}
 
 
 __all__ = [

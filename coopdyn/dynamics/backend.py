@@ -14,6 +14,7 @@ Pinocchio, else Python with a one-time warning saying why. Choose per object wit
 
 from __future__ import annotations
 
+import importlib
 import os
 import warnings
 from functools import cache
@@ -34,7 +35,7 @@ BACKENDS = ("auto", "native", "python")
 def _load() -> tuple[ModuleType | None, str]:
     """(the kernel module or None, why not)."""
     try:
-        from .. import _native
+        _native = importlib.import_module("coopdyn._native")  # the compiled leaf (imports only coopdyn.errors)
     except ImportError as exc:
         return None, f"coopdyn._native did not import ({exc}); reinstall coopdyn with a C++17 compiler available"
     built = getattr(_native, "PINOCCHIO_VERSION", "?")

@@ -239,8 +239,23 @@ def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder:
         raise f.error(str(exc), "controller") from exc
 
 
-def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True) -> Any:
-    """Simulate a loaded scene file and write its outputs; returns the Result."""
+@dataclass(frozen=True)
+class RunReport:
+    """What :func:`run` did: the result, the files it wrote and a summary (lines of text)."""
+
+    result: Any
+    written: tuple[Path, ...]
+    summary: tuple[str, ...]
+
+    def __str__(self) -> str:
+        return "\n".join([*self.summary, *(f"  wrote {w}" for w in self.written)])
+
+
+def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True) -> RunReport:
+    """Simulate a loaded scene file and write its outputs; returns what it did (print it to show it).
+
+    On a divergence or Ctrl-C the trajectory so far is written (``trajectory.npz``/``.csv`` and
+    ``diagnosis.txt``) and the error is re-raised with those paths in its ``saved`` attribute."""
     import numpy as np
 
     from ..errors import DivergenceError, SimulationInterrupted
@@ -260,8 +275,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
             progress=progress,
         )
     except (DivergenceError, SimulationInterrupted) as exc:
-        for path in save_partial(exc, out):
-            print(f"  wrote {path} (what the run had)")
+        exc.saved = save_partial(exc, out)  # type: ignore[union-attr]
         raise
     written = []
     out.mkdir(parents=True, exist_ok=True)
@@ -285,19 +299,17 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
         from ..viz.viewer import export_html
 
         written.append(export_html(res, out / "animation.html"))
-    print(f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s")
-    print(
-        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS"
-    )
+    summary = [
+        f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s",
+        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS",
+    ]
     if loaded.task is not None:
         desired = np.array([loaded.task(t).position for t in res.t])
         err = np.linalg.norm(res.object_position() - desired, axis=1)
-        print(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
+        summary.append(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
     if len(loaded.scene.links) > 1:
-        print(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
-    for w in written:
-        print(f"  wrote {w}")
-    return res
+        summary.append(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
+    return RunReport(res, tuple(written), tuple(summary))
 
 
 def load_result(loaded: Run, path: str | Path | None = None) -> Any:

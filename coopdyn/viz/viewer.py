@@ -9,6 +9,7 @@ scene tree and packs it with meshcat's own viewer script, as ``meshcat-server`` 
 from __future__ import annotations
 
 import base64
+import logging
 import os
 import time
 from collections.abc import Iterator
@@ -23,6 +24,8 @@ from ..model.scene import Scene
 from ..result import Result
 
 FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
+
+_log = logging.getLogger(__name__)
 
 
 def _meshcat() -> Any:
@@ -244,7 +247,7 @@ def view(
     idx = _frames(result, fps)
     wrenches = result.wrenches()
     url = vis.url()
-    print(f"meshcat viewer at {url} (Ctrl-C to stop)", flush=True)
+    _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
     n = 0
     try:
         while loops is None or n < loops:
