@@ -38,8 +38,8 @@ case "$job" in
     exec "$VENV/bin/coopdyn" demo --out out/demo "$@"
     ;;
   test)
-    "$VENV/bin/ruff" check coopdyn tests examples
-    "$VENV/bin/ruff" format --check coopdyn tests examples
+    "$VENV/bin/ruff" check coopdyn tests examples benchmarks
+    "$VENV/bin/ruff" format --check coopdyn tests examples benchmarks
     "$VENV/bin/mypy"
     "$VENV/bin/lint-imports" --no-cache >/dev/null || "$VENV/bin/lint-imports" --no-cache  # the layer contract (pyproject.toml); details only when broken
     exec "$VENV/bin/python" -m pytest "$@"

@@ -1,4 +1,5 @@
-"""Peer simulators on coopdyn's benchmark scenes, run the way a careful user would (DESIGN §7).
+"""Peer simulators on coopdyn's benchmark scenes, run the way a careful user would
+(docs/benchmarks.md, "Peers").
 
 Only MuJoCo, and only the book's linear case, for now: the faithful MuJoCo model of it is exact
 (three slide joints in one nested chain, the interconnections as joint springs), so its error
