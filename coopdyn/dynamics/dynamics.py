@@ -195,10 +195,8 @@ class Dynamics:
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``Q = Σ Jrᵀ G_f_G``, the interconnections' generalized force (nv,) at (q, v)."""
-        zero = np.zeros(self.scene.n_actuated)
-        if self._has_damping:  # the joint damping is not an interconnection force
-            return self.implicit_terms(q, v, zero)[0] + pin.nonLinearEffects(self.model, self.data, q, v) + self._damping * v
-        return self.implicit_terms(q, v, zero)[0] + pin.nonLinearEffects(self.model, self.data, q, v)
+        f = self.implicit_terms(q, v, np.zeros(self.scene.n_actuated))[0]  # Q − B q̇ − b(q, q̇)
+        return f + pin.nonLinearEffects(self.model, self.data, q, v) + self._damping * v
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
         """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
@@ -296,11 +294,9 @@ class PythonDynamics(Dynamics):
         return f, pin.crba(model, data, q).reshape(model.nv, model.nv).copy(), self._K, self._D
 
     def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
-        act = self.scene.actuated
-        K_g = K.copy()
-        K_g[act, act] += kp
-        S = M + gh * D + (gh * gh) * K_g
-        S[act, act] += gh * kd
+        K_g, D_g = K.copy(), D.copy()
+        self.add_joint_gains(K_g, D_g, kp, kd)
+        S = M + gh * D_g + (gh * gh) * K_g
         try:
             L = np.linalg.cholesky(S)
         except np.linalg.LinAlgError:

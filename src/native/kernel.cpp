@@ -100,8 +100,6 @@ public:
     tau_full_.setZero(nv);
     K_t_.setZero(nv, nv);
     D_t_.setZero(nv, nv);
-    kp_.setZero(actuated_.size());
-    kd_.setZero(actuated_.size());
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
@@ -203,13 +201,9 @@ public:
       PO.row(k) = pinocchio::updateFramePlacement(model_, data_, object_frame_).translation().transpose();
       for (Eigen::Index i = 0; i < L; ++i) {
         const Link & lk = links_[i];
-        const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
-        const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
-        const SE3 T_M_G = oMT.actInv(oMG);
-        const pinocchio::Motion V_T = pinocchio::getFrameVelocity(model_, data_, lk.tip, pinocchio::LOCAL);
-        const pinocchio::Motion V_G = pinocchio::getFrameVelocity(model_, data_, lk.grasp, pinocchio::LOCAL);
-        const Vector6 xi = (V_G - T_M_G.actInv(V_T)).toVector();
-        lk.element->evaluate(T_M_G, xi, false, ev_);
+        const SE3 T_M_G = relative(lk, ev_, false);
+        const SE3 & oMT = data_.oMf[lk.tip];
+        const SE3 & oMG = data_.oMf[lk.grasp];
         E.block<1, 6>(k, 6 * i) = ev_.deformation.transpose();
         U(k, i) = ev_.energy;
         P(k, i) = ev_.power;
@@ -233,15 +227,17 @@ public:
   void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
 
 private:
-  // The element of link `lk` at the kinematics of the last pass (placements updated here), with
-  // ξ from the frame velocities (readouts) — not the hot path.
-  void relative(const Link & lk, ElementEval & ev, bool jacobians) {
+  // Evaluate the element of link `lk` at the kinematics of the last forwardKinematics(q, v)
+  // (updates the placements of T and G in data_.oMf), with ξ from the frame velocities; returns
+  // T_M_G. For readouts — the hot path takes ξ = Jr q̇ in generalized_force.
+  SE3 relative(const Link & lk, ElementEval & ev, bool jacobians) {
     const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
     const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
     const SE3 T_M_G = oMT.actInv(oMG);
     const pinocchio::Motion V_T = pinocchio::getFrameVelocity(model_, data_, lk.tip, pinocchio::LOCAL);
     const pinocchio::Motion V_G = pinocchio::getFrameVelocity(model_, data_, lk.grasp, pinocchio::LOCAL);
     lk.element->evaluate(T_M_G, (V_G - T_M_G.actInv(V_T)).toVector(), jacobians, ev);
+    return T_M_G;
   }
 
   // What the implicit methods need at (q, v): tau_full_ = f = Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_
@@ -329,7 +325,7 @@ private:
   double rotation_alarm_angle_ = 0.0;
   ElementEval ev_;
   Matrix6x J_G_, J_T_, SJ_;
-  VectorXd Q_, tau_full_, rhs_, kp_, kd_;
+  VectorXd Q_, tau_full_, rhs_;
   MatrixXd K_t_, D_t_, S_, Kg_;
   double gh_ = 0.0;
   bool factored_ = false;

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 from ...errors import SceneError, did_you_mean
 from .ball_spring import BallSpring
-from .base import Element, ElementEval
+from .base import Element, ElementEval, SpringDamper
 from .se3_spring import SE3Spring
 
 
@@ -53,4 +53,4 @@ def lookup(kind: str | type[Element]) -> ElementType:
     return ELEMENTS[kind]
 
 
-__all__ = ["ELEMENTS", "BallSpring", "Element", "ElementEval", "ElementType", "SE3Spring", "lookup", "register"]
+__all__ = ["ELEMENTS", "BallSpring", "Element", "ElementEval", "ElementType", "SE3Spring", "SpringDamper", "lookup", "register"]

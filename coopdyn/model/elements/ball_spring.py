@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from ... import _validate
 from ...errors import SceneError
-from .base import Element, ElementEval, read_only
+from .base import ElementEval, SpringDamper
 
 
 def _spd3(value: Any, name: str, unit: str) -> np.ndarray:
@@ -42,7 +42,7 @@ def _spd3(value: Any, name: str, unit: str) -> np.ndarray:
     return arr
 
 
-class BallSpring(Element):
+class BallSpring(SpringDamper):
     """A 3-DOF translational spring–damper between T and G (see the module docstring).
 
     Args:
@@ -57,11 +57,8 @@ class BallSpring(Element):
     deformation_units: ClassVar[str] = "m, m, m"
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
-        self.K = read_only(_spd3(stiffness, f"{name}: stiffness", "N/m"))
-        self.D = read_only(np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m"))
-        if not np.any(self.K) and not np.any(self.D):
-            raise SceneError(f"{name}: stiffness and damping are both zero; the arm would not touch the object")
-        self._damped = bool(np.any(self.D))
+        D = np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m")
+        self._keep(_spd3(stiffness, f"{name}: stiffness", "N/m"), D, name)
 
     def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
         R, p = T_M_G.rotation, T_M_G.translation
@@ -81,13 +78,3 @@ class BallSpring(Element):
             S_D[:3, :3] = R.T @ self.D @ R
         theta = float(np.linalg.norm(pin.log3(R)))
         return ElementEval(0.5 * float(p @ self.K @ p), p.copy(), G_f_G, power, S_K, S_D, theta)
-
-    @property
-    def has_damping(self) -> bool:
-        return self._damped
-
-    def native_parameters(self) -> tuple[np.ndarray, ...]:
-        return (np.asarray(self.K), np.asarray(self.D))
-
-    def __repr__(self) -> str:
-        return f"BallSpring(K diag {np.diag(self.K).tolist()}, D diag {np.diag(self.D).tolist()})"

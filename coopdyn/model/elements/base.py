@@ -27,6 +27,8 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from ...errors import SceneError
+
 
 class ElementEval(NamedTuple):
     """What an element contributes at one relative pose and twist."""
@@ -83,3 +85,28 @@ class Element(ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
+
+
+class SpringDamper(Element):
+    """An element with a stiffness matrix ``K`` and a damping matrix ``D`` (the built-in ones):
+    keeps them read-only, refuses both zero, and gives ``(K, D)`` to its C++ twin. A subclass's
+    ``__init__`` validates the matrices and calls :meth:`_keep`."""
+
+    K: np.ndarray
+    D: np.ndarray
+
+    def _keep(self, K: np.ndarray, D: np.ndarray, name: str) -> None:
+        if not np.any(K) and not np.any(D):
+            raise SceneError(f"{name}: stiffness and damping are both zero; the arm would not touch the object")
+        self.K, self.D = read_only(K), read_only(D)
+        self._damped = bool(np.any(D))
+
+    @property
+    def has_damping(self) -> bool:
+        return self._damped
+
+    def native_parameters(self) -> tuple[np.ndarray, ...]:
+        return (np.asarray(self.K), np.asarray(self.D))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(K diag {np.diag(self.K).tolist()}, D diag {np.diag(self.D).tolist()})"

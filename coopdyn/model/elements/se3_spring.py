@@ -17,12 +17,11 @@ import numpy as np
 import pinocchio as pin
 
 from ... import _validate
-from ...errors import SceneError
-from .base import Element, ElementEval, read_only
+from .base import ElementEval, SpringDamper
 from .lie import jlog6, log6
 
 
-class SE3Spring(Element):
+class SE3Spring(SpringDamper):
     """A 6-DOF spring–damper between T and G (see the module docstring).
 
     Args:
@@ -37,13 +36,9 @@ class SE3Spring(Element):
     deformation_units: ClassVar[str] = "m, m, m, rad, rad, rad"
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
-        self.K = read_only(_validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad"))
-        self.D = read_only(
-            np.zeros((6, 6)) if damping is None else _validate.spd6(damping, f"{name}: damping", "N·s/m, N·m·s/rad")
-        )
-        if not np.any(self.K) and not np.any(self.D):
-            raise SceneError(f"{name}: stiffness and damping are both zero; the arm would not touch the object")
-        self._damped = bool(np.any(self.D))
+        K = _validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad")
+        D = np.zeros((6, 6)) if damping is None else _validate.spd6(damping, f"{name}: damping", "N·s/m, N·m·s/rad")
+        self._keep(K, D, name)
 
     def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
         e, theta = log6(T_M_G)
@@ -60,13 +55,3 @@ class SE3Spring(Element):
             S_K = J.T @ self.K @ J
             S_D = J.T @ self.D @ J
         return ElementEval(0.5 * float(e @ self.K @ e), e, -(J.T @ w), power, S_K, S_D, theta)
-
-    @property
-    def has_damping(self) -> bool:
-        return self._damped
-
-    def native_parameters(self) -> tuple[np.ndarray, ...]:
-        return (np.asarray(self.K), np.asarray(self.D))
-
-    def __repr__(self) -> str:
-        return f"SE3Spring(K diag {np.diag(self.K).tolist()}, D diag {np.diag(self.D).tolist()})"
