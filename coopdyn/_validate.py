@@ -75,13 +75,23 @@ def spd6(value: Any, name: str, unit: str) -> np.ndarray:
             f"{name} must be a 6x6 matrix or a 6-vector diagonal [{unit}] "
             f"(order: linear x, y, z, then angular x, y, z), got shape {arr.shape}"
         )
+    return symmetric_psd(arr, name)
+
+
+def symmetric_psd(arr: np.ndarray, name: str) -> np.ndarray:
+    """``arr`` (square, finite) checked symmetric and positive semi-definite to 1e-9 relative, and
+    returned exactly symmetric. The checks work on ``arr / max|arr|``, so that nothing overflows up
+    to the float limit."""
     scale = max(float(np.max(np.abs(arr))), 1e-300)
-    if np.max(np.abs(arr - arr.T)) > 1e-9 * scale:
-        raise SceneError(f"{name} must be symmetric; max |{name} - {name}ᵀ| = {np.max(np.abs(arr - arr.T)):.3g}")
-    arr = 0.5 * (arr + arr.T)
-    eig = np.linalg.eigvalsh(arr)
-    if eig[0] < -1e-9 * scale:
+    unit = arr / scale
+    asym = float(np.max(np.abs(unit - unit.T)))
+    if asym > 1e-9:
+        raise SceneError(f"{name} must be symmetric; max |{name} − {name}ᵀ| = {asym * scale:.3g}")
+    unit = 0.5 * (unit + unit.T)
+    smallest = float(np.linalg.eigvalsh(unit)[0])
+    if smallest < -1e-9:
         raise SceneError(
-            f"{name} must be positive semi-definite (an elastic energy ½ eᵀ K e ≥ 0); its smallest eigenvalue is {eig[0]:.6g}"
+            f"{name} must be positive semi-definite (an elastic energy ½ eᵀ K e ≥ 0); "
+            f"its smallest eigenvalue is {smallest * scale:.6g}"
         )
-    return arr
+    return 0.5 * arr + 0.5 * arr.T  # halves first: no overflow, and exact for a symmetric arr

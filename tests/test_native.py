@@ -179,6 +179,9 @@ def test_a_step_matrix_that_is_not_positive_definite_raises_on_both_backends(pan
     q, v, tau = pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated)
     with pytest.raises(StepMatrixError, match="not positive definite"):
         dyn.implicit_euler_velocity(q, v, tau, 1e-2, np.full(pandas.n_actuated, -1e6), np.zeros(pandas.n_actuated))
+    nv = pandas.nv
+    with pytest.raises(StepMatrixError, match="not finite"):
+        dyn.factor(np.full((nv, nv), np.nan), np.zeros((nv, nv)), np.zeros((nv, nv)), 1e-3, tau, tau)
 
 
 def test_simulate_names_the_time_and_the_method_when_the_step_matrix_fails(pandas: cd.Scene) -> None:

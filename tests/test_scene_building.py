@@ -168,3 +168,12 @@ def test_two_pandas_hold_a_box_with_ball_springs_on_the_native_backend(pandas: c
     # a point grasp: no moment on the object about the grasp point, and the box is carried
     np.testing.assert_allclose(res.wrench(0)[:, 3:], 0.0, atol=1e-12)
     assert res.wrench(0)[-1, 2] + res.wrench(1)[-1, 2] == pytest.approx(2.0 * 9.81, rel=0.2)
+
+
+def test_stiffness_up_to_the_float_limit_is_validated_without_overflow() -> None:
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1))
+    huge = np.full(6, 1e308)
+    scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=huge)])
+    np.testing.assert_array_equal(np.diag(scene.links[0].element.K), huge)
+    with pytest.raises(cd.SceneError, match="smallest eigenvalue is -1e\\+308"):
+        cd.Scene([], box, [cd.Interconnection(None, stiffness=np.diag([1e308] * 5 + [-1e308]))])

@@ -123,7 +123,7 @@ class Dynamics:
         :meth:`solve`; ``kp``, ``kd`` (n_actuated,) are joint PD gains [N·m/rad], [N·m·s/rad].
 
         Raises:
-            StepMatrixError: S is not positive definite.
+            StepMatrixError: S is not finite or not positive definite.
         """
         raise NotImplementedError
 
@@ -297,6 +297,9 @@ class PythonDynamics(Dynamics):
         K_g, D_g = K.copy(), D.copy()
         self.add_joint_gains(K_g, D_g, kp, kd)
         S = M + gh * D_g + (gh * gh) * K_g
+        if not np.all(np.isfinite(S)):  # numpy's Cholesky "succeeds" on NaN
+            self._step = None
+            raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite")
         try:
             L = np.linalg.cholesky(S)
         except np.linalg.LinAlgError:

@@ -128,6 +128,10 @@ public:
     }
     S_.noalias() += (gh * gh) * Kg_;
     gh_ = gh;
+    if (!S_.allFinite()) {  // LLT "succeeds" on NaN
+      factored_ = false;
+      throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
+    }
     llt_.compute(S_);  // reads the lower triangle
     if (llt_.info() != Eigen::Success) {
       factored_ = false;

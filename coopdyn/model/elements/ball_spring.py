@@ -33,13 +33,7 @@ def _spd3(value: Any, name: str, unit: str) -> np.ndarray:
         raise SceneError(
             f"{name} must be a scalar, a 3-vector diagonal or a 3×3 matrix [{unit}] (x, y, z), got shape {arr.shape}"
         )
-    scale = max(float(np.max(np.abs(arr))), 1e-300)
-    if np.max(np.abs(arr - arr.T)) > 1e-9 * scale:
-        raise SceneError(f"{name} must be symmetric; max |{name} − {name}ᵀ| = {np.max(np.abs(arr - arr.T)):.3g}")
-    arr = 0.5 * (arr + arr.T)
-    if np.linalg.eigvalsh(arr)[0] < -1e-9 * scale:
-        raise SceneError(f"{name} must be positive semi-definite; its smallest eigenvalue is {np.linalg.eigvalsh(arr)[0]:.6g}")
-    return arr
+    return _validate.symmetric_psd(arr, name)
 
 
 class BallSpring(SpringDamper):
