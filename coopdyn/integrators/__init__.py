@@ -9,6 +9,7 @@ name                          order  adaptive  per step
 ``implicit_euler``            1      no        1 RHS, 1 Jacobian, 1 factorisation
 ``ros2``                      2      no        2 RHS, 1 Jacobian, 1 factorisation
 ``ros2_adaptive``             2(1)   yes       as ros2
+``trapezoid``                 2      no        as ros2; does not damp oscillations (ρ∞ = 1)
 ``exponential``               2*     no        1 matrix–vector product (linear scenes only)
 ``scipy``                     —      inside    scipy ``solve_ivp`` per step (reference)
 ============================  =====  ========  ===========================================
@@ -22,13 +23,23 @@ from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
 from .exponential import Exponential, LinearForm, linear_form
-from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler
+from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler, Trapezoid
 from .scipy_reference import ScipyReference
 
 #: Name → integrator class. ``simulate(..., integrator=name)`` builds one with default settings.
 INTEGRATORS: dict[str, type[Integrator]] = {
     cls.name: cls
-    for cls in (SymplecticEuler, RK4, DormandPrince, LinearlyImplicitEuler, ROS2, AdaptiveROS2, Exponential, ScipyReference)
+    for cls in (
+        SymplecticEuler,
+        RK4,
+        DormandPrince,
+        LinearlyImplicitEuler,
+        ROS2,
+        AdaptiveROS2,
+        Trapezoid,
+        Exponential,
+        ScipyReference,
+    )
 }
 
 
@@ -58,6 +69,7 @@ __all__ = [
     "Problem",
     "ScipyReference",
     "SymplecticEuler",
+    "Trapezoid",
     "get_integrator",
     "linear_form",
 ]

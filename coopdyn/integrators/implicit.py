@@ -1,5 +1,7 @@
 """Linearly implicit methods for stiff interconnections: implicit Euler ("implicit springs",
-Baraff & Witkin 1998) and the two-stage L-stable Rosenbrock-W method ROS2 (Verwer et al. 1999).
+Baraff & Witkin 1998), the two-stage L-stable Rosenbrock-W method ROS2 (Verwer et al. 1999), and
+the same two-stage scheme at γ = ½: the linearly implicit trapezoidal rule, which does not damp
+the interconnections' oscillations (|R(iω)| = 1) — with a high-frequency damping ρ∞ between the two.
 
 Both use the Jacobian of the stiff part, ``J = [[0, I], [−M⁻¹K̃, −M⁻¹D̃]]`` with K̃, D̃ from
 the problem's ``implicit_terms``, and never form ``M⁻¹``: a stage solve ``(I − γhJ) k = f`` on
@@ -83,13 +85,27 @@ class LinearlyImplicitEuler(Integrator):
         return 1.0 / (1.0 - np.asarray(z, dtype=complex))
 
 
-GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
+GAMMA = 1.0 + 1.0 / math.sqrt(2.0)  #: ROS2's γ (L-stable: R(∞) = 0)
 
 
-def _ros2(system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
-    """One ROS2 step; returns (δ, v⁺, error of δ, error of v⁺) with the embedded first-order estimate."""
+def gamma_for(rho_inf: float) -> float:
+    """The γ of the two-stage Rosenbrock-W scheme whose stability function has |R(∞)| = ρ∞.
+
+    The scheme ``(I − γhJ)k₁ = f(y)``, ``(I − γhJ)k₂ = f(y + hk₁) − 2k₁``,
+    ``y⁺ = y + h(3k₁ + k₂)/2`` is second order for any γ and any Jacobian approximation J, and
+    A-stable for γ ≥ ¼, with ``R(z) = (1 + (1 − 2γ)z + (γ² − 2γ + ½)z²) / (1 − γz)²``;
+    ``R(∞) = (γ² − 2γ + ½)/γ²`` runs from −1 (γ = ½: the trapezoidal rule's Cayley map
+    ``(1 + z/2)/(1 − z/2)``, no damping at any frequency) to 0 (γ = 1 + 1/√2: ROS2).
+    """
+    rho = float(rho_inf)
+    return (1.0 + math.sqrt((1.0 - rho) / 2.0)) / (1.0 + rho)
+
+
+def _ros2(system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, gamma: float = GAMMA) -> tuple[np.ndarray, ...]:
+    """One two-stage Rosenbrock-W step; returns (δ, v⁺, error of δ, error of v⁺) with the embedded
+    first-order estimate."""
     f1, M, K, D = system.implicit_terms(t, q, v)
-    system.factor(M, K, D, GAMMA * h)
+    system.factor(M, K, D, gamma * h)
     kq1, kv1 = system.solve(v, f1)
     d2, v2 = h * kq1, v + h * kv1
     q2 = system.integrate(q, d2)
@@ -100,10 +116,10 @@ def _ros2(system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float) -> 
     return delta, v_new, 0.5 * h * (kq1 + kq2), 0.5 * h * (kv1 + kv2)
 
 
-def _ros2_stability(z: np.ndarray) -> np.ndarray:
+def _ros2_stability(z: np.ndarray, gamma: float = GAMMA) -> np.ndarray:
     z = np.asarray(z, dtype=complex)
-    hk1 = z / (1.0 - GAMMA * z)
-    hk2 = (z * (1.0 + hk1) - 2.0 * hk1) / (1.0 - GAMMA * z)
+    hk1 = z / (1.0 - gamma * z)
+    hk2 = (z * (1.0 + hk1) - 2.0 * hk1) / (1.0 - gamma * z)
     return 1.0 + 1.5 * hk1 + 0.5 * hk2
 
 
@@ -141,3 +157,45 @@ class AdaptiveROS2(AdaptiveIntegrator):
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
+
+
+class Trapezoid(Integrator):
+    """The linearly implicit trapezoidal rule on the Lie group: ROS2's two stages at γ = ½.
+
+    Second order with any Jacobian approximation, A-stable, and **non-dissipative**: its
+    stability function is the Cayley map ``(1 + z/2)/(1 − z/2)``, so an undamped oscillation of
+    any frequency keeps its amplitude (|R(iω)| = 1) — where implicit Euler and ROS2 damp the
+    interconnections' spring modes away and misreport their forces at large steps. An
+    under-resolved mode is kept but its phase is wrong (frequency warped by ``2·atan(ωh/2)/h``).
+    2 RHS, 1 Jacobian and 1 factorisation per step, like ROS2.
+
+    Args:
+        rho_inf: high-frequency spectral radius ρ∞ = |R(∞)| in [0, 1] (as in generalized-α):
+            1 (default) damps nothing; smaller values damp modes far above 1/h, down to 0 =
+            ROS2 (L-stable). In between the method stays second order and A-stable.
+    """
+
+    name = "trapezoid"
+    order = 2
+    a_stable = True
+
+    def __init__(self, rho_inf: float = 1.0) -> None:
+        rho = float(rho_inf) if isinstance(rho_inf, int | float) and not isinstance(rho_inf, bool) else math.nan
+        if not 0.0 <= rho <= 1.0:
+            from ..errors import SimulationError
+
+            raise SimulationError(f"rho_inf must be a number in [0, 1], got {rho_inf!r}")
+        self.rho_inf = rho
+        self.gamma = gamma_for(rho)
+
+    def step(
+        self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        delta, v_new, _, _ = _ros2(system, t, q, v, h, self.gamma)
+        return system.integrate(q, delta), v_new
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        return _ros2_stability(z, self.gamma)
+
+    def __repr__(self) -> str:
+        return f"Trapezoid(rho_inf={self.rho_inf:g})"
