@@ -25,10 +25,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import cho_solve
 
 from . import _validate
 from .errors import SceneError
-from .grasp import grasp_matrix, squeeze_directions
 from .model.scene import Scene
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -37,6 +37,55 @@ LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b for 3-vectors (np.cross costs ~10× more on the controller's hot path)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a × b for (N, 3) arrays (or a (3,) b); np.cross costs several times more."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _moment_inverse(r: np.ndarray) -> np.ndarray:
+    """(A⁻¹) (3, 3) of the moment block ``A = N·I + Σ (|rᵢ|² I − rᵢ rᵢᵀ)`` of G Gᵀ.
+
+    With moments about the centroid (Σ rᵢ = 0) the grasp matrix has the block-diagonal
+    ``G Gᵀ = diag(N·I, A)``, so ``G⁺ = Gᵀ (G Gᵀ)⁻¹`` needs one 3×3 inverse and no SVD (G always
+    has full row rank: every grasp transmits moments).
+    """
+    n = r.shape[0]
+    A = (n + float(np.einsum("ij,ij->", r, r))) * np.eye(3) - r.T @ r
+    return np.linalg.inv(A)
+
+
+def _distribute(r: np.ndarray, A_inv: np.ndarray, wrench: np.ndarray) -> np.ndarray:
+    """``G⁺ F`` as (N, 6) in closed form: ``y = (G Gᵀ)⁻¹ F``, ``fᵢ = Gᵢᵀ y = [y_f − rᵢ × y_m; y_m]``."""
+    y_f = wrench[:3] / r.shape[0]
+    y_m = A_inv @ wrench[3:]
+    out = np.empty((r.shape[0], 6))
+    out[:, :3] = y_f - _cross_rows(r, y_m)
+    out[:, 3:] = y_m
+    return out
+
+
+def _null_space_part(J: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``(I − J⁺J) x``: the part of the joint vector x that moves no tip (J (6, n)).
+
+    Closed form for a full-rank J: ``x − Jᵀ (J Jᵀ)⁻¹ J x`` for a redundant arm (n > 6), zero
+    otherwise (``J⁺J = I``); the SVD pseudo-inverse only at a singular configuration."""
+    n = J.shape[1]
+    try:
+        if n > 6:
+            L = np.linalg.cholesky(J @ J.T)
+            if np.min(np.diag(L)) < 1e-7 * np.max(np.diag(L)):  # condition ≳ 1e14: near a singularity
+                raise np.linalg.LinAlgError
+            return x - J.T @ cho_solve((L, True), J @ x, check_finite=False)
+        L = np.linalg.cholesky(J.T @ J)  # full column rank: J⁺J = I
+        if np.min(np.diag(L)) < 1e-7 * np.max(np.diag(L)):
+            raise np.linalg.LinAlgError
+        return np.zeros(n)
+    except np.linalg.LinAlgError:
+        return x - np.linalg.pinv(J) @ (J @ x)
 
 
 class ObjectReference(NamedTuple):
@@ -182,19 +231,23 @@ class ObjectImpedance:
         pin.updateFramePlacements(model, data)
         F, ref = self.object_wrench(t, q, v)
         points = np.array([data.oMf[g].translation for g, _, _ in self._links])
-        G = grasp_matrix(points)
         c = points.mean(axis=0)
+        r = points - c
         o = data.oMf[scene.object_frame].translation
         F_c = F.copy()
         F_c[3:] += _cross(o - c, F[:3])  # moment about the grasps' centroid
-        G_pinv = np.linalg.pinv(G)
-        f = G_pinv @ F_c
+        A_inv = _moment_inverse(r)
+        f = _distribute(r, A_inv, F_c)
         if ref.squeeze and len(points) > 1:
-            inward = np.zeros(6 * len(points))
-            for i, d in enumerate(squeeze_directions(points)):
-                inward[6 * i : 6 * i + 3] = ref.squeeze * d
-            f += inward - G_pinv @ (G @ inward)  # keep only its internal (null-space) part
-        return f.reshape(-1, 6)
+            d = -r
+            norms = np.sqrt(np.einsum("ij,ij->i", d, d))
+            if np.any(norms < 1e-9):
+                raise SceneError("grasp points coincide with their centroid: no squeeze direction")
+            inward = np.zeros((len(points), 6))
+            inward[:, :3] = ref.squeeze * d / norms[:, None]
+            resultant = np.concatenate([inward[:, :3].sum(axis=0), _cross_rows(r, inward[:, :3]).sum(axis=0)])
+            f += inward - _distribute(r, A_inv, resultant)  # keep only its internal (null-space) part
+        return f
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         model, data, scene = self.scene.model, self._data, self.scene
@@ -209,10 +262,9 @@ class ObjectImpedance:
             r = data.oMf[g_id].translation - data.oMf[t_id].translation
             w = f_i.copy()
             w[3:] += _cross(r, f_i[:3])
-            tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * v[arm.v_index]
-            J_pinv = np.linalg.pinv(J)
-            N = np.eye(arm.v_index.size) - J.T @ J_pinv.T
-            tau += N @ (self.null_stiffness * posture[arm.v_index] - self.null_damping * v[arm.v_index])
+            vi = v[arm.v_index]
+            tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * vi
+            tau += _null_space_part(J, self.null_stiffness * posture[arm.v_index] - self.null_damping * vi)
             out.append(tau)
         return np.concatenate(out)
 
