@@ -1,0 +1,328 @@
+// The scene dynamics' hot path: class Kernel (see kernel.cpp for the equations and the module).
+#pragma once
+
+#include <pinocchio/multibody.hpp>
+#include <pinocchio/spatial.hpp>
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/energy.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+
+#include <eigenpy/eigenpy.hpp>
+#include <boost/python.hpp>
+
+#include "elements.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace bp = boost::python;
+using pinocchio::Data;
+using pinocchio::FrameIndex;
+using pinocchio::Model;
+using pinocchio::SE3;
+using coopdyn::ElementEval;
+using coopdyn::Matrix6;
+using coopdyn::Vector6;
+
+using Matrix6x = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+using RefVec = Eigen::Ref<const VectorXd>;
+using RefMat = Eigen::Ref<const MatrixXd>;
+
+namespace coopdyn_native {
+
+// The step matrix of a linearly implicit step is not positive definite (translated to
+// coopdyn.errors.StepMatrixError).
+struct StepMatrixError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Above this rotation of a deformation [rad] the SE(3) logarithm nears its jump at π.
+constexpr double ROTATION_ALARM = 0.9 * M_PI;
+
+struct Link {
+  FrameIndex tip, grasp;
+  std::unique_ptr<coopdyn::Element> element;
+};
+
+void check_size(const RefVec & x, Eigen::Index n, const char * name) {
+  if (x.size() != n)
+    throw std::invalid_argument(
+      std::string(name) + " has " + std::to_string(x.size()) + " entries, expected " + std::to_string(n));
+}
+
+class Kernel {
+public:
+  Kernel(bp::object model_obj, bp::object data_obj, bp::list links, const RefVec & damping,
+         const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame)
+    : model_obj_(model_obj), data_obj_(data_obj),
+      model_(bp::extract<const Model &>(model_obj)), data_(bp::extract<Data &>(data_obj)),
+      damping_(damping), actuated_(actuated), object_frame_(object_frame) {
+    const auto nv = model_.nv;
+    check_size(damping, nv, "damping");
+    if (object_frame_ >= model_.frames.size()) throw std::invalid_argument("object_frame out of range");
+    for (Eigen::Index i = 0; i < actuated_.size(); ++i)
+      if (actuated_[i] < 0 || actuated_[i] >= nv) throw std::invalid_argument("actuated index out of range");
+    for (bp::ssize_t i = 0; i < bp::len(links); ++i) {
+      bp::tuple t = bp::extract<bp::tuple>(links[i]);
+      Link lk;
+      const std::string kind = bp::extract<std::string>(t[0]);
+      lk.tip = bp::extract<FrameIndex>(t[1]);
+      lk.grasp = bp::extract<FrameIndex>(t[2]);
+      if (lk.tip >= model_.frames.size() || lk.grasp >= model_.frames.size())
+        throw std::invalid_argument("link frame index out of range");
+      lk.element = coopdyn::make_element(kind, bp::extract<bp::tuple>(t[3]));
+      links_.push_back(std::move(lk));
+    }
+    has_damping_ = !damping_.isZero(0.0);
+    J_G_.setZero(6, nv);
+    J_T_.setZero(6, nv);
+    SJ_.setZero(6, nv);
+    Q_.setZero(nv);
+    tau_full_.setZero(nv);
+    K_t_.setZero(nv, nv);
+    D_t_.setZero(nv, nv);
+  }
+
+  VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+    generalized_force(q, v, tau, wrench, false);
+    return pinocchio::aba(model_, data_, q, v, tau_full_);
+  }
+
+  // (f, M, K̃, D̃): f = Sτ + Q − Bq̇ − b(q, q̇) = M q̈ and the stiffness matrices (without gains).
+  bp::tuple implicit_terms(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+    implicit_parts(q, v, tau, wrench);
+    return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
+  }
+
+  // Factorise S = M + gh (D̃ + Kd) + gh² (K̃ + Kp) from the last implicit_terms (or given matrices).
+  void factor(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd) {
+    check_size(kp, actuated_.size(), "kp");
+    check_size(kd, actuated_.size(), "kd");
+    const auto nv = model_.nv;
+    if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
+      throw std::invalid_argument("factor: M, K and D must be nv x nv");
+    Kg_ = K;
+    S_ = M + gh * D;
+    for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
+      Kg_(actuated_[i], actuated_[i]) += kp[i];
+      S_(actuated_[i], actuated_[i]) += gh * kd[i];
+    }
+    S_.noalias() += (gh * gh) * Kg_;
+    gh_ = gh;
+    if (!S_.allFinite()) {  // LLT "succeeds" on NaN
+      factored_ = false;
+      throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
+    }
+    llt_.compute(S_);  // reads the lower triangle
+    if (llt_.info() != Eigen::Success) {
+      factored_ = false;
+      throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+    }
+    factored_ = true;
+  }
+
+  // (k_q, k_v) of (I − γhJ) k = (f_q, f_v), given M f_v: S k_v = M f_v − γh K̃ f_q, k_q = f_q + γh k_v.
+  bp::tuple solve(const RefVec & f_q, const RefVec & Mf_v) {
+    if (!factored_) throw std::logic_error("solve before a successful factor");
+    check_size(f_q, model_.nv, "f_q");
+    check_size(Mf_v, model_.nv, "Mf_v");
+    rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
+    const VectorXd k_v = llt_.solve(rhs_);
+    return bp::make_tuple(VectorXd(f_q + gh_ * k_v), k_v);
+  }
+
+  // One linearly implicit Euler velocity update: v⁺ = v + h k_v with (f_q, f_v) = (v, M⁻¹f):
+  // (M + h(D̃ + Kd) + h²(K̃ + Kp)) k_v = f − h (K̃ + Kp) v.
+  VectorXd implicit_euler_velocity(const RefVec & q, const RefVec & v, const RefVec & tau, double h,
+                                   const RefVec & kp, const RefVec & kd, bp::object wrench) {
+    implicit_parts(q, v, tau, wrench);
+    factor(data_.M, K_t_, D_t_, h, kp, kd);
+    rhs_.noalias() = tau_full_ - h * (Kg_ * v);
+    return v + h * llt_.solve(rhs_);
+  }
+
+  // ½ eᵀ K e of each link (n_links,) [J] at the frame placements of the last kinematics pass.
+  VectorXd elastic_energies() {
+    VectorXd out(links_.size());
+    const Vector6 zero = Vector6::Zero();
+    for (std::size_t i = 0; i < links_.size(); ++i) {
+      const Link & lk = links_[i];
+      const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
+      const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
+      lk.element->evaluate(oMT.actInv(oMG), zero, false, ev_);
+      out[i] = ev_.energy;
+    }
+    return out;
+  }
+
+  // Every element's evaluation at (q, v): a list of (energy, deformation, G_f_G, power, S_K, S_D, θ).
+  bp::list element_states(const RefVec & q, const RefVec & v) {
+    check_size(q, model_.nq, "q");
+    check_size(v, model_.nv, "v");
+    pinocchio::forwardKinematics(model_, data_, q, v);
+    bp::list out;
+    for (const Link & lk : links_) {
+      relative(lk, ev_, true);
+      out.append(bp::make_tuple(ev_.energy, Vector6(ev_.deformation), Vector6(ev_.f), ev_.power, Matrix6(ev_.SK),
+                                Matrix6(ev_.SD), ev_.theta));
+    }
+    return out;
+  }
+
+  // The readouts of a trajectory Q (n, nq), V (n, nv), one sample per row: deformations
+  // (n, 6L, zero-padded), energies (n, L), dissipated powers (n, L), the wrench on the object at
+  // G and on the arm at T, in world axes (n, 6L each), the positions of G and T (n, 3L each),
+  // the object frame's position (n, 3), kinetic and gravity energy (n, 2).
+  bp::tuple readouts(const RefMat & Q, const RefMat & V) {
+    const Eigen::Index n = Q.rows(), L = static_cast<Eigen::Index>(links_.size());
+    if (Q.cols() != model_.nq || V.cols() != model_.nv || V.rows() != n)
+      throw std::invalid_argument("readouts: Q must be (n, nq) and V (n, nv)");
+    MatrixXd E(n, 6 * L), U(n, L), P(n, L), WG(n, 6 * L), WT(n, 6 * L), PG(n, 3 * L), PT(n, 3 * L), PO(n, 3), KP(n, 2);
+    for (Eigen::Index k = 0; k < n; ++k) {
+      const VectorXd q = Q.row(k).transpose(), v = V.row(k).transpose();
+      pinocchio::forwardKinematics(model_, data_, q, v);
+      KP(k, 0) = pinocchio::computeKineticEnergy(model_, data_);
+      KP(k, 1) = pinocchio::computePotentialEnergy(model_, data_);
+      PO.row(k) = pinocchio::updateFramePlacement(model_, data_, object_frame_).translation().transpose();
+      for (Eigen::Index i = 0; i < L; ++i) {
+        const Link & lk = links_[i];
+        const SE3 T_M_G = relative(lk, ev_, false);
+        const SE3 & oMT = data_.oMf[lk.tip];
+        const SE3 & oMG = data_.oMf[lk.grasp];
+        E.block<1, 6>(k, 6 * i) = ev_.deformation.transpose();
+        U(k, i) = ev_.energy;
+        P(k, i) = ev_.power;
+        const pinocchio::Force f_G(ev_.f);
+        const pinocchio::Force f_T = -T_M_G.act(f_G);  // action = reaction, in T
+        WG.block<1, 3>(k, 6 * i) = (oMG.rotation() * f_G.linear()).transpose();
+        WG.block<1, 3>(k, 6 * i + 3) = (oMG.rotation() * f_G.angular()).transpose();
+        WT.block<1, 3>(k, 6 * i) = (oMT.rotation() * f_T.linear()).transpose();
+        WT.block<1, 3>(k, 6 * i + 3) = (oMT.rotation() * f_T.angular()).transpose();
+        PG.block<1, 3>(k, 3 * i) = oMG.translation().transpose();
+        PT.block<1, 3>(k, 3 * i) = oMT.translation().transpose();
+      }
+    }
+    return bp::make_tuple(E, U, P, WG, WT, PG, PT, PO, KP);
+  }
+
+  double last_dissipation() const { return last_dissipation_; }
+  // Index of the first link whose rotation deformation passed 0.9π since the last clear, or −1.
+  int rotation_alarm() const { return rotation_alarm_; }
+  double rotation_alarm_angle() const { return rotation_alarm_angle_; }
+  void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
+
+private:
+  // Evaluate the element of link `lk` at the kinematics of the last forwardKinematics(q, v)
+  // (updates the placements of T and G in data_.oMf), with ξ from the frame velocities; returns
+  // T_M_G. For readouts — the hot path takes ξ = Jr q̇ in generalized_force.
+  SE3 relative(const Link & lk, ElementEval & ev, bool jacobians) {
+    const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
+    const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
+    const SE3 T_M_G = oMT.actInv(oMG);
+    const pinocchio::Motion V_T = pinocchio::getFrameVelocity(model_, data_, lk.tip, pinocchio::LOCAL);
+    const pinocchio::Motion V_G = pinocchio::getFrameVelocity(model_, data_, lk.grasp, pinocchio::LOCAL);
+    lk.element->evaluate(T_M_G, (V_G - T_M_G.actInv(V_T)).toVector(), jacobians, ev);
+    return T_M_G;
+  }
+
+  // What the implicit methods need at (q, v): tau_full_ = f = Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_
+  // and data_.M = M(q) with both triangles (crba fills the upper one).
+  void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+    generalized_force(q, v, tau, wrench, true);
+    tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
+    pinocchio::crba(model_, data_, q);
+    data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+  }
+
+  // Kinematics at q, then tau_full_ = Sτ + Q − Bq̇ (+ the object wrench); with `matrices`, also
+  // K_t_ = Σ Jrᵀ S_K Jr and D_t_ = Σ Jrᵀ S_D Jr + B.
+  void generalized_force(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench,
+                         bool matrices) {
+    const auto nv = model_.nv;
+    check_size(q, model_.nq, "q");
+    check_size(v, nv, "v");
+    check_size(tau, actuated_.size(), "tau");
+    pinocchio::computeJointJacobians(model_, data_, q);
+    Q_.setZero();
+    double p_diss = 0.0;
+    if (matrices) {
+      K_t_.setZero();
+      D_t_.setZero();
+      D_t_.diagonal() = damping_;
+    }
+    for (std::size_t i = 0; i < links_.size(); ++i) {
+      const Link & lk = links_[i];
+      const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
+      const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
+      const SE3 T_M_G = oMT.actInv(oMG);
+      J_G_.setZero();
+      J_T_.setZero();
+      pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
+      pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
+      J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // Jr; lazy: cheaper than GEMM at 6 × nv
+      const Vector6 xi = J_G_ * v;
+      lk.element->evaluate(T_M_G, xi, matrices, ev_);
+      Q_.noalias() += J_G_.transpose() * ev_.f;
+      p_diss += ev_.power;
+      if (ev_.theta > ROTATION_ALARM && rotation_alarm_ < 0) {
+        rotation_alarm_ = static_cast<int>(i);
+        rotation_alarm_angle_ = ev_.theta;
+      }
+      if (matrices) {
+        SJ_ = ev_.SK.lazyProduct(J_G_);
+        K_t_ += J_G_.transpose().lazyProduct(SJ_);
+        if (lk.element->damped()) {
+          SJ_ = ev_.SD.lazyProduct(J_G_);
+          D_t_ += J_G_.transpose().lazyProduct(SJ_);
+        }
+      }
+    }
+    if (!wrench.is_none()) {
+      const VectorXd w = bp::extract<VectorXd>(wrench)();
+      if (w.size() != 6) throw std::invalid_argument("object wrench must have 6 entries");
+      const auto & R = pinocchio::updateFramePlacement(model_, data_, object_frame_).rotation();
+      Vector6 local;
+      local.head<3>().noalias() = R.transpose() * w.head<3>();
+      local.tail<3>().noalias() = R.transpose() * w.tail<3>();
+      J_G_.setZero();
+      pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_G_);
+      Q_.noalias() += J_G_.transpose() * local;
+    }
+    tau_full_ = Q_;
+    for (Eigen::Index i = 0; i < actuated_.size(); ++i) tau_full_[actuated_[i]] += tau[i];
+    if (has_damping_) {
+      tau_full_.array() -= damping_.array() * v.array();
+      p_diss += (damping_.array() * v.array().square()).sum();
+    }
+    last_dissipation_ = p_diss;
+  }
+
+  bp::object model_obj_, data_obj_;  // keep the Python objects alive
+  const Model & model_;
+  Data & data_;
+  std::vector<Link> links_;
+  VectorXd damping_;
+  Eigen::VectorXi actuated_;
+  FrameIndex object_frame_;
+  bool has_damping_ = false;
+  double last_dissipation_ = 0.0;
+  int rotation_alarm_ = -1;
+  double rotation_alarm_angle_ = 0.0;
+  ElementEval ev_;
+  Matrix6x J_G_, J_T_, SJ_;
+  VectorXd Q_, tau_full_, rhs_;
+  MatrixXd K_t_, D_t_, S_, Kg_;
+  double gh_ = 0.0;
+  bool factored_ = false;
+  Eigen::LLT<MatrixXd> llt_;
+};
+
+}  // namespace coopdyn_native
