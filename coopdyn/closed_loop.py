@@ -63,6 +63,11 @@ class System:
         self._gains = gains() if callable(gains) else None
 
     @property
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """The controller's joint (Kp, Kd) (n_actuated,) the implicit methods add to their matrix (zero without ``gains()``)."""
+        return self._gains if self._gains is not None else (self._zero, self._zero)
+
+    @property
     def has_object_wrench(self) -> bool:
         """Whether an external object wrench is applied."""
         return self.object_wrench is not None

@@ -41,6 +41,12 @@ class GravityCompensationPD:
         adds to the joints, for implicit integrators and :func:`coopdyn.advise`."""
         return self.kp, self.kd
 
+    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+        """This law for the compiled step loop (None: the scene is not this controller's)."""
+        if scene is not self.scene:
+            return None
+        return {"kind": "gravity_pd", "kp": self.kp.copy(), "kd": self.kd.copy(), "q_des": self.q_des.copy()}
+
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         act, model = self.scene.actuated_index, self.scene.model
         g = pin.computeGeneralizedGravity(model, self._data, q)[act]
@@ -70,6 +76,7 @@ class ComputedTorque:
             raise SceneError("ComputedTorque needs arms made of 1-DOF joints (nq = nv)")
         q0 = scene.q0[self._q_index]
         zero = np.zeros(n)
+        self._hold = None if reference is not None else q0
         self.reference = reference if reference is not None else (lambda t: (q0, zero, zero))
         self._data = scene.model.createData()
 
@@ -79,6 +86,18 @@ class ComputedTorque:
         M = pin.crba(model, data, q)[np.ix_(act, act)]
         h = pin.nonLinearEffects(model, data, q, v)[act]
         return M @ (a_d + self.kp * (q_d - q[self._q_index]) + self.kd * (v_d - v[act])) + h
+
+    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+        """This law for the compiled step loop, when it holds q0 (a Python reference runs in Python)."""
+        if scene is not self.scene or self._hold is None:
+            return None
+        return {
+            "kind": "computed_torque",
+            "q_index": self._q_index.astype(np.int32),
+            "kp": self.kp.copy(),
+            "kd": self.kd.copy(),
+            "q_d": self._hold.copy(),
+        }
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """Approximate joint stiffness/damping [N·m/rad], [N·m·s/rad]: diag(M)·(Kp, Kd) at q0."""

@@ -200,7 +200,13 @@ class ObjectImpedance:
         pin.framesForwardKinematics(model, data, scene.q0)
         oMo = data.oMf[scene.object_frame]
         hold = ObjectReference(oMo.translation.copy(), oMo.rotation.copy(), np.zeros(3), np.zeros(3), np.zeros(3), 0.0)
-        self.reference = reference if reference is not None else (lambda t: hold)
+        self._hold = hold if reference is None else None
+
+        def hold_reference(t: float) -> ObjectReference:
+            return hold
+
+        self._hold_reference = hold_reference
+        self.reference = reference if reference is not None else hold_reference
         self.mass = scene.object.mass
         self._com = np.asarray(scene.object.com, dtype=float)
         fixtures = [lk.name for lk in scene.links if lk.arm is None]
@@ -267,6 +273,42 @@ class ObjectImpedance:
             tau += _null_space_part(J, self.null_stiffness * posture[arm.v_index] - self.null_damping * vi)
             out.append(tau)
         return np.concatenate(out)
+
+    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+        """This law for the compiled step loop: with the default hold or a :class:`GripLiftOscillate`
+        reference (None for a Python reference, which runs in Python)."""
+        if scene is not self.scene:
+            return None
+        ref = self.reference
+        if self._hold is not None and ref is self._hold_reference:
+            task: dict[str, Any] = {"hold": True, "start": self._hold.position, "rotation": self._hold.rotation}
+        elif type(ref) is GripLiftOscillate:
+            axis = np.asarray(ref.axis, dtype=float)
+            task = {
+                "hold": False,
+                "start": np.asarray(ref.start, dtype=float),
+                "rotation": np.eye(3) if ref.rotation is None else np.asarray(ref.rotation, dtype=float),
+                "axis": axis / np.linalg.norm(axis),
+                "cycles": int(ref.cycles),
+                **{k: float(getattr(ref, k)) for k in ("squeeze", "t_grip", "lift", "t_lift", "lift_duration")},
+                **{k: float(getattr(ref, k)) for k in ("amplitude", "frequency", "t_osc")},
+            }
+        else:
+            return None
+        return {
+            "kind": "object_impedance",
+            "object_frame": int(scene.object_frame),
+            "grasps": [(int(g), int(t), np.asarray(arm.v_index, dtype=np.int32)) for g, t, arm in self._links],
+            "task": task,
+            "mass": float(self.mass),
+            "com": self._com.copy(),
+            "gravity": np.asarray(scene.gravity, dtype=float),
+            **{name: getattr(self, name).copy() for name in ("Kp", "Kr", "Dp", "Dr")},
+            "joint_damping": float(self.joint_damping),
+            "null_k": float(self.null_stiffness),
+            "null_d": float(self.null_damping),
+            "q0": scene.q0.copy(),
+        }
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint damping added by the controller, for implicit integrators [N·m/rad], [N·m·s/rad]."""

@@ -12,6 +12,8 @@ import numpy as np
 from .closed_loop import System
 from .errors import EnergyBalanceError, EnergyBalanceWarning
 
+ENERGY_RTOL = 0.05  #: default tolerance of the balance, relative to the energy in play
+
 
 class EnergyMonitor:
     """Checks ``E(t) − E(0) ≤ W_in(t) − W_diss(t) + tolerance`` along a run.
@@ -31,7 +33,7 @@ class EnergyMonitor:
     """
 
     def __init__(
-        self, system: System, t: float, q: np.ndarray, v: np.ndarray, *, every: int, rtol: float = 0.05, mode: str = "warn"
+        self, system: System, t: float, q: np.ndarray, v: np.ndarray, *, every: int, rtol: float = ENERGY_RTOL, mode: str = "warn"
     ):
         self.system, self.every, self.rtol, self.mode = system, max(1, int(every)), rtol, mode
         self.dynamics = system.dynamics
@@ -85,12 +87,17 @@ class EnergyMonitor:
         self.max_excess = max(self.max_excess, excess)
         if excess > tol and self.first_violation is None:
             self.first_violation = t
-            msg = (
-                f"energy balance broken at t = {t:.6g} s: the energy grew by {e.total - self.E0:.6g} J while the joint "
-                f"torques did {self.work:.6g} J of net work (dissipation included); the excess {excess:.3g} J is more than "
-                f"{self.rtol:.0%} of the energy in play ({self.scale:.3g} J). The integrator is probably unstable or too "
-                "coarse here: reduce dt, or use 'implicit_euler'/'ros2' (see coopdyn.advise)"
-            )
+            msg = violation_message(t, e.total - self.E0, self.work, excess, self.rtol, self.scale)
             if self.mode == "raise":
                 raise EnergyBalanceError(msg)
-            warnings.warn(msg, EnergyBalanceWarning, stacklevel=4)
+            warnings.warn(msg, EnergyBalanceWarning, stacklevel=5)  # _check, after_step or finish, the loop, simulate, its caller
+
+
+def violation_message(t: float, growth: float, work: float, excess: float, rtol: float, scale: float) -> str:
+    """What :class:`EnergyMonitor` says when the balance breaks (the compiled loop says the same)."""
+    return (
+        f"energy balance broken at t = {t:.6g} s: the energy grew by {growth:.6g} J while the joint "
+        f"torques did {work:.6g} J of net work (dissipation included); the excess {excess:.3g} J is more than "
+        f"{rtol:.0%} of the energy in play ({scale:.3g} J). The integrator is probably unstable or too "
+        "coarse here: reduce dt, or use 'implicit_euler'/'ros2' (see coopdyn.advise)"
+    )

@@ -48,6 +48,7 @@ class Result:
     n_rejected: int = 0
     status: str = "completed"  #: "completed", "interrupted" (Ctrl-C) or "diverged"
     backend: str | None = None  #: the dynamics backend of the run; readouts use the same
+    loop: str = "python"  #: the step loop that ran: "compiled" or "python" (see coopdyn.simulate)
 
     @cached_property
     def _dynamics(self) -> Dynamics:

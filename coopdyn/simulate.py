@@ -11,12 +11,23 @@ from typing import Any
 
 import numpy as np
 
+from . import compiled
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
-from .errors import DivergenceError, LogMapWarning, SimulationError, SimulationInterrupted, StepMatrixError
+from .errors import (
+    ControllerError,
+    DivergenceError,
+    EnergyBalanceError,
+    EnergyBalanceWarning,
+    KernelError,
+    LogMapWarning,
+    SimulationError,
+    SimulationInterrupted,
+    StepMatrixError,
+)
 from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
-from .monitor import EnergyMonitor
+from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result
 from .stability import advise
 
@@ -35,6 +46,7 @@ def simulate(
     energy_check: str = "warn",
     object_wrench: Callable[[float], np.ndarray] | None = None,
     backend: str | None = None,
+    loop: str = "auto",
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -58,6 +70,14 @@ def simulate(
             world axes, at the object frame origin (disturbances, loads, contacts).
         backend: ``"native"`` (the compiled kernel), ``"python"`` or ``"auto"`` (see
             :mod:`coopdyn.backend`); ``None`` reads ``COOPDYN_BACKEND`` (default ``"auto"``).
+        loop: ``"auto"`` (default) runs the steps in the compiled loop when every piece is built
+            in — native backend, an integrator from ``INTEGRATORS`` (not ``exponential`` or
+            ``scipy``), no controller or a built-in one (``GravityCompensationPD``,
+            ``ComputedTorque`` holding q0, ``ObjectImpedance`` holding or with
+            ``GripLiftOscillate``, ``drives_controller``), no ``object_wrench`` — and in Python
+            otherwise; ``"compiled"`` requires the compiled loop (SimulationError saying which
+            piece is Python); ``"python"`` forces the Python loop. Both give the same result to
+            round-off; ``Result.loop`` says which ran.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -80,19 +100,41 @@ def simulate(
         raise SimulationError(f"save_every must be an integer >= 1, got {save_every!r}")
     if energy_check not in ("warn", "raise", "off"):
         raise SimulationError(f"energy_check must be 'warn', 'raise' or 'off', got {energy_check!r}")
+    if loop not in ("auto", "compiled", "python"):
+        raise SimulationError(f"loop must be 'auto', 'compiled' or 'python', got {loop!r}")
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
 
     system = System(Dynamics(scene, backend), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
+    config, why = None, "loop='python'"
+    if loop != "python":
+        config, why = compiled.plan(
+            scene,
+            system,
+            method,
+            q0=q,
+            v0=v,
+            dt=dt,
+            t_final=t_final,
+            n_steps=run.n_steps,
+            save_every=save_every,
+            max_speed=max_speed,
+            energy_check="off" if method.exact_discretisation else energy_check,
+        )
+        if config is None and loop == "compiled":
+            raise SimulationError(f"loop='compiled' cannot run this simulation: {why}; use loop='auto' or 'python'")
+    run.loop = "python" if config is None else "compiled"
     monitor = None
-    if energy_check != "off" and not method.exact_discretisation:
+    if config is None and energy_check != "off" and not method.exact_discretisation:
         monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check)
     bar = _progress_bar(t_final, method.name) if progress else None
     cpu0 = time.process_time()
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a blow-up is reported as a DivergenceError
-            if method.adaptive:
+            if config is not None:
+                _compiled_loop(run, config, bar)
+            elif method.adaptive:
                 _adaptive_loop(run, q, v, monitor, bar)
             else:
                 _fixed_loop(run, q, v, monitor, bar)
@@ -141,6 +183,7 @@ class _Run:
         self.cpu_time = 0.0
         self.ws = method.workspace(system)  # the method's own per-run scratch
         self._warned_links: set[int] = set()
+        self.loop = "python"
 
     def save(self, t: float, q: np.ndarray, v: np.ndarray, step_follows: bool = True) -> None:
         """Keep a sample. When a step from it follows, its torque is taken from that step's own
@@ -197,9 +240,12 @@ class _Run:
             return
         dynamics.clear_rotation_alarm()
         link, theta = alarm
-        if link in self._warned_links:
-            return
-        self._warned_links.add(link)
+        if link not in self._warned_links:
+            self._warned_links.add(link)
+            self.warn_rotation(link, theta, t)
+
+    def warn_rotation(self, link: int, theta: float, t: float, stacklevel: int = 5) -> None:
+        """The log-map warning of :meth:`after_step`, attributed to the caller of ``simulate``."""
         name = self.scene.links[link].name
         warnings.warn(
             f"interconnection {name!r} (index {link}): its rotation deformation reached {theta:.3f} rad "
@@ -207,7 +253,7 @@ class _Run:
             "with an anisotropic or coupled K, the elastic energy jumps too. A real grasp twisted this far has "
             "let go; check the scene (stiffness, controller) or use an isotropic rotational K",
             LogMapWarning,
-            stacklevel=4,
+            stacklevel=stacklevel,
         )
 
     def step_failed(self, exc: StepMatrixError, t: float, h: float) -> StepMatrixError:
@@ -241,6 +287,7 @@ class _Run:
             n_rejected=self.n_rejected,
             status=status,
             backend=s.dynamics.backend,
+            loop=self.loop,
         )
 
 
@@ -272,6 +319,50 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
         monitor.finish(t, q, v)
     if bar is not None:
         bar.update(run.t_final - bar.n)
+
+
+def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
+    """The whole run in the compiled loop, chunk by chunk (see :mod:`coopdyn.compiled`)."""
+    native: Any = run.system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
+    status = compiled.RUNNING
+    try:
+        while status == compiled.RUNNING:
+            status = native.advance(compiled.CHUNK)
+            for kind, a, b, c, d, e in native.take_events():
+                if kind == 0:
+                    run.warn_rotation(int(a), b, c, stacklevel=4)
+                else:
+                    message = violation_message(a, b, c, d, ENERGY_RTOL, e)
+                    if status == compiled.ENERGY:
+                        raise EnergyBalanceError(message)
+                    warnings.warn(message, EnergyBalanceWarning, stacklevel=3)
+            if bar is not None:
+                bar.update(native.t - bar.n)
+    finally:  # also on Ctrl-C between chunks: the samples so far make the partial result
+        samples = compiled.Samples(native, run.scene)
+        run.t, run.q, run.v = samples.t.tolist(), list(samples.q), list(samples.v)
+        run.tau = list(samples.tau)
+        if samples.pending:
+            run.tau[-1] = None
+        s = run.system
+        s.n_rhs, s.n_jac, s.n_factor = samples.n_rhs, samples.n_jac, samples.n_factor
+        run.n_accepted, run.n_rejected = samples.n_accepted, samples.n_rejected
+    if status == compiled.DONE:
+        return
+    message, t, h, q, v = native.failure()
+    if status == compiled.DIVERGED:
+        run.check(t, np.asarray(q, dtype=float), np.asarray(v, dtype=float), h)
+    if status == compiled.STEP_MATRIX:
+        raise run.step_failed(StepMatrixError(message), t, h)
+    method = run.method
+    if status == compiled.H_MIN:
+        raise SimulationError(
+            f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "  # type: ignore[attr-defined]
+            f"the step fell below h_min = {method.h_min:g} s"  # type: ignore[attr-defined]
+        )
+    if status == compiled.CONTROLLER:
+        raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {message})")
+    raise KernelError(f"the compiled loop stopped at t = {run.t[-1]:.6g} s: {message}")
 
 
 def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:

@@ -99,6 +99,16 @@ class NativeDynamics(Dynamics):
         except Exception as exc:
             raise _kernel_error(exc, "implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)") from exc
 
+    def compiled_loop(self, config: dict[str, object]) -> object:
+        """A compiled run of this scene (coopdyn.compiled writes ``config``); the kernel object
+        it steps stays alive with it."""
+        try:
+            return _backend.kernel_module().make_loop(self._kernel, config)
+        except CoopdynError:
+            raise
+        except Exception as exc:
+            raise _kernel_error(exc, "the compiled loop's configuration") from exc
+
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
         try:
             raw = self._kernel.element_states(q, v)

@@ -111,6 +111,13 @@ class Integrator(ABC):
         """Advance from (t, q, v) by ``h`` [s]; return the new (q, v). ``ws``: this method's
         workspace for the run (:meth:`workspace`), or None."""
 
+    def compiled_spec(self) -> dict[str, Any] | None:
+        """What the compiled step loop needs to run this method, or None (the Python loop runs it).
+
+        Only the built-in classes define it; :func:`coopdyn.simulate` uses it only when the
+        method's own class defines it, so a subclass that changes a step runs in Python."""
+        return None
+
     def workspace(self, system: Problem) -> Any:
         """Per-run scratch of this method (None: it needs none); passed to every step as ``ws``."""
         return None

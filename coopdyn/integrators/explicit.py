@@ -23,6 +23,9 @@ class SymplecticEuler(Integrator):
         v_new = v + h * system.acceleration(t, q, v)
         return system.integrate(q, h * v_new), v_new
 
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "symplectic_euler"}
+
     def spectral_radius(self, A: np.ndarray, h: float) -> float:
         """The method is partitioned (no scalar R(z)): use its step matrix on x' = A x."""
         n = A.shape[0] // 2
@@ -72,6 +75,13 @@ def _stages(
     return kd, ka, last
 
 
+def _tableau_spec(tab: ButcherTableau) -> dict[str, Any]:
+    spec: dict[str, Any] = {"method": "rk", "A": [list(row) for row in tab.A], "b": list(tab.b), "c": list(tab.c)}
+    if tab.b_hat is not None:
+        spec["b_hat"] = list(tab.b_hat)
+    return spec
+
+
 def _rk_stability(tab: ButcherTableau, z: np.ndarray, weights: tuple[float, ...]) -> np.ndarray:
     """R(z) = 1 + z bᵀ (I − zA)⁻¹ 1 evaluated stage by stage (explicit: A strictly lower)."""
     z = np.asarray(z, dtype=complex)
@@ -115,6 +125,9 @@ class RK4(ExplicitRungeKutta):
         c=(0.0, 0.5, 0.5, 1.0),
     )
 
+    def compiled_spec(self) -> dict[str, Any]:
+        return _tableau_spec(self.tableau)
+
 
 class _FirstSameAsLast:
     """Dormand–Prince's workspace: the last stage's acceleration, reused as the next step's first
@@ -152,6 +165,9 @@ class DormandPrince(AdaptiveIntegrator):
         c=(0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0),
         b_hat=(5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40),
     )
+
+    def compiled_spec(self) -> dict[str, Any]:
+        return {**_tableau_spec(self.tableau), "adaptive": True, "error_order": self.error_order}
 
     def workspace(self, system: Problem) -> _FirstSameAsLast:
         return _FirstSameAsLast()

@@ -56,6 +56,9 @@ class LinearlyImplicitEuler(Integrator):
             raise SimulationError(f"jacobian_every must be an integer >= 1, got {jacobian_every!r}")
         self.jacobian_every = jacobian_every
 
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "implicit_euler", "jacobian_every": self.jacobian_every}
+
     def workspace(self, system: Problem) -> _Reuse | None:
         return _Reuse() if self.jacobian_every > 1 else None
 
@@ -139,6 +142,9 @@ class ROS2(Integrator):
         delta, v_new, _, _ = _ros2(system, t, q, v, h)
         return system.integrate(q, delta), v_new
 
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "rosenbrock", "gamma": GAMMA}
+
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
 
@@ -154,6 +160,9 @@ class AdaptiveROS2(AdaptiveIntegrator):
     def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
         delta, v_new, e_d, e_v = _ros2(system, t, q, v, h)
         return Attempt(system.integrate(q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new))
+
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "rosenbrock", "gamma": GAMMA, "adaptive": True, "error_order": self.error_order}
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
@@ -193,6 +202,9 @@ class Trapezoid(Integrator):
     ) -> tuple[np.ndarray, np.ndarray]:
         delta, v_new, _, _ = _ros2(system, t, q, v, h, self.gamma)
         return system.integrate(q, delta), v_new
+
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "rosenbrock", "gamma": self.gamma}
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z, self.gamma)

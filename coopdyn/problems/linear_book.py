@@ -19,7 +19,7 @@ import bisect
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -341,10 +341,27 @@ def book_task(
     return drive(share1, share1 * p.g, 1.0), drive(share2, share2 * p.g, -1.0)
 
 
-def drives_controller(*drives: Drive) -> Callable[[float, np.ndarray, np.ndarray], np.ndarray]:
+class DrivesController:
+    """Open-loop drives, one per arm joint: ``τ_i = drive_i(t)`` [N]."""
+
+    def __init__(self, drives: Sequence[Drive]) -> None:
+        self.drives = tuple(drives)
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.array([d(t) for d in self.drives])
+
+    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+        """The drives' segments for the compiled step loop: rows (start, constant, ramp,
+        amplitude, omega, phase)."""
+        if len(self.drives) != scene.n_actuated:
+            return None
+        fields = ("start", "constant", "ramp", "amplitude", "omega", "phase")
+        return {
+            "kind": "drives",
+            "segments": [np.array([[float(getattr(s, f)) for f in fields] for s in d.segments]) for d in self.drives],
+        }
+
+
+def drives_controller(*drives: Drive) -> DrivesController:
     """A controller applying open-loop drives, one per arm joint: ``τ_i = drive_i(t)``."""
-
-    def controller(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return np.array([d(t) for d in drives])
-
-    return controller
+    return DrivesController(drives)

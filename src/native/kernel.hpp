@@ -92,13 +92,51 @@ public:
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
-    generalized_force(q, v, tau, wrench, false);
+    const Vector6 w = object_wrench(wrench);
+    generalized_force(q, v, tau, wrench.is_none() ? nullptr : &w, false);
     return pinocchio::aba(model_, data_, q, v, tau_full_);
+  }
+
+  // --- the C++ interface of the compiled step loop (loop.hpp): no Python objects, no wrench ---
+  const Model & model() const { return model_; }
+  const Eigen::VectorXi & actuated() const { return actuated_; }
+  // q̈ at (q, v, τ) (a reference into the Data, valid until the next call).
+  const VectorXd & accel(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
+    generalized_force(q, v, tau, nullptr, false);
+    return pinocchio::aba(model_, data_, q, v, tau_full_);
+  }
+  // f = M q̈, M, K̃, D̃ at (q, v, τ), left in f_terms(), mass(), stiffness(), damping().
+  void terms(const VectorXd & q, const VectorXd & v, const VectorXd & tau) { implicit_parts(q, v, tau, nullptr); }
+  const VectorXd & f_terms() const { return tau_full_; }
+  const MatrixXd & mass() const { return data_.M; }
+  const MatrixXd & stiffness() const { return K_t_; }
+  const MatrixXd & damping_matrix() const { return D_t_; }
+  // k_v, k_q of the last factor() (see solve()).
+  void solve_into(const VectorXd & f_q, const VectorXd & Mf_v, VectorXd & k_q, VectorXd & k_v) {
+    rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
+    k_v = llt_.solve(rhs_);
+    k_q = f_q + gh_ * k_v;
+  }
+  void ie_velocity(const VectorXd & q, const VectorXd & v, const VectorXd & tau, double h, const VectorXd & kp,
+                   const VectorXd & kd, VectorXd & v_new) {
+    implicit_parts(q, v, tau, nullptr);
+    factor(data_.M, K_t_, D_t_, h, kp, kd);
+    rhs_.noalias() = tau_full_ - h * (Kg_ * v);
+    v_new = v + h * llt_.solve(rhs_);
+  }
+  // Kinetic + gravity + elastic energy at (q, v) [J], as Dynamics.energy.
+  double total_energy(const VectorXd & q, const VectorXd & v, double * motion = nullptr) {
+    const double kinetic = pinocchio::computeKineticEnergy(model_, data_, q, v);
+    const double potential = pinocchio::computePotentialEnergy(model_, data_);
+    const VectorXd u = elastic_energies();
+    if (motion) *motion = kinetic + u.sum();
+    return kinetic + potential + u.sum();
   }
 
   // (f, M, K̃, D̃): f = Sτ + Q − Bq̇ − b(q, q̇) = M q̈ and the stiffness matrices (without gains).
   bp::tuple implicit_terms(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
-    implicit_parts(q, v, tau, wrench);
+    const Vector6 w = object_wrench(wrench);
+    implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
   }
 
@@ -143,7 +181,8 @@ public:
   // (M + h(D̃ + Kd) + h²(K̃ + Kp)) k_v = f − h (K̃ + Kp) v.
   VectorXd implicit_euler_velocity(const RefVec & q, const RefVec & v, const RefVec & tau, double h,
                                    const RefVec & kp, const RefVec & kd, bp::object wrench) {
-    implicit_parts(q, v, tau, wrench);
+    const Vector6 w = object_wrench(wrench);
+    implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     factor(data_.M, K_t_, D_t_, h, kp, kd);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
     return v + h * llt_.solve(rhs_);
@@ -220,6 +259,13 @@ public:
   void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
 
 private:
+  static Vector6 object_wrench(bp::object wrench) {
+    if (wrench.is_none()) return Vector6::Zero();
+    const VectorXd w = bp::extract<VectorXd>(wrench)();
+    if (w.size() != 6) throw std::invalid_argument("object wrench must have 6 entries");
+    return w;
+  }
+
   // Evaluate the element of link `lk` at the kinematics of the last forwardKinematics(q, v)
   // (updates the placements of T and G in data_.oMf), with ξ from the frame velocities; returns
   // T_M_G. For readouts — the hot path takes ξ = Jr q̇ in generalized_force.
@@ -235,7 +281,7 @@ private:
 
   // What the implicit methods need at (q, v): tau_full_ = f = Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_
   // and data_.M = M(q) with both triangles (crba fills the upper one).
-  void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+  void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
     generalized_force(q, v, tau, wrench, true);
     tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
     pinocchio::crba(model_, data_, q);
@@ -244,7 +290,7 @@ private:
 
   // Kinematics at q, then tau_full_ = Sτ + Q − Bq̇ (+ the object wrench); with `matrices`, also
   // K_t_ = Σ Jrᵀ S_K Jr and D_t_ = Σ Jrᵀ S_D Jr + B.
-  void generalized_force(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench,
+  void generalized_force(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench,
                          bool matrices) {
     const auto nv = model_.nv;
     check_size(q, model_.nq, "q");
@@ -285,9 +331,8 @@ private:
         }
       }
     }
-    if (!wrench.is_none()) {
-      const VectorXd w = bp::extract<VectorXd>(wrench)();
-      if (w.size() != 6) throw std::invalid_argument("object wrench must have 6 entries");
+    if (wrench) {
+      const Vector6 & w = *wrench;
       const auto & R = pinocchio::updateFramePlacement(model_, data_, object_frame_).rotation();
       Vector6 local;
       local.head<3>().noalias() = R.transpose() * w.head<3>();

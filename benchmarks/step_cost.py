@@ -1,0 +1,79 @@
+"""Cost per step of the compiled loop against the Python loop and against the kernel's own work,
+on the benchmark's Panda scene (two Pandas + 2 kg box, k = 1e4 N/m undamped, gravity
+compensation + PD 50/5, perturbed start).
+
+For each method, interleaved run by run in one process (medians of ``--repeats``):
+  * ``compiled`` / ``python``: CPU per accepted step of a whole ``simulate`` run (energy monitor
+    on, one sample saved per 10 ms), in each loop;
+  * ``kernel``: CPU per step of the kernel calls the method makes, timed from Python on a fixed
+    state (each call also pays ~0.5–1 µs of binding overhead, so this overstates the kernel's
+    work): implicit Euler one ``implicit_euler_velocity``; RK4 four ``acceleration``; ROS2 and
+    the trapezoid one ``implicit_terms`` + ``factor`` + two ``solve`` + one ``acceleration``
+    — each plus the controller in C++ terms is not included (it is part of the loop).
+
+    .venv/bin/python benchmarks/step_cost.py [--repeats 5] [--seconds 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import coopdyn as cd
+from coopdyn.control import GravityCompensationPD
+
+METHODS = ("symplectic_euler", "rk4", "implicit_euler", "ros2", "trapezoid", "dopri5")
+
+
+def _kernel_work(dyn: cd.Dynamics, method: str, q: np.ndarray, v: np.ndarray, tau: np.ndarray, n: int) -> float:
+    """CPU per step [s] of the kernel calls one step of ``method`` makes, at a fixed state."""
+    k = dyn._kernel  # type: ignore[attr-defined]
+    kp, kd = np.full(tau.size, 50.0), np.full(tau.size, 5.0)
+    t0 = time.process_time()
+    for _ in range(n):
+        if method == "implicit_euler":
+            k.implicit_euler_velocity(q, v, tau, 1e-3, kp, kd, None)
+        elif method in ("rk4", "symplectic_euler", "dopri5"):
+            for _ in range({"rk4": 4, "symplectic_euler": 1, "dopri5": 6}[method]):
+                k.acceleration(q, v, tau, None)
+        else:
+            f, M, K, D = k.implicit_terms(q, v, tau, None)
+            k.factor(M, K, D, 5e-4, kp, kd)
+            k.solve(v, f)
+            k.acceleration(q, v, tau, None)
+            k.solve(v, f)
+    return (time.process_time() - t0) / n
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--seconds", type=float, default=2.0, help="simulated time per run [s]")
+    args = parser.parse_args()
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4)
+    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
+    dyn = cd.Dynamics(scene, "native")
+    tau = ctrl(0.0, scene.q0, v0)
+    times: dict[tuple[str, str], list[float]] = {}
+    for _ in range(args.repeats):
+        for method in METHODS:
+            dt = 2.5e-4 if method == "symplectic_euler" else 5e-4 if method == "rk4" else 1e-3
+            for loop in ("compiled", "python"):
+                res = cd.simulate(
+                    scene, args.seconds, controller=ctrl, integrator=method, dt=dt, v0=v0, save_every=round(0.01 / dt), loop=loop
+                )
+                times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
+            times.setdefault((method, "kernel"), []).append(_kernel_work(dyn, method, scene.q0, v0, tau, 2000))
+    print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; two Pandas + box, k = 1e4 N/m")
+    print(f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}")
+    for method in METHODS:
+        c, p, k = (statistics.median(times[method, w]) * 1e6 for w in ("compiled", "python", "kernel"))
+        print(f"{method:18s} {c:9.2f} {p:9.2f} {k:9.2f} {c / k:16.2f} {p / c:16.1f}")
+
+
+if __name__ == "__main__":
+    main()

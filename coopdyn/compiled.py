@@ -1,0 +1,106 @@
+"""The compiled step loop (src/native/loop.hpp): :func:`coopdyn.simulate` runs a simulation there
+when every piece of it is built in — the native dynamics, a built-in integrator and a built-in
+controller (or none), no ``object_wrench`` callable — and through the Python loop otherwise.
+Both loops take the same steps with the same operations; results agree to round-off
+(tests/test_compiled_loop.py).
+
+The compiled loop runs in chunks of steps with the GIL released; between chunks Python updates
+the progress bar, issues the warnings the chunk reported, and can be interrupted (Ctrl-C).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .closed_loop import System
+from .integrators import Integrator
+from .model.scene import Scene
+from .monitor import ENERGY_RTOL
+
+#: statuses a chunk reports (src/native/loop.hpp: Status)
+RUNNING, DONE, DIVERGED, STEP_MATRIX, ENERGY, H_MIN, CONTROLLER, FAILED = range(8)
+#: steps (adaptive: attempts) per chunk: ~10–50 ms of work between Python's looks
+CHUNK = 2048
+_ENERGY_MODES = {"off": 0, "warn": 1, "raise": 2}
+
+
+def _own_spec(obj: Any, *args: Any) -> dict[str, Any] | None:
+    """``obj.compiled_spec(*args)`` when obj's own class defines it (a subclass that changes the
+    behaviour runs in Python), else None."""
+    spec = type(obj).__dict__.get("compiled_spec")
+    return None if spec is None else spec(obj, *args)
+
+
+def plan(
+    scene: Scene,
+    system: System,
+    method: Integrator,
+    *,
+    q0: np.ndarray,
+    v0: np.ndarray,
+    dt: float,
+    t_final: float,
+    n_steps: int,
+    save_every: int,
+    max_speed: float,
+    energy_check: str,
+) -> tuple[dict[str, Any] | None, str]:
+    """The compiled loop's configuration for this run, or (None, why it cannot run compiled)."""
+    if system.dynamics.backend != "native":
+        return None, "the dynamics run on the Python backend"
+    if system.has_object_wrench:
+        return None, "an object_wrench callable is Python code"
+    spec = _own_spec(method)
+    if spec is None:
+        return None, f"the integrator {method!r} has no compiled version"
+    if system.controller is None:
+        controller: dict[str, Any] | None = {"kind": "none"}
+    else:
+        controller = _own_spec(system.controller, scene)
+        if controller is None:
+            return None, f"the controller {type(system.controller).__name__} is Python code"
+    kp, kd = system.gains
+    adaptive = bool(spec.get("adaptive", False))
+    config = {
+        "adaptive": adaptive,
+        "gamma": 0.0,
+        "jacobian_every": 1,
+        "error_order": 0,
+        **spec,
+        "controller": controller,
+        "kp": np.asarray(kp, dtype=float),
+        "kd": np.asarray(kd, dtype=float),
+        "q0": np.asarray(q0, dtype=float),
+        "v0": np.asarray(v0, dtype=float),
+        "dt": float(dt),
+        "t_final": float(t_final),
+        "n_steps": int(n_steps),
+        "save_every": int(save_every),
+        "max_speed": float(max_speed),
+        "energy_mode": _ENERGY_MODES[energy_check],
+        "energy_every": max(1, round(5e-3 / dt)),
+        "energy_rtol": ENERGY_RTOL,
+        "rtol": float(getattr(method, "rtol", 0.0)),
+        "atol": float(getattr(method, "atol", 0.0)),
+        "h_min": float(getattr(method, "h_min", 0.0)),
+    }
+    return config, ""
+
+
+class Samples:
+    """What a compiled run saved: t (n,), q (n, nq), v (n, nv), τ (n, n_actuated), and whether
+    the last sample's torque is still pending (its step not taken)."""
+
+    def __init__(self, loop: Any, scene: Scene) -> None:
+        t, Q, V, TAU, self.pending = loop.samples()
+        n = len(t)
+        self.t = np.asarray(t, dtype=float).reshape(n)
+        self.q = np.asarray(Q, dtype=float).reshape(n, scene.nq)
+        self.v = np.asarray(V, dtype=float).reshape(n, scene.nv)
+        self.tau = np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated)
+        self.n_rhs, self.n_jac, self.n_factor, self.n_accepted, self.n_rejected = loop.counters()
+
+
+__all__ = ["CHUNK", "CONTROLLER", "DIVERGED", "DONE", "ENERGY", "FAILED", "H_MIN", "RUNNING", "STEP_MATRIX", "Samples", "plan"]

@@ -1,0 +1,608 @@
+// The compiled step loop: coopdyn.simulate's loop (coopdyn/simulate.py), its built-in integrators
+// (coopdyn/integrators/) and energy monitor (coopdyn/monitor.py) in C++, for runs whose every
+// piece is built in. The same operations in the same order as the Python loop, tested equal to
+// round-off (tests/test_compiled_loop.py). It runs in chunks of steps with the GIL released;
+// Python (coopdyn/compiled.py) turns what a chunk reports into samples, warnings and errors.
+#pragma once
+
+#include "controllers.hpp"
+#include "kernel.hpp"
+
+#include <pinocchio/algorithm/joint-configuration.hpp>
+
+#include <Python.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace coopdyn_native {
+
+enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7 };
+
+enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK };
+
+struct Tableau {
+  std::vector<std::vector<double>> A;
+  std::vector<double> b, c, b_hat;
+};
+
+struct Event {  // a warning for Python to issue
+  int kind;     // 0: rotation alarm (link, theta, t); 1: energy balance (t, dE, work, excess, scale)
+  double a, b, c, d, e;
+};
+
+// The energy-balance monitor (coopdyn.monitor.EnergyMonitor), same arithmetic.
+struct Monitor {
+  bool on = false, raise = false;
+  int every = 1;
+  double rtol = 0.05, E0 = 0, peak = 0, scale = 0, work = 0, abs_work = 0, uncertainty = 0, max_excess = 0;
+  bool has_pending = false, has_before = false, violated = false;
+  double pending_h = 0, pending_p = 0, before_h = 0, before_p = 0;
+  long steps = 0;
+
+  void close_interval(double p_end, double h_next, bool has_next) {
+    if (has_pending) {
+      const double h = pending_h, p = pending_p;
+      double dw;
+      if (has_before && std::abs(before_h - h) <= 1e-12 * h) {
+        dw = h / 12.0 * (5.0 * p_end + 8.0 * p - before_p);
+        uncertainty += h / 12.0 * std::abs(p_end - 2.0 * p + before_p);
+      } else {
+        dw = 0.5 * h * (p + p_end);
+        uncertainty += 0.5 * h * std::abs(p_end - p);
+      }
+      work += dw;
+      abs_work += std::abs(dw);
+      has_before = true;
+      before_h = pending_h;
+      before_p = pending_p;
+    }
+    has_pending = has_next;
+    pending_h = h_next;
+    pending_p = p_end;
+  }
+};
+
+class Loop {
+  struct ControllerFailure : std::runtime_error {  // a built-in controller returned non-finite torques
+    using std::runtime_error::runtime_error;
+  };
+
+public:
+  Loop(Kernel & kernel, std::unique_ptr<Controller> controller, int method, Tableau tab, bool adaptive, double gamma,
+       int jacobian_every, int error_order, const VectorXd & kp, const VectorXd & kd, const VectorXd & q0,
+       const VectorXd & v0, double dt, double t_final, long n_steps, long save_every, double max_speed,
+       int energy_mode, long energy_every, double energy_rtol, double rtol, double atol, double h_min)
+    : k_(kernel), model_(kernel.model()), ctrl_(std::move(controller)), method_(method), tab_(std::move(tab)),
+      adaptive_(adaptive), gamma_(gamma), jacobian_every_(jacobian_every), error_order_(error_order), kp_(kp),
+      kd_(kd), dt_(dt), t_final_(t_final), n_steps_(n_steps), every_(save_every), max_speed_(max_speed),
+      rtol_(rtol), atol_(atol), h_min_(h_min), q_(q0), v_(v0) {
+    const auto nq = model_.nq, nv = model_.nv;
+    na_ = kernel.actuated().size();
+    act_ = kernel.actuated();
+    tau_.setZero(na_);
+    neutral_ = pinocchio::neutral(model_);
+    for (pinocchio::JointIndex j = 1; j < model_.joints.size(); ++j)
+      if (model_.joints[j].nv() > 1) chart_.emplace_back(model_.joints[j].idx_v(), model_.joints[j].nv());
+    if (!chart_.empty()) dI_.setZero(nv, nv);
+    // the output grid
+    if (adaptive_) {
+      for (long k = every_; k < n_steps_; k += every_) outputs_.push_back(std::min(double(k) * dt_, t_final_));
+      outputs_.push_back(std::min(double(n_steps_) * dt_, t_final_));
+    }
+    const long n_save = n_steps_ / every_ + 2;
+    T_.reserve(n_save);
+    Q_.reserve(n_save * nq);
+    V_.reserve(n_save * nv);
+    TAU_.reserve(n_save * na_);
+    q_new_.setZero(nq);
+    qs_.setZero(nq);
+    tmp2_.setZero(nv);
+    v_new_.setZero(nv);
+    monitor_.on = energy_mode > 0;
+    monitor_.raise = energy_mode == 2;
+    monitor_.every = static_cast<int>(std::max<long>(1, energy_every));
+    monitor_.rtol = energy_rtol;
+    if (monitor_.on) {
+      double motion;
+      monitor_.E0 = k_.total_energy(q_, v_, &motion);
+      monitor_.peak = monitor_.scale = motion;
+    }
+    if (adaptive_) save(0.0, q_, v_, true);
+  }
+
+  // Run up to `budget` steps (attempts, for adaptive methods) with the GIL released; the status.
+  int advance(long budget) {
+    if (status_ != RUNNING) return status_;
+    PyThreadState * state = PyEval_SaveThread();
+    try {
+      if (adaptive_)
+        run_adaptive(budget);
+      else
+        run_fixed(budget);
+    } catch (const ControllerFailure & e) {
+      fail(CONTROLLER, e.what());
+    } catch (const StepMatrixError & e) {
+      fail(STEP_MATRIX, e.what());
+    } catch (const std::exception & e) {
+      fail(FAILED, e.what());
+    }
+    PyEval_RestoreThread(state);
+    return status_;
+  }
+
+  // The samples so far: t (n,), Q (n, nq), V (n, nv), TAU (n, n_actuated).
+  bp::tuple samples() const {
+    const Eigen::Index n = static_cast<Eigen::Index>(T_.size());
+    using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const VectorXd t = Eigen::Map<const VectorXd>(T_.data(), n);
+    const MatrixXd Q = Eigen::Map<const RowMat>(Q_.data(), n, model_.nq);
+    const MatrixXd V = Eigen::Map<const RowMat>(V_.data(), n, model_.nv);
+    const MatrixXd TAU = Eigen::Map<const RowMat>(TAU_.data(), n, na_);
+    return bp::make_tuple(t, Q, V, TAU, pending_);
+  }
+
+  bp::list take_events() {
+    bp::list out;
+    for (const Event & e : events_) out.append(bp::make_tuple(e.kind, e.a, e.b, e.c, e.d, e.e));
+    events_.clear();
+    return out;
+  }
+
+  // (counters) n_rhs, n_jac, n_factor, n_accepted, n_rejected
+  bp::tuple counters() const { return bp::make_tuple(n_rhs_, n_jac_, n_factor_, n_accepted_, n_rejected_); }
+  // What stopped the run: (message, t, h, the failing state's q, v).
+  bp::tuple failure() const { return bp::make_tuple(message_, fail_t_, fail_h_, q_fail_, v_fail_); }
+  double time() const { return t_; }
+  double progress_time() const { return t_; }
+
+private:
+  // ---------------------------------------------------------------- the closed loop (System)
+  void torque(double t, const VectorXd & q, const VectorXd & v) {
+    ctrl_->torque(t, q, v, tau_);
+    const double sq = tau_.dot(tau_);
+    if (!std::isfinite(sq)) {
+      std::string bad;
+      for (Eigen::Index i = 0; i < tau_.size(); ++i)
+        if (!std::isfinite(tau_[i])) bad += (bad.empty() ? "" : ", ") + std::to_string(i);
+      if (!bad.empty()) {
+        fail_t_ = t;
+        throw ControllerFailure("[" + bad + "]");
+      }
+    }
+  }
+  double net_power(const VectorXd & v) const {
+    double p = 0.0;
+    for (Eigen::Index i = 0; i < na_; ++i) p += tau_[i] * v[act_[i]];
+    return 0.0 + p - k_.last_dissipation();
+  }
+  void record(const VectorXd & v) {
+    const double p = net_power(v);
+    if (!have_first_) {
+      have_first_ = true;
+      first_p_ = p;
+      first_tau_ = tau_;
+    }
+    last_p_ = p;
+    last_tau_ = tau_;
+  }
+  void begin_step() {
+    prev_last_p_ = last_p_;
+    prev_last_tau_ = last_tau_;
+    have_prev_last_ = have_last_any_;
+    have_first_ = false;
+  }
+  // q̈ into `a`: one counted RHS evaluation, recorded.
+  void acceleration(double t, const VectorXd & q, const VectorXd & v, VectorXd & a) {
+    ++n_rhs_;
+    torque(t, q, v);
+    a = k_.accel(q, v, tau_);
+    record(v);
+    have_last_any_ = true;
+  }
+  void implicit_terms(double t, const VectorXd & q, const VectorXd & v) {
+    ++n_rhs_;
+    ++n_jac_;
+    torque(t, q, v);
+    k_.terms(q, v, tau_);
+    record(v);
+    have_last_any_ = true;
+  }
+  void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh) {
+    ++n_factor_;
+    k_.factor(M, K, D, gh, kp_, kd_);
+  }
+  void integrate(const VectorXd & q, const VectorXd & dq, VectorXd & out) { pinocchio::integrate(model_, q, dq, out); }
+  // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks.
+  void chart_velocity(const VectorXd & q0, const VectorXd & delta, const VectorXd & v, VectorXd & out) {
+    out = v;
+    if (chart_.empty()) return;
+    pinocchio::dIntegrate(model_, q0, delta, dI_, pinocchio::ARG1);
+    for (const auto & [i0, n] : chart_)
+      out.segment(i0, n) = dI_.block(i0, i0, n, n).partialPivLu().solve(v.segment(i0, n));
+  }
+
+  // ---------------------------------------------------------------- one step of each method
+  // Σ cᵢ kᵢ over the first n stages' non-zero coefficients (explicit.py: _combine).
+  static void combine(const std::vector<double> & coeffs, const std::vector<VectorXd> & ks, std::size_t n,
+                      VectorXd & out) {
+    out.setZero(ks[0].size());
+    for (std::size_t i = 0; i < coeffs.size() && i < n; ++i)
+      if (coeffs[i] != 0.0) out += coeffs[i] * ks[i];
+  }
+
+  // Explicit Runge–Kutta stages in the chart around q (explicit.py: _stages); with `fsal`, stage 0 is a0_.
+  void rk_stages(double t, const VectorXd & q, const VectorXd & v, double h, bool fsal) {
+    const std::size_t s = tab_.A.size();
+    sd_.resize(s);
+    sa_.resize(s);
+    for (std::size_t i = 0; i < s; ++i) {
+      if (i == 0) {
+        sd_[0] = v;
+        if (fsal)
+          sa_[0] = a0_;
+        else
+          acceleration(t, q, v, sa_[0]);
+        continue;
+      }
+      combine(tab_.A[i], sd_, i, tmp_);
+      delta_ = h * tmp_;
+      combine(tab_.A[i], sa_, i, tmp_);
+      vs_ = v + h * tmp_;
+      integrate(q, delta_, qs_);
+      chart_velocity(q, delta_, vs_, sd_[i]);
+      acceleration(t + tab_.c[i] * h, qs_, vs_, sa_[i]);
+    }
+  }
+
+  // One step (fixed) or attempt (adaptive) from (t, q_, v_) into q_new_, v_new_; the error norm.
+  double step(double t, double h) {
+    const VectorXd & q = q_;
+    const VectorXd & v = v_;
+    switch (method_) {
+      case SYMPLECTIC_EULER:
+        acceleration(t, q, v, tmp_);
+        v_new_ = v + h * tmp_;
+        integrate(q, h * v_new_, q_new_);
+        return 0.0;
+      case RK: {
+        const bool fsal = adaptive_ && fsal_valid_;
+        rk_stages(t, q, v, h, fsal);
+        if (!adaptive_) {
+          combine(tab_.b, sd_, sd_.size(), tmp_);
+          integrate(q, h * tmp_, q_new_);
+          combine(tab_.b, sa_, sa_.size(), tmp_);
+          v_new_ = v + h * tmp_;
+          return 0.0;
+        }
+        q_new_ = qs_;  // the last stage is the solution (first same as last)
+        v_new_ = vs_;
+        std::vector<double> diff(tab_.b.size());
+        for (std::size_t i = 0; i < diff.size(); ++i) diff[i] = tab_.b[i] - tab_.b_hat[i];
+        combine(diff, sd_, sd_.size(), tmp_);
+        e_d_ = h * tmp_;
+        combine(diff, sa_, sa_.size(), tmp_);
+        e_v_ = h * tmp_;
+        a0_ = sa_.back();
+        fsal_p_ = last_p_;
+        fsal_tau_ = last_tau_;
+        return error_norm(q, v, v_new_);
+      }
+      case IMPLICIT_EULER: {
+        if (jacobian_every_ == 1) {
+          ++n_rhs_;
+          ++n_jac_;
+          ++n_factor_;
+          torque(t, q, v);
+          k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new_);
+          record(v);
+          have_last_any_ = true;
+          integrate(q, h * v_new_, q_new_);
+          return 0.0;
+        }
+        if (!w_ready_ || w_count_ >= jacobian_every_ || w_h_ != h) {
+          implicit_terms(t, q, v);
+          f1_ = k_.f_terms();
+          M_ = k_.mass();
+          factor(M_, k_.stiffness(), k_.damping_matrix(), h);
+          w_count_ = 0;
+          w_h_ = h;
+          w_ready_ = true;
+        } else {
+          acceleration(t, q, v, tmp_);
+          f1_.noalias() = M_ * tmp_;
+        }
+        ++w_count_;
+        k_.solve_into(v, f1_, kq1_, kv1_);
+        v_new_ = v + h * kv1_;
+        integrate(q, h * v_new_, q_new_);
+        return 0.0;
+      }
+      case ROSENBROCK: {
+        implicit_terms(t, q, v);
+        f1_ = k_.f_terms();
+        M_ = k_.mass();
+        factor(M_, k_.stiffness(), k_.damping_matrix(), gamma_ * h);
+        k_.solve_into(v, f1_, kq1_, kv1_);
+        delta_ = h * kq1_;
+        vs_ = v + h * kv1_;
+        integrate(q, delta_, qs_);
+        acceleration(t + h, qs_, vs_, tmp_);
+        chart_velocity(q, delta_, vs_, tmp2_);
+        tmp2_ -= 2.0 * kq1_;
+        tmp_ -= 2.0 * kv1_;
+        f1_.noalias() = M_ * tmp_;
+        k_.solve_into(tmp2_, f1_, kq2_, kv2_);
+        integrate(q, h * (1.5 * kq1_ + 0.5 * kq2_), q_new_);
+        v_new_ = v + h * (1.5 * kv1_ + 0.5 * kv2_);
+        if (!adaptive_) return 0.0;
+        e_d_ = 0.5 * h * (kq1_ + kq2_);
+        e_v_ = 0.5 * h * (kv1_ + kv2_);
+        return error_norm(q, v, v_new_);
+      }
+    }
+    return 0.0;
+  }
+
+  double error_norm(const VectorXd & q0, const VectorXd & v0, const VectorXd & v1) {
+    pinocchio::difference(model_, neutral_, q0, tmp2_);
+    double sum = 0.0;
+    for (Eigen::Index i = 0; i < e_d_.size(); ++i) {
+      const double sc = atol_ + rtol_ * std::abs(tmp2_[i]);
+      sum += (e_d_[i] / sc) * (e_d_[i] / sc);
+    }
+    double sum_v = 0.0;
+    for (Eigen::Index i = 0; i < e_v_.size(); ++i) {
+      const double sc = atol_ + rtol_ * std::max(std::abs(v0[i]), std::abs(v1[i]));
+      sum_v += (e_v_[i] / sc) * (e_v_[i] / sc);
+    }
+    return std::sqrt((sum + sum_v) / double(2 * e_v_.size()));
+  }
+
+  double next_step(double h, double error) const {
+    if (error == 0.0) return 5.0 * h;
+    return h * std::min(5.0, std::max(0.2, 0.9 * std::pow(error, -1.0 / (error_order_ + 1))));
+  }
+
+  // ---------------------------------------------------------------- the loop's bookkeeping
+  void save(double t, const VectorXd & q, const VectorXd & v, bool step_follows) {
+    T_.push_back(t);
+    Q_.insert(Q_.end(), q.data(), q.data() + q.size());
+    V_.insert(V_.end(), v.data(), v.data() + v.size());
+    if (step_follows) {
+      TAU_.resize(TAU_.size() + na_, 0.0);
+      pending_ = true;
+    } else {
+      torque(t, q, v);
+      TAU_.insert(TAU_.end(), tau_.data(), tau_.data() + na_);
+      pending_ = false;
+    }
+  }
+  // The pending sample's torque: the step's own evaluation at its start.
+  void settle(double t, bool reused_start) {
+    if (!pending_) return;
+    const VectorXd & tau = reused_start ? fsal_tau_start_ : first_tau_;
+    if (!reused_start && !have_first_) {
+      torque(t, Eigen::Map<const VectorXd>(&Q_[Q_.size() - model_.nq], model_.nq),
+             Eigen::Map<const VectorXd>(&V_[V_.size() - model_.nv], model_.nv));
+      std::copy(tau_.data(), tau_.data() + na_, TAU_.end() - na_);
+    } else {
+      std::copy(tau.data(), tau.data() + na_, TAU_.end() - na_);
+    }
+    pending_ = false;
+  }
+  double start_power(bool reused_start) const { return reused_start ? fsal_p_start_ : first_p_; }
+
+  bool diverged(double t, const VectorXd & q, const VectorXd & v, double h) {
+    if (v.squaredNorm() <= max_speed_ * max_speed_ && std::isfinite(q.squaredNorm())) return false;
+    const bool finite = q.allFinite() && v.allFinite();
+    if ((v.size() == 0 || v.cwiseAbs().maxCoeff() <= max_speed_) && finite) return false;
+    message_ = finite ? "fast" : "non-finite";
+    fail_t_ = t;
+    fail_h_ = h;
+    q_fail_ = q;
+    v_fail_ = v;
+    status_ = DIVERGED;
+    return true;
+  }
+
+  void after_step(double t) {
+    const int link = k_.rotation_alarm();
+    if (link < 0) return;
+    const double theta = k_.rotation_alarm_angle();
+    k_.clear_rotation_alarm();
+    if (std::find(warned_.begin(), warned_.end(), link) != warned_.end()) return;
+    warned_.push_back(link);
+    events_.push_back({0, double(link), theta, t, 0, 0});
+  }
+
+  void monitor_check(double t, const VectorXd & q, const VectorXd & v) {
+    double motion;
+    const double total = k_.total_energy(q, v, &motion);
+    Monitor & m = monitor_;
+    m.peak = std::max(m.peak, motion);
+    m.scale = m.peak + m.abs_work;
+    const double excess = (total - m.E0) - m.work;
+    const double tol = m.rtol * m.scale + m.uncertainty + 1e-9 * (std::abs(m.E0) + 1.0);
+    m.max_excess = std::max(m.max_excess, excess);
+    if (excess > tol && !m.violated) {
+      m.violated = true;
+      events_.push_back({1, t, total - m.E0, m.work, excess, m.scale});
+      if (m.raise) status_ = ENERGY;
+    }
+  }
+  void monitor_after_step(double t0, const VectorXd & q0, const VectorXd & v0, double h, bool reused_start) {
+    monitor_.close_interval(start_power(reused_start), h, true);
+    ++monitor_.steps;
+    if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
+  }
+  void monitor_finish(double t, const VectorXd & q, const VectorXd & v) {
+    torque(t, q, v);
+    k_.accel(q, v, tau_);
+    monitor_.close_interval(net_power(v), 0.0, false);
+    monitor_check(t, q, v);
+  }
+
+  void finish() {
+    if (monitor_.on) monitor_finish(t_, q_, v_);
+    if (status_ == RUNNING) status_ = DONE;
+    settle_fresh();
+  }
+
+  void fail(int status, const std::string & message) {
+    status_ = status;
+    message_ = message;
+    settle_fresh();
+  }
+
+  void settle_fresh() {
+    if (pending_) {  // the last sample's torque, computed afresh
+      try {
+        torque(T_.back(), Eigen::Map<const VectorXd>(&Q_[Q_.size() - model_.nq], model_.nq),
+               Eigen::Map<const VectorXd>(&V_[V_.size() - model_.nv], model_.nv));
+        std::copy(tau_.data(), tau_.data() + na_, TAU_.end() - na_);
+      } catch (const std::exception &) {
+      }
+      pending_ = false;
+    }
+  }
+
+  // One accepted step's tail: checks, warnings, the monitor; false when the run must stop.
+  bool accept(double t, double t_new, double h, bool reused_start) {
+    if (diverged(t_new, q_new_, v_new_, h)) return false;
+    after_step(t_new);
+    if (monitor_.on) {
+      monitor_after_step(t, q_, v_, h, reused_start);
+      if (status_ != RUNNING) return false;
+    }
+    t_ = t_new;
+    q_.swap(q_new_);
+    v_.swap(v_new_);
+    ++n_accepted_;
+    return true;
+  }
+
+  void run_fixed(long budget) {
+    for (; budget > 0; --budget) {
+      const long k = k_step_;
+      if (k % every_ == 0 || k == n_steps_) save(t_, q_, v_, k < n_steps_);
+      if (k == n_steps_) {
+        finish();
+        return;
+      }
+      const double h = std::min(dt_, t_final_ - double(k) * dt_);
+      begin_step();
+      try {
+        step(t_, h);
+      } catch (const ControllerFailure & e) {
+        fail(CONTROLLER, e.what());
+        return;
+      }
+      settle(t_, false);
+      const double t_new = (k + 1 == n_steps_) ? t_final_ : double(k + 1) * dt_;
+      if (!accept(t_, t_new, h, false)) return;
+      ++k_step_;
+    }
+  }
+
+  void run_adaptive(long budget) {
+    for (; budget > 0; --budget) {
+      while (j_out_ < outputs_.size() && outputs_[j_out_] <= t_) ++j_out_;
+      if (j_out_ == outputs_.size()) {
+        finish();
+        return;
+      }
+      const double t_out = outputs_[j_out_];
+      double h_try = std::min(h_, t_out - t_);
+      if (t_ + h_try * (1.0 + 1e-9) >= t_out) h_try = t_out - t_;
+      begin_step();
+      const bool reused = method_ == RK && fsal_valid_;
+      if (reused) {
+        fsal_p_start_ = fsal_p_;
+        fsal_tau_start_ = fsal_tau_;
+      }
+      double err;
+      try {
+        err = step(t_, h_try);
+      } catch (const ControllerFailure & e) {
+        fail(CONTROLLER, e.what());
+        return;
+      }
+      settle(t_, reused);
+      h_ = next_step(h_try, err);
+      if (!(err <= 1.0)) {
+        fsal_valid_ = false;
+        k_.clear_rotation_alarm();
+        ++n_rejected_;
+        if (h_ < h_min_ || !std::isfinite(err)) {
+          if (diverged(t_ + h_try, q_new_, v_new_, h_try)) return;
+          fail_t_ = t_;
+          status_ = H_MIN;
+          return;
+        }
+        continue;
+      }
+      fsal_valid_ = method_ == RK;
+      const double t_new = (h_try == t_out - t_) ? t_out : t_ + h_try;
+      if (!accept(t_, t_new, h_try, reused)) return;
+      if (t_ >= t_out) {
+        save(t_, q_, v_, t_ < t_final_);
+        ++j_out_;
+      }
+    }
+  }
+
+  Kernel & k_;
+  const Model & model_;
+  std::unique_ptr<Controller> ctrl_;
+  int method_;
+  Tableau tab_;
+  bool adaptive_;
+  double gamma_;
+  int jacobian_every_, error_order_;
+  VectorXd kp_, kd_;
+  double dt_, t_final_;
+  long n_steps_, every_;
+  double max_speed_, rtol_, atol_, h_min_;
+  Eigen::Index na_ = 0;
+  Eigen::VectorXi act_;
+  VectorXd neutral_;
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> chart_;
+  MatrixXd dI_;
+  std::vector<double> outputs_;
+  std::size_t j_out_ = 0;
+  // state
+  int status_ = RUNNING;
+  double t_ = 0.0, h_ = 0.0;
+  long k_step_ = 0;
+  VectorXd q_, v_, q_new_, v_new_;
+  long n_rhs_ = 0, n_jac_ = 0, n_factor_ = 0, n_accepted_ = 0, n_rejected_ = 0;
+  // the records of evaluations (System._first / _last)
+  VectorXd tau_, first_tau_, last_tau_, prev_last_tau_, fsal_tau_, fsal_tau_start_;
+  double first_p_ = 0, last_p_ = 0, prev_last_p_ = 0, fsal_p_ = 0, fsal_p_start_ = 0;
+  bool have_first_ = false, have_last_any_ = false, have_prev_last_ = false, pending_ = false, fsal_valid_ = false;
+  // scratch
+  std::vector<VectorXd> sd_, sa_;  // the stages' chart rates and accelerations
+  VectorXd tmp_, tmp2_, delta_, vs_, qs_, a0_, e_d_, e_v_, f1_, kq1_, kv1_, kq2_, kv2_;
+  MatrixXd M_;
+  bool w_ready_ = false;
+  int w_count_ = 0;
+  double w_h_ = 0.0;
+  // outputs
+  std::vector<double> T_, Q_, V_, TAU_;
+  std::vector<Event> events_;
+  std::vector<int> warned_;
+  Monitor monitor_;
+  std::string message_;
+  double fail_t_ = 0.0, fail_h_ = 0.0;
+  VectorXd q_fail_, v_fail_;
+
+public:
+  void set_first_step(double h) { h_ = h; }
+};
+
+}  // namespace coopdyn_native

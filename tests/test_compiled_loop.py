@@ -1,0 +1,180 @@
+"""The compiled step loop (src/native/loop.hpp) against the Python loop: the same steps, samples,
+torques, counters, warnings and errors, to round-off — for every built-in integrator and
+controller — and the cases that must stay in Python."""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+import coopdyn as cd
+from coopdyn.control import ComputedTorque, GravityCompensationPD
+from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.integrators import RK4, DormandPrince, LinearlyImplicitEuler, Trapezoid
+from coopdyn.scenes import object_start
+
+METHODS = [
+    "symplectic_euler",
+    "rk4",
+    "implicit_euler",
+    LinearlyImplicitEuler(jacobian_every=3),
+    "ros2",
+    "trapezoid",
+    Trapezoid(rho_inf=0.5),
+    DormandPrince(rtol=1e-7, atol=1e-9),
+    "ros2_adaptive",
+]
+
+
+def _both(scene: cd.Scene, t_final: float, **kwargs: object) -> tuple[cd.Result, cd.Result]:
+    py = cd.simulate(scene, t_final, loop="python", **kwargs)  # type: ignore[arg-type]
+    co = cd.simulate(scene, t_final, loop="compiled", **kwargs)  # type: ignore[arg-type]
+    assert (py.loop, co.loop) == ("python", "compiled")
+    return py, co
+
+
+def _assert_same(py: cd.Result, co: cd.Result, rtol: float = 1e-9) -> None:
+    assert co.t.shape == py.t.shape and np.allclose(co.t, py.t, rtol=0, atol=1e-12)
+    for name in ("q", "v", "tau"):
+        a, b = getattr(py, name), getattr(co, name)
+        assert np.max(np.abs(a - b)) <= rtol * max(1.0, np.max(np.abs(a))), name
+    for name in ("n_rhs", "n_jac", "n_factor", "n_steps", "n_rejected", "status"):
+        assert getattr(co, name) == getattr(py, name), name
+
+
+@pytest.mark.parametrize("method", METHODS, ids=str)
+def test_every_built_in_method_gives_the_python_loops_result(pandas: cd.Scene, method: object) -> None:
+    """Two Pandas + box under gravity compensation + PD, perturbed start, 0.1 s."""
+    v0 = np.random.default_rng(1).normal(size=pandas.nv) * 0.3
+    py, co = _both(pandas, 0.1, controller=GravityCompensationPD(pandas), integrator=method, dt=1e-3, v0=v0, save_every=3)
+    _assert_same(py, co)
+
+
+@pytest.fixture(scope="module")
+def damped() -> cd.Scene:
+    return cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+
+
+@pytest.mark.parametrize("method", ["implicit_euler", "rk4", "trapezoid", "dopri5"])
+def test_object_impedance_with_the_book_task_runs_compiled_with_the_same_result(damped: cd.Scene, method: str) -> None:
+    """The demo's controller (grip, lift, oscillate) over the grip and the lift's start, 1 s."""
+    ctrl = ObjectImpedance(damped, GripLiftOscillate(start=object_start(damped), squeeze=20.0, t_lift=0.5))
+    py, co = _both(damped, 1.0, controller=ctrl, integrator=method, dt=5e-4 if method == "rk4" else 1e-3, save_every=10)
+    _assert_same(py, co)
+
+
+def test_object_impedance_holding_computed_torque_and_no_controller(damped: cd.Scene) -> None:
+    for ctrl in (ObjectImpedance(damped), ComputedTorque(damped), None):
+        py, co = _both(damped, 0.2, controller=ctrl, integrator="implicit_euler", dt=1e-3)
+        _assert_same(py, co)
+
+
+@pytest.mark.parametrize("method", ["rk4", "trapezoid", "dopri5"])
+def test_open_loop_drives_on_the_book_case(book: cd.Scene, method: str) -> None:
+    d1, d2 = cd.scenes.book_task()
+    py, co = _both(book, 3.0, controller=cd.scenes.drives_controller(d1, d2), integrator=method, dt=1e-3, save_every=7)
+    _assert_same(py, co)
+
+
+def test_python_pieces_run_in_the_python_loop(pandas: cd.Scene) -> None:
+    """A Python controller, a subclass of a built-in method, an object wrench: the Python loop,
+    chosen automatically; loop='compiled' says which piece is Python."""
+
+    def ctrl(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.zeros(pandas.n_actuated)
+
+    class MyRK4(RK4):
+        pass
+
+    assert cd.simulate(pandas, 0.01, controller=ctrl).loop == "python"
+    assert cd.simulate(pandas, 0.01, integrator=MyRK4()).loop == "python"
+    assert cd.simulate(pandas, 0.01, object_wrench=lambda t: np.zeros(6)).loop == "python"
+    assert cd.simulate(pandas, 0.01, backend="python").loop == "python"
+    assert cd.simulate(pandas, 0.01).loop == "compiled"
+    with pytest.raises(cd.SimulationError, match=r"cannot run this simulation: the controller function is Python"):
+        cd.simulate(pandas, 0.01, controller=ctrl, loop="compiled")
+    with pytest.raises(cd.SimulationError, match=r"loop must be 'auto', 'compiled' or 'python', got 'fast'"):
+        cd.simulate(pandas, 0.01, loop="fast")
+
+
+def test_a_divergence_in_the_compiled_loop_is_reported_like_in_python() -> None:
+    """rk4 far above its stability limit: the same DivergenceError, time and partial result."""
+    stiff = cd.scenes.facing_arms("panda", stiffness=1e6)
+    errors = []
+    for loop in ("python", "compiled"):
+        with pytest.raises(cd.DivergenceError) as info, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            cd.simulate(stiff, 1.0, controller=GravityCompensationPD(stiff), integrator="rk4", dt=2e-3, loop=loop)
+        errors.append(info.value)
+    py, co = errors
+    assert str(co) == str(py)
+    assert co.result.loop == "compiled" and co.result.status == "diverged"
+    _assert_same(py.result, co.result)
+
+
+def test_energy_warning_is_the_same_in_both_loops() -> None:
+    """The book case with springs too stiff for symplectic Euler at 1 ms: the monitor warns before
+    the divergence, with the same text in both loops, attributed to the caller."""
+    stiff = cd.scenes.linear_book(c_p=2e8, c_k=2e8, d_p=0.0, d_k=0.0)
+    ctrl = cd.scenes.drives_controller(*cd.scenes.book_task())
+    texts, errors = [], []
+    for loop in ("python", "compiled"):
+        with warnings.catch_warnings(record=True) as caught, pytest.raises(cd.DivergenceError) as info:
+            warnings.simplefilter("always")
+            cd.simulate(stiff, 1.0, controller=ctrl, integrator="symplectic_euler", dt=1e-3, loop=loop)
+        energy = [w for w in caught if issubclass(w.category, cd.EnergyBalanceWarning)]
+        assert all(w.filename == __file__ for w in energy)
+        texts.append([str(w.message) for w in energy])
+        errors.append(str(info.value))
+    assert len(texts[0]) == 1 and texts[1] == texts[0]
+    assert errors[1] == errors[0]
+
+
+def test_ctrl_c_during_a_compiled_run_keeps_the_trajectory(pandas: cd.Scene) -> None:
+    """A KeyboardInterrupt arrives between chunks: SimulationInterrupted with the samples so far."""
+    import _thread
+
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(cd.SimulationInterrupted) as info:
+            cd.simulate(
+                pandas, 200.0, controller=GravityCompensationPD(pandas), integrator="implicit_euler", dt=1e-3, save_every=10
+            )
+    finally:
+        timer.cancel()
+    res = info.value.result
+    assert res.loop == "compiled" and res.status == "interrupted"
+    assert 0.0 < res.t[-1] < 200.0 and np.all(np.isfinite(res.tau)) and len(res.t) == len(res.tau)
+    assert res.n_steps >= round(res.t[-1] / 1e-3)
+
+
+def test_the_compiled_loop_releases_the_gil(pandas: cd.Scene, monkeypatch: pytest.MonkeyPatch) -> None:
+    """While one thread runs a compiled simulation in one long chunk (about a second of work),
+    another thread keeps running Python: its longest wait for the GIL stays far below the chunk."""
+    monkeypatch.setattr(cd.compiled, "CHUNK", 100_000)
+    done = threading.Event()
+    gaps = [0.0]
+
+    def spin() -> None:
+        last = time.perf_counter()
+        while not done.is_set():
+            now = time.perf_counter()
+            gaps[0] = max(gaps[0], now - last)
+            last = now
+
+    thread = threading.Thread(target=spin)
+    thread.start()
+    try:
+        t0 = time.perf_counter()
+        res = cd.simulate(pandas, 100.0, integrator="implicit_euler", dt=1e-3, save_every=1000, energy_check="off")
+        wall = time.perf_counter() - t0
+    finally:
+        done.set()
+        thread.join()
+    assert res.loop == "compiled" and res.n_steps == 100_000
+    assert gaps[0] < 0.25 * wall, (gaps[0], wall)
