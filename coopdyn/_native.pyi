@@ -1,4 +1,5 @@
-"""Type stub of the compiled kernel (src/native/kernel.cpp): the dynamics (coopdyn.dynamics.native) and the step loop (coopdyn.compiled)."""
+"""Type stub of the compiled kernel (src/native/kernel.cpp): the dynamics (coopdyn.dynamics.native)
+and the step loop (coopdyn.compiled)."""
 
 from typing import Any
 
