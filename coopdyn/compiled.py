@@ -61,6 +61,12 @@ def plan(
         controller = _own_spec(system.controller, scene)
         if controller is None:
             return None, f"the controller {type(system.controller).__name__} is Python code"
+    if spec["method"] == "exponential":  # discretised here, once per step size the run takes
+        ws = method.workspace(system)
+        last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}
+        steps = sorted({min(dt, t_final - k * dt) for k in last})
+        spec["discretisations"] = [(h, *method.discretisation(system, h, ws)) for h in steps]  # type: ignore[attr-defined]
+        spec["n_factor"] = system.n_factor
     kp, kd = system.gains
     adaptive = bool(spec.get("adaptive", False))
     config = {

@@ -99,6 +99,12 @@ class NativeDynamics(Dynamics):
         except Exception as exc:
             raise _kernel_error(exc, "implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)") from exc
 
+    def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        try:
+            return self._kernel.spring_force(q, v)
+        except Exception as exc:
+            raise _kernel_error(exc, "spring_force(q, v)") from exc
+
     def compiled_loop(self, config: dict[str, object]) -> object:
         """A compiled run of this scene (coopdyn.compiled writes ``config``); the kernel object
         it steps stays alive with it."""

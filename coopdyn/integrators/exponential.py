@@ -92,10 +92,13 @@ class Exponential(Integrator):
             raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {hold!r}")
         self.hold = hold
 
+    def compiled_spec(self) -> dict[str, Any]:
+        return {"method": "exponential"}
+
     def workspace(self, system: Problem) -> _Discretisations:
         return _Discretisations()
 
-    def _discrete(
+    def discretisation(
         self, system: Problem, h: float, ws: _Discretisations | None
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, int]:
         """For z = (x, u₀, 1): the step ``[Φ Γ₀ γ]``, the stacked predictions of the inner
@@ -120,7 +123,7 @@ class Exponential(Integrator):
     ) -> tuple[np.ndarray, np.ndarray]:
         if system.has_object_wrench:
             raise SimulationError("the exponential integrator does not take object_wrench (its discretisation has no such input)")
-        step, predictor, inner, p = self._discrete(system, h, ws)
+        step, predictor, inner, p = self.discretisation(system, h, ws)
         n = q.size
         u0 = system.torque(t, q, v)
         z = np.concatenate([q, v, u0, _ONE])

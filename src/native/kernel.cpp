@@ -104,6 +104,7 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
   else if (method == "rk") m = cn::RK;
   else if (method == "implicit_euler") m = cn::IMPLICIT_EULER;
   else if (method == "rosenbrock") m = cn::ROSENBROCK;
+  else if (method == "exponential") m = cn::EXPONENTIAL;
   else throw std::invalid_argument("compiled loop: unknown method " + method);
   if (m == cn::RK) {
     bp::list A = get<bp::list>(cfg, "A");
@@ -120,6 +121,22 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
     get<int>(cfg, "energy_mode"), get<long>(cfg, "energy_every"), get<double>(cfg, "energy_rtol"), get<double>(cfg, "rtol"), get<double>(cfg, "atol"),
     get<double>(cfg, "h_min"));
   loop->set_first_step(get<double>(cfg, "dt"));
+  if (m == cn::EXPONENTIAL) {
+    bp::list steps = get<bp::list>(cfg, "discretisations");
+    for (bp::ssize_t i = 0; i < bp::len(steps); ++i) {
+      bp::tuple d = bp::extract<bp::tuple>(steps[i]);
+      cn::Discretisation x;
+      x.h = bp::extract<double>(d[0]);
+      x.step = bp::extract<MatrixXd>(d[1]);
+      x.p = bp::extract<int>(d[4]);
+      if (x.p > 0) {
+        x.predictor = bp::extract<MatrixXd>(d[2]);
+        x.inner = bp::extract<MatrixXd>(d[3]);
+      }
+      loop->add_discretisation(std::move(x));
+    }
+  }
+  if (cfg.has_key("n_factor")) loop->set_factorisations(get<long>(cfg, "n_factor"));
   return loop;
 }
 
@@ -149,6 +166,7 @@ BOOST_PYTHON_MODULE(_native) {
     .def("implicit_euler_velocity", &Kernel::implicit_euler_velocity,
          bp::args("self", "q", "v", "tau", "h", "kp", "kd", "wrench"))
     .def("elastic_energies", &Kernel::elastic_energies, bp::args("self"))
+    .def("spring_force", &Kernel::spring_force, bp::args("self", "q", "v"))
     .def("element_states", &Kernel::element_states, bp::args("self", "q", "v"))
     .def("readouts", &Kernel::readouts, bp::args("self", "Q", "V"))
     .def("clear_rotation_alarm", &Kernel::clear_rotation_alarm, bp::args("self"))

@@ -97,6 +97,13 @@ public:
     return pinocchio::aba(model_, data_, q, v, tau_full_);
   }
 
+  // Q = Σ Jrᵀ G_f_G (nv), the interconnections' generalized force at (q, v).
+  VectorXd spring_force(const RefVec & q, const RefVec & v) {
+    const VectorXd tau = VectorXd::Zero(actuated_.size());
+    generalized_force(q, v, tau, nullptr, false);
+    return Q_;
+  }
+
   // --- the C++ interface of the compiled step loop (loop.hpp): no Python objects, no wrench ---
   const Model & model() const { return model_; }
   const Eigen::VectorXi & actuated() const { return actuated_; }

@@ -23,11 +23,19 @@ namespace coopdyn_native {
 
 enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7 };
 
-enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK };
+enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK, EXPONENTIAL };
 
 struct Tableau {
   std::vector<std::vector<double>> A;
   std::vector<double> b, c, b_hat;
+};
+
+// The exponential integrator's discretisation for one step size (exponential.py: _discrete):
+// x⁺ = step·(x, u₀, 1) + inner·(u₁ … u_p), the uᵢ at the states predictor·(x, u₀, 1).
+struct Discretisation {
+  double h;
+  MatrixXd step, predictor, inner;
+  int p;
 };
 
 struct Event {  // a warning for Python to issue
@@ -222,8 +230,14 @@ private:
     out = v;
     if (chart_.empty()) return;
     pinocchio::dIntegrate(model_, q0, delta, dI_, pinocchio::ARG1);
-    for (const auto & [i0, n] : chart_)
-      out.segment(i0, n) = dI_.block(i0, i0, n, n).partialPivLu().solve(v.segment(i0, n));
+    for (const auto & [i0, n] : chart_) {
+      if (n == 6)  // free flyer: fixed size, no allocation
+        out.segment<6>(i0) = Eigen::Matrix<double, 6, 6>(dI_.block<6, 6>(i0, i0)).partialPivLu().solve(v.segment<6>(i0));
+      else if (n == 3)
+        out.segment<3>(i0) = Eigen::Matrix3d(dI_.block<3, 3>(i0, i0)).partialPivLu().solve(v.segment<3>(i0));
+      else
+        out.segment(i0, n) = dI_.block(i0, i0, n, n).partialPivLu().solve(v.segment(i0, n));
+    }
   }
 
   // ---------------------------------------------------------------- one step of each method
@@ -320,6 +334,34 @@ private:
         k_.solve_into(v, f1_, kq1_, kv1_);
         v_new_ = v + h * kv1_;
         integrate(q, h * v_new_, q_new_);
+        return 0.0;
+      }
+      case EXPONENTIAL: {
+        const Discretisation * d = nullptr;
+        for (const Discretisation & x : exp_) if (x.h == h) d = &x;
+        if (!d) throw std::runtime_error("no exponential discretisation for this step size");
+        const Eigen::Index n = q.size();
+        torque(t, q, v);
+        have_first_ = true;
+        first_tau_ = tau_;
+        z_.resize(2 * n + na_ + 1);
+        z_ << q, v, tau_, 1.0;
+        x_ = d->step * z_;
+        ++n_rhs_;
+        if (d->p > 0 && na_ > 0) {
+          X_ = d->predictor * z_;
+          U_.resize(d->p * na_);
+          for (int i = 1; i <= d->p; ++i) {
+            qi_ = X_.segment((i - 1) * 2 * n, n);
+            vi_ = X_.segment((i - 1) * 2 * n + n, n);
+            torque(t + h * i / d->p, qi_, vi_);
+            U_.segment((i - 1) * na_, na_) = tau_;
+          }
+          x_ += d->inner * U_;
+          n_rhs_ += d->p;
+        }
+        q_new_ = x_.head(n);
+        v_new_ = x_.tail(n);
         return 0.0;
       }
       case ROSENBROCK: {
@@ -589,6 +631,8 @@ private:
   std::vector<VectorXd> sd_, sa_;  // the stages' chart rates and accelerations
   VectorXd tmp_, tmp2_, delta_, vs_, qs_, a0_, e_d_, e_v_, f1_, kq1_, kv1_, kq2_, kv2_;
   MatrixXd M_;
+  std::vector<Discretisation> exp_;
+  VectorXd z_, x_, X_, U_, qi_, vi_;
   bool w_ready_ = false;
   int w_count_ = 0;
   double w_h_ = 0.0;
@@ -603,6 +647,8 @@ private:
 
 public:
   void set_first_step(double h) { h_ = h; }
+  void add_discretisation(Discretisation d) { exp_.push_back(std::move(d)); }
+  void set_factorisations(long n) { n_factor_ = n; }
 };
 
 }  // namespace coopdyn_native
