@@ -70,9 +70,10 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from .bench import run_benchmarks
+    from .bench import run_benchmarks, run_peer_comparison
 
-    print(run_benchmarks(args.out, quick=args.quick)["report"])
+    run = run_peer_comparison if args.peers else run_benchmarks
+    print(run(args.out, quick=args.quick)["report"])
     return 0
 
 
@@ -112,6 +113,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     bench = sub.add_parser("bench", help="work–precision and stability benchmarks (tables, CSV, PNG)")
     bench.add_argument("--out", default="out/bench", help="output folder (default: out/bench)")
     bench.add_argument("--quick", action="store_true", help="few points, short runs, one repetition (CI)")
+    bench.add_argument(
+        "--peers", action="store_true", help="instead: coopdyn vs MuJoCo on the Panda scene, interleaved (needs mujoco)"
+    )
     bench.set_defaults(func=_bench)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)

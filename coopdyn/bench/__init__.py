@@ -28,6 +28,37 @@ from .report import (
 from .stability import is_stable_at, measure_stable_dt
 
 
+def run_peer_comparison(
+    out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True
+) -> dict[str, Any]:
+    """coopdyn against MuJoCo on the Panda scene, k = 1e4 and 1e6 N/m (:mod:`.panda_peers`);
+    writes ``peers.csv`` and ``peers.png`` (work–precision, every simulator on the same axes) and
+    returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
+
+    Raises:
+        MissingDependencyError: MuJoCo is not installed (``pip install mujoco``).
+    """
+    from .._optional import require
+    from .panda_peers import compare, format_comparison
+
+    require("mujoco", "the MuJoCo peer", "mujoco")
+    out_dir = Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=1 if quick else 5, progress=progress)
+    files = {
+        "rows": write_csv(result["rows"], out_dir / "peers.csv"),
+        "chart": plot_work_precision(result["rows"], out_dir / "peers.png"),
+    }
+    report = "\n\n".join(
+        [
+            format_rows(result["rows"]),
+            format_comparison(result),
+            "\n".join(f"wrote {path}  ({name})" for name, path in files.items()),
+        ]
+    )
+    return {**result, "files": files, "report": report}
+
+
 def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:
     """The whole benchmark: work–precision, stability, timings; writes CSV and charts and returns
     the measurements with ``"report"``, the tables as text (``coopdyn bench`` prints it)."""
@@ -35,7 +66,7 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     out_dir.mkdir(parents=True, exist_ok=True)
     stiffnesses = [1e4, 1e5, 1e6]
     cases = [linear_case(3.0)] + [panda_case(k, 0.1 if quick else 0.2) for k in stiffnesses]
-    methods = ["symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "ros2_adaptive", "exponential"]
+    methods = ["symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "ros2_adaptive", "trapezoid", "exponential"]
     rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
     rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
     stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)
@@ -70,6 +101,7 @@ __all__ = [
     "read_csv",
     "rhs_timing",
     "run_benchmarks",
+    "run_peer_comparison",
     "stability_sweep",
     "work_precision",
 ]

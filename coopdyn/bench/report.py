@@ -39,6 +39,9 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
 
     plt = _pyplot()
     names = list(dict.fromkeys(r.scene for r in rows))
+    methods = list(dict.fromkeys(r.method for r in rows))
+    palette = plt.get_cmap("tab10").colors + plt.get_cmap("Dark2").colors
+    colour = {m: palette[i % len(palette)] for i, m in enumerate(methods)}  # one colour per method in every panel
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), constrained_layout=True, squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
         n_bad = 0
@@ -46,7 +49,14 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
                 style = "x--" if method.startswith("mujoco") else "o-"  # peers dashed
-                ax.loglog([r.cpu_per_sim_s for r in pts], [max(r.wrench_error, 1e-16) for r in pts], style, label=method, ms=4)
+                ax.loglog(
+                    [r.cpu_per_sim_s for r in pts],
+                    [max(r.wrench_error, 1e-16) for r in pts],
+                    style,
+                    label=method,
+                    ms=4,
+                    color=colour[method],
+                )
             bad = [r for r in rows if r.scene == name and r.method == method and not r.stable]
             for r in bad:
                 n_bad += 1

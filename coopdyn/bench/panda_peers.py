@@ -1,0 +1,189 @@
+"""coopdyn against MuJoCo on the Panda scene (``coopdyn bench --peers``), interleaved in one process.
+
+For each stiffness: the benchmark's Panda case (two Pandas + 2 kg box, undamped
+interconnections, gravity compensation + PD 50/5, perturbed start; reference Dormand–Prince at
+rtol 1e-11), built in MuJoCo from coopdyn's own model (:mod:`.mujoco_scene`) after checking that
+the accelerations agree at random states. Every run — coopdyn's methods over steps and
+tolerances, MuJoCo's ``implicitfast`` and ``RK4`` over steps — is timed in rounds: round r runs
+every point once, so machine noise hits all simulators alike; the CPU time is the median over
+rounds. Errors are each run's largest interconnection-force error on the 10 ms output grid,
+against the same reference (MuJoCo's trajectory is read back into coopdyn's coordinates and its
+forces are evaluated by the same law).
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import warnings
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..errors import DivergenceError, EnergyBalanceWarning
+from ..integrators import INTEGRATORS, Integrator
+from ..result import Result
+from ..simulate import simulate
+from .cases import OUTPUT_INTERVAL, Case, Row, _forces, panda_case
+
+#: force-error levels of the comparison table [N]
+LEVELS = (10.0, 0.1, 1e-3, 1e-6)
+#: coopdyn methods in the comparison (fixed steps, or tolerances for the adaptive one)
+METHODS = ("implicit_euler", "trapezoid", "ros2", "rk4", "dopri5")
+MUJOCO = ("implicitfast", "RK4")
+
+
+def _steps(quick: bool) -> list[float]:
+    n = 4 if quick else 8
+    return [5e-3 / 2**k for k in range(n)]
+
+
+def _rtols(quick: bool) -> list[float]:
+    return [1e-4, 1e-7, 1e-10] if quick else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
+
+
+def _errors(case: Case, res: Result) -> tuple[float, float]:
+    pos, forces = case.reference(res)
+    return (
+        float(np.max(np.linalg.norm(res.object_position() - pos, axis=1))),
+        float(np.max(np.linalg.norm(_forces(res) - forces, axis=2))),
+    )
+
+
+def _coopdyn_point(case: Case, method: str, dt: float, rtol: float) -> Callable[[], tuple[float, Result | None]]:
+    def run() -> tuple[float, Result | None]:
+        cls = INTEGRATORS[method]
+        integrator: Integrator = cls(rtol=rtol, atol=rtol * 1e-3) if cls.adaptive else cls()  # type: ignore[call-arg]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", EnergyBalanceWarning)
+                res = simulate(
+                    case.scene,
+                    case.t_final,
+                    controller=case.controller,
+                    integrator=integrator,
+                    dt=dt,
+                    save_every=max(1, round(OUTPUT_INTERVAL / dt)),
+                    v0=case.v0,
+                )
+        except DivergenceError:
+            return math.nan, None
+        return res.cpu_time, res
+
+    return run
+
+
+def _mujoco_point(case: Case, integrator: str, dt: float) -> Callable[[], tuple[float, Result | None]]:
+    from .mujoco_scene import MujocoScene
+
+    peer = MujocoScene(case.scene, case.controller, integrator, dt)
+
+    def run() -> tuple[float, Result | None]:
+        save_every = max(1, round(OUTPUT_INTERVAL / dt))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t, Q, V, cpu, n_steps = peer.run(case.scene.q0, case.v0, case.t_final, save_every)
+        if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1:
+            return math.nan, None  # stopped at a non-finite state
+        tau = np.zeros((t.size, case.scene.n_actuated))
+        res = Result(case.scene, t, Q, V, tau, f"mujoco {integrator}", dt, n_steps * (4 if integrator == "RK4" else 1), cpu)
+        if not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
+            return math.nan, None
+        return cpu, res
+
+    return run
+
+
+def compare(
+    stiffnesses: Sequence[float] = (1e4, 1e6),
+    *,
+    t_final: float = 1.0,
+    quick: bool = False,
+    rounds: int = 5,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the comparison; returns ``rows`` (:class:`Row`, MuJoCo's methods named ``"mujoco …"``)
+    and ``checks`` (stiffness → largest relative acceleration difference MuJoCo vs coopdyn)."""
+    from .measure import _bar
+    from .mujoco_scene import MujocoScene
+
+    cases = [panda_case(k, t_final) for k in stiffnesses]
+    checks = {}
+    plan: list[tuple[Case, str, str, float, float, Callable[[], tuple[float, Result | None]]]] = []
+    for case in cases:
+        checks[case.name] = MujocoScene(case.scene, case.controller, "RK4", 1e-3).check()
+        if checks[case.name] > 1e-9:
+            raise RuntimeError(f"MuJoCo's accelerations differ from coopdyn's by {checks[case.name]:.1e} on {case.name}")
+        h = OUTPUT_INTERVAL
+        for m in METHODS:
+            if INTEGRATORS[m].adaptive:
+                plan += [(case, m, f"rtol={r:g}", h, r, _coopdyn_point(case, m, h, r)) for r in _rtols(quick)]
+            else:
+                plan += [(case, m, f"dt={dt:g}", dt, math.nan, _coopdyn_point(case, m, dt, math.nan)) for dt in _steps(quick)]
+        for mj in MUJOCO:
+            plan += [(case, f"mujoco {mj}", f"dt={dt:g}", dt, math.nan, _mujoco_point(case, mj, dt)) for dt in _steps(quick)]
+    cpu: dict[int, list[float]] = {i: [] for i in range(len(plan))}
+    results: dict[int, Result | None] = {}
+    with _bar(len(plan) * rounds, "coopdyn vs MuJoCo", progress) as bar:
+        for _ in range(rounds):
+            for i, (case, method, label, _, _, run) in enumerate(plan):
+                if i in results and (results[i] is None or sum(cpu[i]) > 10.0):  # diverged, or slow enough
+                    bar.update(1)
+                    continue
+                seconds, res = run()
+                cpu[i].append(seconds)
+                results.setdefault(i, res)
+                bar.set_postfix_str(f"{case.name} {method} {label}")
+                bar.update(1)
+    rows = []
+    for i, (case, method, label, dt, rtol, _) in enumerate(plan):
+        res = results[i]
+        if res is None:
+            rows.append(Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, False))
+            continue
+        pos_err, force_err = _errors(case, res)
+        rows.append(
+            Row(
+                case.name,
+                method,
+                label,
+                dt,
+                rtol,
+                pos_err,
+                force_err,
+                statistics.median(cpu[i]) / case.t_final,
+                res.n_rhs,
+                res.n_factor,
+                True,
+                False,
+            )
+        )
+    return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final}
+
+
+def format_comparison(result: dict[str, Any]) -> str:
+    """For each scene and force-error level: the cheapest run of each simulator that reaches it
+    and the ratio coopdyn / best peer (< 1: coopdyn is cheaper)."""
+    from .report import _best_to_reach
+
+    rows: list[Row] = result["rows"]
+    lines = [
+        "coopdyn vs MuJoCo (same model, same interconnection law, same controller), "
+        f"{result['t_final']:g} s, CPU median of {result['rounds']} interleaved rounds",
+        "accelerations checked first, largest relative difference: "
+        + ", ".join(f"{name}: {err:.1e}" for name, err in result["checks"].items()),
+    ]
+    head = f"{'scene':<16} {'level [N]':>9}  {'coopdyn: cheapest run':<34} {'MuJoCo: cheapest run':<36} {'ratio':>6}"
+    lines += [head, "-" * len(head)]
+    for scene in dict.fromkeys(r.scene for r in rows):
+        mine = [r for r in rows if r.scene == scene and not r.method.startswith("mujoco")]
+        peer = [r for r in rows if r.scene == scene and r.method.startswith("mujoco")]
+        for level in LEVELS:
+            a, b = _best_to_reach(mine, level), _best_to_reach(peer, level)
+            cell_a = f"{a.method} {a.setting} {a.cpu_per_sim_s * 1e3:.1f} ms" if a else "not reached"
+            cell_b = f"{b.method[7:]} {b.setting} {b.cpu_per_sim_s * 1e3:.1f} ms" if b else "not reached"
+            ratio = f"{a.cpu_per_sim_s / b.cpu_per_sim_s:.2f}" if a and b else "—"
+            lines.append(f"{scene:<16} {level:>9g}  {cell_a:<34} {cell_b:<36} {ratio:>6}")
+    lines.append("(ms: CPU per simulated second; ratio: coopdyn / MuJoCo, below 1 means coopdyn is cheaper)")
+    return "\n".join(lines)
