@@ -37,3 +37,22 @@ def test_diverging_points_are_marked_not_dropped() -> None:
     first = rows[0]  # dt = 5 ms, far beyond the explicit limit (~1 ms)
     assert not first.stable and math.isinf(first.wrench_error)
     assert "DIVERGED" in bench.format_rows(rows)
+
+
+def test_peer_comparison_on_the_panda_scene() -> None:
+    """coopdyn vs MuJoCo on the Panda scene: both simulators' runs, errors against the same
+    reference (MuJoCo RK4 and coopdyn rk4 at the same small step agree with it alike), and the
+    table of cheapest runs per force level."""
+    import pytest
+
+    pytest.importorskip("mujoco")
+    from coopdyn.bench.panda_peers import compare, format_comparison
+
+    result = compare((1e4,), t_final=0.05, quick=True, rounds=1, progress=False)
+    rows = {(r.method, r.setting): r for r in result["rows"]}
+    assert result["checks"]["pandas k=1e+04"] < 1e-12
+    mine, theirs = rows["rk4", "dt=0.000625"], rows["mujoco RK4", "dt=0.000625"]
+    assert mine.stable and theirs.stable
+    assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05)  # the same method on the same system
+    table = format_comparison(result)
+    assert "pandas k=1e+04" in table and "coopdyn / MuJoCo" in table

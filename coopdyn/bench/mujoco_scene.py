@@ -138,6 +138,7 @@ class MujocoScene:
 
         self._dynamics = Dynamics(scene)
         self._qv: tuple[np.ndarray, np.ndarray] | None = None  # the state of the current evaluation
+        self.warnings: list[str] = []  #: MuJoCo's warnings (e.g. "Nan, Inf or huge value in QACC")
         self._R = np.eye(3)  # the free body's rotation at that state
 
     # --- state conversion (Pinocchio ↔ MuJoCo) ------------------------------------------------
@@ -203,11 +204,14 @@ class MujocoScene:
     def __enter__(self) -> MujocoScene:
         self.mj.set_mjcb_passive(self._passive)
         self.mj.set_mjcb_control(self._control)
+        self._warning = self.mj.get_mju_user_warning()
+        self.mj.set_mju_user_warning(self.warnings.append)  # not MUJOCO_LOG.TXT in the user's folder
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.mj.set_mjcb_passive(None)
         self.mj.set_mjcb_control(None)
+        self.mj.set_mju_user_warning(self._warning)
 
     # --- checks and runs -------------------------------------------------------------------------
     def check(self, n: int = 5, seed: int = 0) -> float:

@@ -143,7 +143,7 @@ def format_peers(rows: Sequence[Row]) -> str:
                     else "not reached in the sweep"
                 )
             )
-    lines.append("peers on the Panda scenes: not run (MuJoCo needs the URDF geometry rewritten, the SE(3) spring as a callback)")
+    lines.append("peers on the Panda scenes: coopdyn bench --peers")
     return "\n".join(lines)
 
 
