@@ -21,8 +21,10 @@ from .monitor import ENERGY_RTOL
 
 #: statuses a chunk reports (src/native/loop.hpp: Status)
 RUNNING, DONE, DIVERGED, STEP_MATRIX, ENERGY, H_MIN, CONTROLLER, FAILED = range(8)
-#: steps (adaptive: attempts) per chunk: ~10–50 ms of work between Python's looks
-CHUNK = 2048
+#: wall time of one chunk [s]: how often Python looks (progress bar, warnings, Ctrl-C)
+CHUNK_SECONDS = 0.05
+#: steps (adaptive: attempts) of the first chunk; later chunks are sized to CHUNK_SECONDS
+FIRST_CHUNK = 64
 _ENERGY_MODES = {"off": 0, "warn": 1, "raise": 2}
 
 
@@ -95,6 +97,12 @@ def plan(
     return config, ""
 
 
+def next_chunk(steps: int, seconds: float) -> int:
+    """The size of the next chunk after one of ``steps`` steps took ``seconds`` of wall time."""
+    per_step = seconds / max(steps, 1)
+    return int(min(max(CHUNK_SECONDS / max(per_step, 1e-9), 16), 1 << 20))
+
+
 class Samples:
     """What a compiled run saved: t (n,), q (n, nq), v (n, nv), τ (n, n_actuated), and whether
     the last sample's torque is still pending (its step not taken)."""
@@ -109,4 +117,17 @@ class Samples:
         self.n_rhs, self.n_jac, self.n_factor, self.n_accepted, self.n_rejected = loop.counters()
 
 
-__all__ = ["CHUNK", "CONTROLLER", "DIVERGED", "DONE", "ENERGY", "FAILED", "H_MIN", "RUNNING", "STEP_MATRIX", "Samples", "plan"]
+__all__ = [
+    "CHUNK_SECONDS",
+    "CONTROLLER",
+    "DIVERGED",
+    "DONE",
+    "ENERGY",
+    "FAILED",
+    "FIRST_CHUNK",
+    "H_MIN",
+    "RUNNING",
+    "STEP_MATRIX",
+    "Samples",
+    "plan",
+]

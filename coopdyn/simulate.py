@@ -324,10 +324,12 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
 def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
     """The whole run in the compiled loop, chunk by chunk (see :mod:`coopdyn.compiled`)."""
     native: Any = run.system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
-    status = compiled.RUNNING
+    status, chunk = compiled.RUNNING, compiled.FIRST_CHUNK
     try:
         while status == compiled.RUNNING:
-            status = native.advance(compiled.CHUNK)
+            wall = time.perf_counter()
+            status = native.advance(chunk)
+            chunk = compiled.next_chunk(chunk, time.perf_counter() - wall)
             for kind, a, b, c, d, e in native.take_events():
                 if kind == 0:
                     run.warn_rotation(int(a), b, c, stacklevel=4)

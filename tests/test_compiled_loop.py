@@ -156,9 +156,9 @@ def test_ctrl_c_during_a_compiled_run_keeps_the_trajectory(pandas: cd.Scene) -> 
 
 
 def test_the_compiled_loop_releases_the_gil(pandas: cd.Scene, monkeypatch: pytest.MonkeyPatch) -> None:
-    """While one thread runs a compiled simulation in one long chunk (about a second of work),
-    another thread keeps running Python: its longest wait for the GIL stays far below the chunk."""
-    monkeypatch.setattr(cd.compiled, "CHUNK", 100_000)
+    """While one thread runs a compiled simulation in long chunks (the run is ~1 s of work),
+    another thread keeps running Python: its longest wait for the GIL stays far below the run."""
+    monkeypatch.setattr(cd.compiled, "CHUNK_SECONDS", 10.0)  # chunks of ~10 s: the whole run in one or two
     done = threading.Event()
     gaps = [0.0]
 
