@@ -63,8 +63,10 @@ def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd
     grey = (np.abs(r - g) < 0.05) & (np.abs(g - b) < 0.05) & (r > 0.6)
     assert orange.sum() > 200, "the box is not on the screenshot"
     assert grey.sum() > 2000, "the arms are not on the screenshot"
-    red = (r > 0.6) & (g < 0.3) & (b < 0.3)
-    assert red.sum() > 20, "the force arrows are not on the screenshot"
+    # red hue, antialiased edges included (orange has g well above b): 38–43 pixels in five runs
+    # here; the thin-core criterion this replaced counted 20–31 and failed one run at its threshold 20
+    red = (r > 0.5) & (g < 0.45 * r) & (b < 0.45 * r) & (np.abs(g - b) < 0.12)
+    assert red.sum() > 12, f"the force arrows are not on the screenshot ({red.sum()} red pixels)"
 
 
 @pytest.mark.parametrize("name", ["two_pandas.toml", "linear_book.toml"])
