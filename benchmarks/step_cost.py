@@ -8,8 +8,9 @@ For each method, interleaved run by run in one process (medians of ``--repeats``
   * ``kernel``: CPU per step of the kernel calls the method makes, timed from Python on a fixed
     state (each call also pays ~0.5–1 µs of binding overhead, so this overstates the kernel's
     work): implicit Euler one ``implicit_euler_velocity``; RK4 four ``acceleration``; ROS2 and
-    the trapezoid one ``implicit_terms`` + ``factor`` + two ``solve`` + one ``acceleration``
-    — each plus the controller in C++ terms is not included (it is part of the loop).
+    the trapezoid one ``implicit_terms`` + ``factor`` + two ``solve`` + one ``acceleration``;
+    Dormand–Prince six ``acceleration``. The controller is not in this column (the loops
+    include it).
 
     .venv/bin/python benchmarks/step_cost.py [--repeats 5] [--seconds 2]
 """

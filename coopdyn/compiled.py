@@ -10,7 +10,8 @@ the progress bar, issues the warnings the chunk reported, and can be interrupted
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -19,8 +20,11 @@ from .integrators import Integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL
 
-#: statuses a chunk reports (src/native/loop.hpp: Status)
-RUNNING, DONE, DIVERGED, STEP_MATRIX, ENERGY, H_MIN, CONTROLLER, FAILED = range(8)
+#: what a chunk reports, by name (src/native/loop.hpp: Status; the kernel exports the names)
+STATUS_NAMES = ("running", "done", "diverged", "step_matrix", "energy", "h_min", "controller", "failed", "scene")
+RUNNING, DONE, DIVERGED, STEP_MATRIX, ENERGY, H_MIN, CONTROLLER, FAILED, SCENE = range(len(STATUS_NAMES))
+#: the kinds of event a chunk reports (src/native/loop.hpp: Event)
+ROTATION_ALARM, ENERGY_BALANCE = 0, 1
 #: wall time of one chunk [s]: how often Python looks (progress bar, warnings, Ctrl-C)
 CHUNK_SECONDS = 0.05
 #: steps (adaptive: attempts) of the first chunk; later chunks are sized to CHUNK_SECONDS
@@ -33,6 +37,13 @@ def _own_spec(obj: Any, *args: Any) -> dict[str, Any] | None:
     behaviour runs in Python), else None."""
     spec = type(obj).__dict__.get("compiled_spec")
     return None if spec is None else spec(obj, *args)
+
+
+class Plan(NamedTuple):
+    """The compiled loop's configuration, or None and why the run stays in Python."""
+
+    config: dict[str, Any] | None
+    why: str
 
 
 def plan(
@@ -48,21 +59,25 @@ def plan(
     save_every: int,
     max_speed: float,
     energy_check: str,
-) -> tuple[dict[str, Any] | None, str]:
-    """The compiled loop's configuration for this run, or (None, why it cannot run compiled)."""
+) -> Plan:
+    """The compiled loop's configuration for this run, or None and why it cannot run compiled."""
     if system.dynamics.backend != "native":
-        return None, "the dynamics run on the Python backend"
+        return Plan(None, "the dynamics run on the Python backend")
     if system.has_object_wrench:
-        return None, "an object_wrench callable is Python code"
+        return Plan(None, "an object_wrench callable is Python code")
     spec = _own_spec(method)
     if spec is None:
-        return None, f"the integrator {method!r} has no compiled version"
+        return Plan(None, f"the integrator {method!r} has no compiled version")
     if system.controller is None:
         controller: dict[str, Any] | None = {"kind": "none"}
     else:
         controller = _own_spec(system.controller, scene)
         if controller is None:
-            return None, f"the controller {type(system.controller).__name__} is Python code"
+            return Plan(
+                None,
+                f"the controller {type(system.controller).__name__} has no compiled version for this run (Python code, "
+                "a Python reference or drive, or built for another scene)",
+            )
     if spec["method"] == "exponential":  # discretised here, once per step size the run takes
         ws = method.workspace(system)
         last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}
@@ -94,7 +109,7 @@ def plan(
         "atol": float(getattr(method, "atol", 0.0)),
         "h_min": float(getattr(method, "h_min", 0.0)),
     }
-    return config, ""
+    return Plan(config, "")
 
 
 def next_chunk(steps: int, seconds: float) -> int:
@@ -103,31 +118,39 @@ def next_chunk(steps: int, seconds: float) -> int:
     return int(min(max(CHUNK_SECONDS / max(per_step, 1e-9), 16), 1 << 20))
 
 
+@dataclass(frozen=True)
 class Samples:
-    """What a compiled run saved: t (n,), q (n, nq), v (n, nv), τ (n, n_actuated), and whether
-    the last sample's torque is still pending (its step not taken)."""
+    """What a compiled run saved, with its work counters."""
 
-    def __init__(self, loop: Any, scene: Scene) -> None:
-        t, Q, V, TAU, self.pending = loop.samples()
-        n = len(t)
-        self.t = np.asarray(t, dtype=float).reshape(n)
-        self.q = np.asarray(Q, dtype=float).reshape(n, scene.nq)
-        self.v = np.asarray(V, dtype=float).reshape(n, scene.nv)
-        self.tau = np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated)
-        self.n_rhs, self.n_jac, self.n_factor, self.n_accepted, self.n_rejected = loop.counters()
+    t: np.ndarray  #: (n,) [s]
+    q: np.ndarray  #: (n, nq)
+    v: np.ndarray  #: (n, nv)
+    tau: np.ndarray  #: (n, n_actuated)
+    pending: bool  #: the last sample's torque is not known yet (no step taken from it)
+    n_rhs: int
+    n_jac: int
+    n_factor: int
+    n_accepted: int
+    n_rejected: int
 
 
-__all__ = [
-    "CHUNK_SECONDS",
-    "CONTROLLER",
-    "DIVERGED",
-    "DONE",
-    "ENERGY",
-    "FAILED",
-    "FIRST_CHUNK",
-    "H_MIN",
-    "RUNNING",
-    "STEP_MATRIX",
-    "Samples",
-    "plan",
-]
+def samples(loop: Any, scene: Scene) -> Samples:
+    """The samples and counters of a compiled run so far."""
+    t, Q, V, TAU, pending = loop.samples()
+    n = len(t)
+    n_rhs, n_jac, n_factor, n_accepted, n_rejected = (int(c) for c in loop.counters())
+    return Samples(
+        np.asarray(t, dtype=float).reshape(n),
+        np.asarray(Q, dtype=float).reshape(n, scene.nq),
+        np.asarray(V, dtype=float).reshape(n, scene.nv),
+        np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated),
+        bool(pending),
+        n_rhs,
+        n_jac,
+        n_factor,
+        n_accepted,
+        n_rejected,
+    )
+
+
+__all__ = ["Plan", "Samples", "next_chunk", "plan", "samples"]

@@ -76,8 +76,13 @@ class ComputedTorque:
             raise SceneError("ComputedTorque needs arms made of 1-DOF joints (nq = nv)")
         q0 = scene.q0[self._q_index]
         zero = np.zeros(n)
-        self._hold = None if reference is not None else q0
-        self.reference = reference if reference is not None else (lambda t: (q0, zero, zero))
+        self._hold = q0
+
+        def hold(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            return q0, zero, zero
+
+        self._hold_reference = hold
+        self.reference = reference if reference is not None else hold
         self._data = scene.model.createData()
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -89,7 +94,7 @@ class ComputedTorque:
 
     def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
         """This law for the compiled step loop, when it holds q0 (a Python reference runs in Python)."""
-        if scene is not self.scene or self._hold is None:
+        if scene is not self.scene or self.reference is not self._hold_reference:
             return None
         return {
             "kind": "computed_torque",

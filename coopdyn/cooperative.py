@@ -19,6 +19,7 @@ mass of the object plus the arms' reflected inertia at the grasps
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -121,9 +122,26 @@ class GripLiftOscillate:
     lift_duration: float = 1.25
     amplitude: float = 0.03
     frequency: float = 1.0
-    cycles: int = 2
+    cycles: float = 2
     t_osc: float = 2.25
     axis: Any = (0.0, 1.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("t_grip", "lift_duration", "frequency"):
+            value = getattr(self, name)
+            if not (
+                isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value) and float(value) > 0
+            ):
+                raise SceneError(f"GripLiftOscillate: {name} must be a positive number, got {value!r}")
+        for name in ("squeeze", "lift", "t_lift", "amplitude", "t_osc", "cycles"):
+            value = getattr(self, name)
+            if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)):
+                raise SceneError(f"GripLiftOscillate: {name} must be a finite number, got {value!r}")
+        if float(self.cycles) < 0:
+            raise SceneError(f"GripLiftOscillate: cycles must be >= 0, got {self.cycles!r}")
+        axis = _validate.finite_array(self.axis, "GripLiftOscillate: axis", (3,))
+        if not np.linalg.norm(axis) > 0:
+            raise SceneError("GripLiftOscillate: axis must not be zero")
 
     def __call__(self, t: float) -> ObjectReference:
         p0 = np.asarray(self.start, dtype=float)
@@ -289,7 +307,7 @@ class ObjectImpedance:
                 "start": np.asarray(ref.start, dtype=float),
                 "rotation": np.eye(3) if ref.rotation is None else np.asarray(ref.rotation, dtype=float),
                 "axis": axis / np.linalg.norm(axis),
-                "cycles": int(ref.cycles),
+                "cycles": float(ref.cycles),
                 **{k: float(getattr(ref, k)) for k in ("squeeze", "t_grip", "lift", "t_lift", "lift_duration")},
                 **{k: float(getattr(ref, k)) for k in ("amplitude", "frequency", "t_osc")},
             }

@@ -21,6 +21,7 @@ from .errors import (
     EnergyBalanceWarning,
     KernelError,
     LogMapWarning,
+    SceneError,
     SimulationError,
     SimulationInterrupted,
     StepMatrixError,
@@ -71,8 +72,8 @@ def simulate(
         backend: ``"native"`` (the compiled kernel), ``"python"`` or ``"auto"`` (see
             :mod:`coopdyn.backend`); ``None`` reads ``COOPDYN_BACKEND`` (default ``"auto"``).
         loop: ``"auto"`` (default) runs the steps in the compiled loop when every piece is built
-            in — native backend, an integrator from ``INTEGRATORS`` (not ``exponential`` or
-            ``scipy``), no controller or a built-in one (``GravityCompensationPD``,
+            in — native backend, an integrator from ``INTEGRATORS`` (all but ``scipy``), no
+            controller or a built-in one (``GravityCompensationPD``,
             ``ComputedTorque`` holding q0, ``ObjectImpedance`` holding or with
             ``GripLiftOscillate``, ``drives_controller``), no ``object_wrench`` — and in Python
             otherwise; ``"compiled"`` requires the compiled loop (SimulationError saying which
@@ -86,7 +87,10 @@ def simulate(
         DivergenceError: when the state stops being finite or exceeds ``max_speed``; it carries
             the trajectory up to the failure and a stability diagnosis.
         SimulationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), carrying the trajectory so far.
+        StepMatrixError: an implicit method's step matrix is not positive definite (with .result).
+        EnergyBalanceError: with ``energy_check="raise"``, when the energy balance breaks.
         SimulationError: on invalid arguments. ControllerError: on a bad controller output.
+        KernelError: what the compiled kernel refuses.
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -331,9 +335,9 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
             status = native.advance(chunk)
             chunk = compiled.next_chunk(chunk, time.perf_counter() - wall)
             for kind, a, b, c, d, e in native.take_events():
-                if kind == 0:
+                if kind == compiled.ROTATION_ALARM:  # (link, θ, t)
                     run.warn_rotation(int(a), b, c, stacklevel=4)
-                else:
+                else:  # energy balance: (t, growth, work, excess, scale)
                     message = violation_message(a, b, c, d, ENERGY_RTOL, e)
                     if status == compiled.ENERGY:
                         raise EnergyBalanceError(message)
@@ -341,7 +345,7 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
             if bar is not None:
                 bar.update(native.t - bar.n)
     finally:  # also on Ctrl-C between chunks: the samples so far make the partial result
-        samples = compiled.Samples(native, run.scene)
+        samples = compiled.samples(native, run.scene)
         run.t, run.q, run.v = samples.t.tolist(), list(samples.q), list(samples.v)
         run.tau = list(samples.tau)
         if samples.pending:
@@ -364,6 +368,8 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
         )
     if status == compiled.CONTROLLER:
         raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {message})")
+    if status == compiled.SCENE:
+        raise SceneError(f"{message} (at t = {t:.6g} s)")
     raise KernelError(f"the compiled loop stopped at t = {run.t[-1]:.6g} s: {message}")
 
 

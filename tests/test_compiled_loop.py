@@ -14,6 +14,7 @@ import pytest
 import coopdyn as cd
 from coopdyn.control import ComputedTorque, GravityCompensationPD
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.errors import StepMatrixError
 from coopdyn.integrators import RK4, DormandPrince, Exponential, LinearlyImplicitEuler, Trapezoid
 from coopdyn.scenes import object_start
 
@@ -97,7 +98,7 @@ def test_python_pieces_run_in_the_python_loop(pandas: cd.Scene) -> None:
     assert cd.simulate(pandas, 0.01, object_wrench=lambda t: np.zeros(6)).loop == "python"
     assert cd.simulate(pandas, 0.01, backend="python").loop == "python"
     assert cd.simulate(pandas, 0.01).loop == "compiled"
-    with pytest.raises(cd.SimulationError, match=r"cannot run this simulation: the controller function is Python"):
+    with pytest.raises(cd.SimulationError, match=r"cannot run this simulation: the controller function has no compiled version"):
         cd.simulate(pandas, 0.01, controller=ctrl, loop="compiled")
     with pytest.raises(cd.SimulationError, match=r"loop must be 'auto', 'compiled' or 'python', got 'fast'"):
         cd.simulate(pandas, 0.01, loop="fast")
@@ -192,4 +193,52 @@ def test_ball_springs_three_arms_and_a_fixture_in_the_compiled_loop(name: str, m
     ctrl = GravityCompensationPD(scene) if scene.n_actuated else None
     v0 = np.random.default_rng(6).normal(size=scene.nv) * 0.2
     py, co = _both(scene, 0.1, controller=ctrl, integrator=method, dt=5e-4, v0=v0, save_every=4)
+    _assert_same(py, co)
+
+
+def test_a_step_matrix_failure_names_the_same_time_and_step_in_both_loops(pandas: cd.Scene) -> None:
+    """A negative joint stiffness from the controller's gains makes the step matrix indefinite."""
+    ctrl = GravityCompensationPD(pandas, kp=-1e6, kd=5.0)
+    errors = []
+    for loop in ("python", "compiled"):
+        with pytest.raises(StepMatrixError) as info:
+            cd.simulate(pandas, 0.1, controller=ctrl, integrator="implicit_euler", dt=1e-3, loop=loop)
+        errors.append(info.value)
+    assert str(errors[1]) == str(errors[0]) and "at t = 0 s (implicit_euler, dt = 0.001 s)" in str(errors[0])
+    _assert_same(errors[0].result, errors[1].result)
+
+
+def test_python_references_stay_in_python(damped: cd.Scene, book: cd.Scene) -> None:
+    """A reference or drive assigned after construction is Python code: never compiled as the
+    default it replaced."""
+    ctrl = ComputedTorque(damped)
+    q0 = ctrl.reference(0.0)[0] + 0.01
+    ctrl.reference = lambda t: (q0, np.zeros_like(q0), np.zeros_like(q0))
+    assert cd.simulate(damped, 0.01, controller=ctrl, integrator="implicit_euler").loop == "python"
+    d1, _ = cd.scenes.book_task()
+    drives = cd.scenes.drives_controller(d1, lambda t: 300.0)
+    res = cd.simulate(book, 0.01, controller=drives)
+    assert res.loop == "python" and res.tau[-1, 1] == 300.0
+    with pytest.raises(cd.SimulationError, match=r"ComputedTorque has no compiled version for this run"):
+        cd.simulate(damped, 0.01, controller=ctrl, loop="compiled")
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("frequency", 0.0, "frequency must be a positive number"),
+        ("cycles", -1, "cycles must be >= 0"),
+        ("lift", np.nan, "lift must be a finite number"),
+    ],
+)
+def test_grip_lift_oscillate_refuses_what_neither_loop_can_run(field: str, value: float, message: str) -> None:
+    with pytest.raises(cd.SceneError, match=message):
+        GripLiftOscillate(start=(0.0, 0.0, 0.5), **{field: value})
+
+
+def test_fractional_cycles_are_the_same_in_both_loops(damped: cd.Scene) -> None:
+    task = GripLiftOscillate(
+        start=object_start(damped), t_grip=0.1, t_lift=0.1, lift_duration=0.2, t_osc=0.3, cycles=1.5, frequency=5.0
+    )
+    py, co = _both(damped, 0.7, controller=ObjectImpedance(damped, task), integrator="implicit_euler", dt=1e-3, save_every=10)
     _assert_same(py, co)

@@ -36,12 +36,12 @@ def run_peer_comparison(
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
 
     Raises:
-        MissingDependencyError: MuJoCo is not installed (``pip install mujoco``).
+        MissingDependencyError: MuJoCo is not installed (``pip install coopdyn[peers]``).
     """
     from .._optional import require
     from .panda_peers import compare, format_comparison
 
-    require("mujoco", "the MuJoCo peer", "mujoco")
+    require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=1 if quick else 5, progress=progress)

@@ -104,7 +104,7 @@ class MujocoScene:
     """
 
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None, integrator: str, dt: float) -> None:
-        mujoco: Any = require("mujoco", "the MuJoCo peer", "mujoco")
+        mujoco: Any = require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
         self.mj, self.scene, self.controller = mujoco, scene, controller
         self.model = mujoco.MjModel.from_xml_string(_mjcf(scene, integrator, dt))
         self.data = mujoco.MjData(self.model)
@@ -202,16 +202,17 @@ class MujocoScene:
         d.ctrl[:] = tau[self._ctrl_from_tau]
 
     def __enter__(self) -> MujocoScene:
+        self._previous = (self.mj.get_mjcb_passive(), self.mj.get_mjcb_control(), self.mj.get_mju_user_warning())
         self.mj.set_mjcb_passive(self._passive)
         self.mj.set_mjcb_control(self._control)
-        self._warning = self.mj.get_mju_user_warning()
         self.mj.set_mju_user_warning(self.warnings.append)  # not MUJOCO_LOG.TXT in the user's folder
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.mj.set_mjcb_passive(None)
-        self.mj.set_mjcb_control(None)
-        self.mj.set_mju_user_warning(self._warning)
+        passive, control, warning = self._previous  # whatever the caller had installed
+        self.mj.set_mjcb_passive(passive)
+        self.mj.set_mjcb_control(control)
+        self.mj.set_mju_user_warning(warning)
 
     # --- checks and runs -------------------------------------------------------------------------
     def check(self, n: int = 5, seed: int = 0) -> float:

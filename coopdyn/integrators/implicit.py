@@ -15,6 +15,7 @@ its Python reference); a step matrix that is not positive definite raises
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -189,7 +190,7 @@ class Trapezoid(Integrator):
     a_stable = True
 
     def __init__(self, rho_inf: float = 1.0) -> None:
-        rho = float(rho_inf) if isinstance(rho_inf, int | float) and not isinstance(rho_inf, bool) else math.nan
+        rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
         if not 0.0 <= rho <= 1.0:
             from ..errors import SimulationError
 

@@ -353,8 +353,8 @@ class DrivesController:
     def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
         """The drives' segments for the compiled step loop: rows (start, constant, ramp,
         amplitude, omega, phase)."""
-        if len(self.drives) != scene.n_actuated:
-            return None
+        if len(self.drives) != scene.n_actuated or any(type(d) is not Drive for d in self.drives):
+            return None  # another callable (or a Drive subclass) runs in Python
         fields = ("start", "constant", "ramp", "amplitude", "omega", "phase")
         return {
             "kind": "drives",

@@ -101,7 +101,7 @@ struct ObjectTask {
   Vector3 start = Vector3::Zero(), axis = Vector3::UnitY();
   Matrix3 R = Matrix3::Identity();
   double squeeze = 0, t_grip = 1, lift = 0, t_lift = 0, lift_duration = 1, amplitude = 0, frequency = 1, t_osc = 0;
-  int cycles = 0;
+  double cycles = 0;
 
   void at(double t, Vector3 & pos, Vector3 & vel, Vector3 & acc, double & sq) const {
     pos = start;
@@ -136,13 +136,18 @@ struct ObjectTask {
 // ObjectImpedance: object impedance, closed-form non-squeezing distribution G⁺F plus the
 // commanded squeeze's internal part, tool wrenches through the tip Jacobians, the arms' own
 // nonlinear effects, joint damping and a posture task in the tip Jacobians' null space.
-struct ObjectImpedanceC : Controller {
+// A grasp geometry the law cannot use (translated to coopdyn.errors.SceneError).
+struct GraspGeometryError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct ObjectImpedanceLaw : Controller {
   struct Grasp {
     pinocchio::FrameIndex grasp, tip;
     std::vector<int> v_index;
   };
 
-  ObjectImpedanceC(const Model & model, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
+  ObjectImpedanceLaw(const Model & model, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
                    double mass, Vector3 com, Vector3 gravity, Vector3 Kp, Vector3 Kr, Vector3 Dp, Vector3 Dr,
                    double joint_damping, double null_k, double null_d, VectorXd q0)
     : model(model), data(model), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
@@ -184,7 +189,7 @@ struct ObjectImpedanceC : Controller {
       for (std::size_t i = 0; i < n; ++i) {
         const Vector3 d = -r.row(i).transpose();
         const double norm = d.norm();
-        if (norm < 1e-9) throw std::runtime_error("grasp points coincide with their centroid: no squeeze direction");
+        if (norm < 1e-9) throw GraspGeometryError("grasp points coincide with their centroid: no squeeze direction");
         inward.block<1, 3>(i, 0) = (squeeze * d / norm).transpose();
       }
       for (std::size_t i = 0; i < n; ++i) resultant.head<3>() += inward.block<1, 3>(i, 0).transpose();

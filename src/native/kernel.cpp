@@ -12,7 +12,6 @@
 //
 // The kernel works on the Python-owned pinocchio Model and Data (boost.python lvalues).
 
-#include <cstring>
 
 #include "kernel.hpp"
 #include "loop.hpp"
@@ -29,6 +28,21 @@ template <class T> T get(const bp::dict & cfg, const char * key) {
   return bp::extract<T>(cfg[key])();
 }
 
+// A vector setting of exactly n entries (n < 0: any).
+VectorXd vec(const bp::dict & cfg, const char * key, Eigen::Index n) {
+  const VectorXd x = get<VectorXd>(cfg, key);
+  if (n >= 0 && x.size() != n)
+    throw std::invalid_argument(std::string("compiled loop: setting ") + key + " has " + std::to_string(x.size()) +
+                                " entries, expected " + std::to_string(n));
+  return x;
+}
+
+MatrixXd mat3(const bp::dict & cfg, const char * key) {
+  const MatrixXd x = get<MatrixXd>(cfg, key);
+  if (x.rows() != 3 || x.cols() != 3) throw std::invalid_argument(std::string("compiled loop: setting ") + key + " must be 3x3");
+  return x;
+}
+
 std::vector<double> doubles(bp::object seq) {
   std::vector<double> out;
   for (bp::ssize_t i = 0; i < bp::len(seq); ++i) out.push_back(bp::extract<double>(seq[i]));
@@ -39,58 +53,66 @@ std::unique_ptr<cn::Controller> make_controller(const Kernel & k, const bp::dict
   const std::string kind = get<std::string>(c, "kind");
   const Model & model = k.model();
   if (kind == "none") return std::make_unique<cn::NoTorque>();
+  const Eigen::Index na = k.actuated().size(), nq = model.nq, nv = model.nv;
   if (kind == "gravity_pd")
-    return std::make_unique<cn::GravityPD>(model, k.actuated(), get<VectorXd>(c, "kp"), get<VectorXd>(c, "kd"),
-                                           get<VectorXd>(c, "q_des"));
-  if (kind == "computed_torque")
-    return std::make_unique<cn::ComputedTorqueHold>(model, k.actuated(), get<Eigen::VectorXi>(c, "q_index"),
-                                                    get<VectorXd>(c, "kp"), get<VectorXd>(c, "kd"),
-                                                    get<VectorXd>(c, "q_d"));
+    return std::make_unique<cn::GravityPD>(model, k.actuated(), vec(c, "kp", na), vec(c, "kd", na), vec(c, "q_des", nq));
+  if (kind == "computed_torque") {
+    const Eigen::VectorXi q_index = get<Eigen::VectorXi>(c, "q_index");
+    if (q_index.size() != na || (na && (q_index.minCoeff() < 0 || q_index.maxCoeff() >= nq)))
+      throw std::invalid_argument("compiled loop: q_index must hold one configuration index per actuated joint");
+    return std::make_unique<cn::ComputedTorqueHold>(model, k.actuated(), q_index, vec(c, "kp", na), vec(c, "kd", na),
+                                                    vec(c, "q_d", na));
+  }
   if (kind == "drives") {
     std::vector<MatrixXd> segments;
     bp::list drives = get<bp::list>(c, "segments");
-    for (bp::ssize_t i = 0; i < bp::len(drives); ++i) segments.push_back(bp::extract<MatrixXd>(drives[i]));
-    if (static_cast<Eigen::Index>(segments.size()) != k.actuated().size())
-      throw std::invalid_argument("drives: one per actuated joint");
+    for (bp::ssize_t i = 0; i < bp::len(drives); ++i) {
+      segments.push_back(bp::extract<MatrixXd>(drives[i]));
+      if (segments.back().cols() != 6 || segments.back().rows() < 1)
+        throw std::invalid_argument("compiled loop: a drive is rows of (start, constant, ramp, amplitude, omega, phase)");
+    }
+    if (static_cast<Eigen::Index>(segments.size()) != na) throw std::invalid_argument("drives: one per actuated joint");
     return std::make_unique<cn::Drives>(std::move(segments));
   }
   if (kind == "object_impedance") {
-    std::vector<cn::ObjectImpedanceC::Grasp> grasps;
+    std::vector<cn::ObjectImpedanceLaw::Grasp> grasps;
     bp::list gl = get<bp::list>(c, "grasps");
     for (bp::ssize_t i = 0; i < bp::len(gl); ++i) {
       bp::tuple g = bp::extract<bp::tuple>(gl[i]);
-      cn::ObjectImpedanceC::Grasp gr;
+      cn::ObjectImpedanceLaw::Grasp gr;
       gr.grasp = bp::extract<pinocchio::FrameIndex>(g[0]);
       gr.tip = bp::extract<pinocchio::FrameIndex>(g[1]);
+      if (gr.grasp >= model.frames.size() || gr.tip >= model.frames.size())
+        throw std::invalid_argument("compiled loop: grasp frame index out of range");
       const Eigen::VectorXi vi = bp::extract<Eigen::VectorXi>(g[2]);
+      if (vi.size() && (vi.minCoeff() < 0 || vi.maxCoeff() >= nv))
+        throw std::invalid_argument("compiled loop: arm velocity index out of range");
       gr.v_index.assign(vi.data(), vi.data() + vi.size());
       grasps.push_back(std::move(gr));
     }
     cn::ObjectTask task;
     bp::dict t = get<bp::dict>(c, "task");
     task.hold = get<bool>(t, "hold");
-    task.start = get<VectorXd>(t, "start");
-    task.R = get<MatrixXd>(t, "rotation");
+    task.start = vec(t, "start", 3);
+    task.R = mat3(t, "rotation");
     if (!task.hold) {
-      task.axis = get<VectorXd>(t, "axis");
-      for (const char * key : {"squeeze", "t_grip", "lift", "t_lift", "lift_duration", "amplitude", "frequency", "t_osc"}) {
-        const double value = get<double>(t, key);
-        if (!std::strcmp(key, "squeeze")) task.squeeze = value;
-        else if (!std::strcmp(key, "t_grip")) task.t_grip = value;
-        else if (!std::strcmp(key, "lift")) task.lift = value;
-        else if (!std::strcmp(key, "t_lift")) task.t_lift = value;
-        else if (!std::strcmp(key, "lift_duration")) task.lift_duration = value;
-        else if (!std::strcmp(key, "amplitude")) task.amplitude = value;
-        else if (!std::strcmp(key, "frequency")) task.frequency = value;
-        else task.t_osc = value;
-      }
-      task.cycles = get<int>(t, "cycles");
+      task.axis = vec(t, "axis", 3);
+      task.squeeze = get<double>(t, "squeeze");
+      task.t_grip = get<double>(t, "t_grip");
+      task.lift = get<double>(t, "lift");
+      task.t_lift = get<double>(t, "t_lift");
+      task.lift_duration = get<double>(t, "lift_duration");
+      task.amplitude = get<double>(t, "amplitude");
+      task.frequency = get<double>(t, "frequency");
+      task.t_osc = get<double>(t, "t_osc");
+      task.cycles = get<double>(t, "cycles");
     }
-    return std::make_unique<cn::ObjectImpedanceC>(
-      model, get<pinocchio::FrameIndex>(c, "object_frame"), std::move(grasps), std::move(task), get<double>(c, "mass"),
-      get<VectorXd>(c, "com"), get<VectorXd>(c, "gravity"), get<VectorXd>(c, "Kp"), get<VectorXd>(c, "Kr"),
-      get<VectorXd>(c, "Dp"), get<VectorXd>(c, "Dr"), get<double>(c, "joint_damping"), get<double>(c, "null_k"),
-      get<double>(c, "null_d"), get<VectorXd>(c, "q0"));
+    const pinocchio::FrameIndex object_frame = get<pinocchio::FrameIndex>(c, "object_frame");
+    if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
+    return std::make_unique<cn::ObjectImpedanceLaw>(
+      model, object_frame, std::move(grasps), std::move(task), get<double>(c, "mass"), vec(c, "com", 3),
+      vec(c, "gravity", 3), vec(c, "Kp", 3), vec(c, "Kr", 3), vec(c, "Dp", 3), vec(c, "Dr", 3),
+      get<double>(c, "joint_damping"), get<double>(c, "null_k"), get<double>(c, "null_d"), vec(c, "q0", nq));
   }
   throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
 }
@@ -113,10 +135,18 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
     tab.c = doubles(cfg["c"]);
     if (cfg.has_key("b_hat")) tab.b_hat = doubles(cfg["b_hat"]);
   }
+  const Model & model = kernel.model();
+  const Eigen::Index na = kernel.actuated().size();
+  if (m == cn::RK && (tab.A.empty() || tab.b.size() != tab.A.size() || tab.c.size() != tab.A.size() ||
+                      (get<bool>(cfg, "adaptive") && tab.b_hat.size() != tab.A.size())))
+    throw std::invalid_argument("compiled loop: inconsistent Butcher tableau");
+  for (std::size_t i = 0; i < tab.A.size(); ++i)
+    if (tab.A[i].size() > i) throw std::invalid_argument("compiled loop: the tableau must be explicit");
+  if (get<int>(cfg, "jacobian_every") < 1) throw std::invalid_argument("compiled loop: jacobian_every must be >= 1");
   auto loop = std::make_shared<Loop>(
     kernel, make_controller(kernel, get<bp::dict>(cfg, "controller")), m, std::move(tab), get<bool>(cfg, "adaptive"),
-    get<double>(cfg, "gamma"), get<int>(cfg, "jacobian_every"), get<int>(cfg, "error_order"), get<VectorXd>(cfg, "kp"),
-    get<VectorXd>(cfg, "kd"), get<VectorXd>(cfg, "q0"), get<VectorXd>(cfg, "v0"), get<double>(cfg, "dt"),
+    get<double>(cfg, "gamma"), get<int>(cfg, "jacobian_every"), get<int>(cfg, "error_order"), vec(cfg, "kp", na),
+    vec(cfg, "kd", na), vec(cfg, "q0", model.nq), vec(cfg, "v0", model.nv), get<double>(cfg, "dt"),
     get<double>(cfg, "t_final"), get<long>(cfg, "n_steps"), get<long>(cfg, "save_every"), get<double>(cfg, "max_speed"),
     get<int>(cfg, "energy_mode"), get<long>(cfg, "energy_every"), get<double>(cfg, "energy_rtol"), get<double>(cfg, "rtol"), get<double>(cfg, "atol"),
     get<double>(cfg, "h_min"));
@@ -129,9 +159,14 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
       x.h = bp::extract<double>(d[0]);
       x.step = bp::extract<MatrixXd>(d[1]);
       x.p = bp::extract<int>(d[4]);
+      const Eigen::Index nx = 2 * model.nv, nz = nx + na + 1;
+      if (model.nq != model.nv || x.step.rows() != nx || x.step.cols() != nz || x.p < 0)
+        throw std::invalid_argument("compiled loop: an exponential step must be (2nv, 2nv + n_actuated + 1)");
       if (x.p > 0) {
         x.predictor = bp::extract<MatrixXd>(d[2]);
         x.inner = bp::extract<MatrixXd>(d[3]);
+        if (x.predictor.rows() != x.p * nx || x.predictor.cols() != nz || x.inner.rows() != nx || x.inner.cols() != x.p * na)
+          throw std::invalid_argument("compiled loop: the exponential's predictor or inner matrix has the wrong shape");
       }
       loop->add_discretisation(std::move(x));
     }
@@ -153,6 +188,9 @@ BOOST_PYTHON_MODULE(_native) {
   eigenpy::enableEigenPySpecific<Eigen::VectorXi>();
   bp::scope().attr("PINOCCHIO_VERSION") = PINOCCHIO_VERSION;
   bp::scope().attr("ELEMENTS") = coopdyn::element_kinds();
+  bp::list statuses;
+  for (const char * name : cn::STATUS_NAMES) statuses.append(name);
+  bp::scope().attr("STATUSES") = bp::tuple(statuses);
   step_matrix_error_type = bp::import("coopdyn.errors").attr("StepMatrixError");
   bp::register_exception_translator<StepMatrixError>(&translate_step_matrix_error);
   bp::class_<Kernel, boost::noncopyable>(

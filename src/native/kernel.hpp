@@ -52,7 +52,7 @@ struct Link {
   std::unique_ptr<coopdyn::Element> element;
 };
 
-void check_size(const RefVec & x, Eigen::Index n, const char * name) {
+inline void check_size(const RefVec & x, Eigen::Index n, const char * name) {
   if (x.size() != n)
     throw std::invalid_argument(
       std::string(name) + " has " + std::to_string(x.size()) + " entries, expected " + std::to_string(n));

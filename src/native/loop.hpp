@@ -21,7 +21,9 @@
 
 namespace coopdyn_native {
 
-enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7 };
+// What a chunk reports (coopdyn/compiled.py reads the names from _native.STATUSES).
+enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7, SCENE = 8 };
+inline const char * const STATUS_NAMES[] = {"running", "done", "diverged", "step_matrix", "energy", "h_min", "controller", "failed", "scene"};
 
 enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK, EXPONENTIAL };
 
@@ -126,7 +128,10 @@ public:
   // Run up to `budget` steps (attempts, for adaptive methods) with the GIL released; the status.
   int advance(long budget) {
     if (status_ != RUNNING) return status_;
-    PyThreadState * state = PyEval_SaveThread();
+    struct Released {  // the GIL, given back on every way out
+      PyThreadState * state = PyEval_SaveThread();
+      ~Released() { PyEval_RestoreThread(state); }
+    } released;
     try {
       if (adaptive_)
         run_adaptive(budget);
@@ -136,10 +141,13 @@ public:
       fail(CONTROLLER, e.what());
     } catch (const StepMatrixError & e) {
       fail(STEP_MATRIX, e.what());
+    } catch (const GraspGeometryError & e) {
+      fail(SCENE, e.what());
     } catch (const std::exception & e) {
       fail(FAILED, e.what());
+    } catch (...) {
+      fail(FAILED, "unknown C++ exception");
     }
-    PyEval_RestoreThread(state);
     return status_;
   }
 
@@ -166,7 +174,6 @@ public:
   // What stopped the run: (message, t, h, the failing state's q, v).
   bp::tuple failure() const { return bp::make_tuple(message_, fail_t_, fail_h_, q_fail_, v_fail_); }
   double time() const { return t_; }
-  double progress_time() const { return t_; }
 
 private:
   // ---------------------------------------------------------------- the closed loop (System)
@@ -198,19 +205,13 @@ private:
     last_p_ = p;
     last_tau_ = tau_;
   }
-  void begin_step() {
-    prev_last_p_ = last_p_;
-    prev_last_tau_ = last_tau_;
-    have_prev_last_ = have_last_any_;
-    have_first_ = false;
-  }
+  void begin_step() { have_first_ = false; }
   // q̈ into `a`: one counted RHS evaluation, recorded.
   void acceleration(double t, const VectorXd & q, const VectorXd & v, VectorXd & a) {
     ++n_rhs_;
     torque(t, q, v);
     a = k_.accel(q, v, tau_);
     record(v);
-    have_last_any_ = true;
   }
   void implicit_terms(double t, const VectorXd & q, const VectorXd & v) {
     ++n_rhs_;
@@ -218,7 +219,6 @@ private:
     torque(t, q, v);
     k_.terms(q, v, tau_);
     record(v);
-    have_last_any_ = true;
   }
   void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh) {
     ++n_factor_;
@@ -314,7 +314,6 @@ private:
           torque(t, q, v);
           k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new_);
           record(v);
-          have_last_any_ = true;
           integrate(q, h * v_new_, q_new_);
           return 0.0;
         }
@@ -503,12 +502,14 @@ private:
 
   void settle_fresh() {
     if (pending_) {  // the last sample's torque, computed afresh
+      const double t = fail_t_;
       try {
         torque(T_.back(), Eigen::Map<const VectorXd>(&Q_[Q_.size() - model_.nq], model_.nq),
                Eigen::Map<const VectorXd>(&V_[V_.size() - model_.nv], model_.nv));
         std::copy(tau_.data(), tau_.data() + na_, TAU_.end() - na_);
-      } catch (const std::exception &) {
+      } catch (const std::exception &) {  // a controller that fails here failed in the step already
       }
+      fail_t_ = t;
       pending_ = false;
     }
   }
@@ -538,12 +539,9 @@ private:
       }
       const double h = std::min(dt_, t_final_ - double(k) * dt_);
       begin_step();
-      try {
-        step(t_, h);
-      } catch (const ControllerFailure & e) {
-        fail(CONTROLLER, e.what());
-        return;
-      }
+      fail_t_ = t_;  // where a failing step started (a StepMatrixError reports it)
+      fail_h_ = h;
+      step(t_, h);
       settle(t_, false);
       const double t_new = (k + 1 == n_steps_) ? t_final_ : double(k + 1) * dt_;
       if (!accept(t_, t_new, h, false)) return;
@@ -562,18 +560,14 @@ private:
       double h_try = std::min(h_, t_out - t_);
       if (t_ + h_try * (1.0 + 1e-9) >= t_out) h_try = t_out - t_;
       begin_step();
+      fail_t_ = t_;
+      fail_h_ = h_try;
       const bool reused = method_ == RK && fsal_valid_;
       if (reused) {
         fsal_p_start_ = fsal_p_;
         fsal_tau_start_ = fsal_tau_;
       }
-      double err;
-      try {
-        err = step(t_, h_try);
-      } catch (const ControllerFailure & e) {
-        fail(CONTROLLER, e.what());
-        return;
-      }
+      const double err = step(t_, h_try);
       settle(t_, reused);
       h_ = next_step(h_try, err);
       if (!(err <= 1.0)) {
@@ -624,9 +618,9 @@ private:
   VectorXd q_, v_, q_new_, v_new_;
   long n_rhs_ = 0, n_jac_ = 0, n_factor_ = 0, n_accepted_ = 0, n_rejected_ = 0;
   // the records of evaluations (System._first / _last)
-  VectorXd tau_, first_tau_, last_tau_, prev_last_tau_, fsal_tau_, fsal_tau_start_;
-  double first_p_ = 0, last_p_ = 0, prev_last_p_ = 0, fsal_p_ = 0, fsal_p_start_ = 0;
-  bool have_first_ = false, have_last_any_ = false, have_prev_last_ = false, pending_ = false, fsal_valid_ = false;
+  VectorXd tau_, first_tau_, last_tau_, fsal_tau_, fsal_tau_start_;
+  double first_p_ = 0, last_p_ = 0, fsal_p_ = 0, fsal_p_start_ = 0;
+  bool have_first_ = false, pending_ = false, fsal_valid_ = false;
   // scratch
   std::vector<VectorXd> sd_, sa_;  // the stages' chart rates and accelerations
   VectorXd tmp_, tmp2_, delta_, vs_, qs_, a0_, e_d_, e_v_, f1_, kq1_, kv1_, kq2_, kv2_;
