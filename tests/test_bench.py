@@ -55,4 +55,4 @@ def test_peer_comparison_on_the_panda_scene() -> None:
     assert mine.stable and theirs.stable
     assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05)  # the same method on the same system
     table = format_comparison(result)
-    assert "pandas k=1e+04" in table and "coopdyn / MuJoCo" in table
+    assert "pandas k=1e+04" in table and "coopdyn / best peer" in table
