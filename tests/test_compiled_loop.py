@@ -242,3 +242,9 @@ def test_fractional_cycles_are_the_same_in_both_loops(damped: cd.Scene) -> None:
     )
     py, co = _both(damped, 0.7, controller=ObjectImpedance(damped, task), integrator="implicit_euler", dt=1e-3, save_every=10)
     _assert_same(py, co)
+
+
+def test_the_kernel_and_python_name_the_statuses_alike() -> None:
+    from coopdyn.dynamics.backend import kernel_module
+
+    assert tuple(kernel_module().STATUSES) == cd.compiled.STATUS_NAMES
