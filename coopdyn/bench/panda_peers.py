@@ -194,7 +194,7 @@ def compare(
                     )
     cpu: dict[int, list[float]] = {i: [] for i in range(len(plan))}
     results: dict[int, Result | None] = {}
-    with _bar(len(plan) * rounds, "coopdyn vs MuJoCo", progress) as bar:
+    with _bar(len(plan) * rounds, "coopdyn vs peers", progress) as bar:
         for _ in range(rounds):
             for i, (case, method, label, _, _, run) in enumerate(plan):
                 if i in results and (results[i] is None or sum(cpu[i]) > 10.0):  # diverged, or slow enough
