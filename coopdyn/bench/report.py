@@ -48,7 +48,7 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
         for method in dict.fromkeys(r.method for r in rows if r.scene == name):
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
-                style = "x--" if method.startswith("mujoco") else "o-"  # peers dashed
+                style = "x--" if method.startswith(("mujoco", "exudyn")) else "o-"  # peers dashed
                 ax.loglog(
                     [r.cpu_per_sim_s for r in pts],
                     [max(r.wrench_error, 1e-16) for r in pts],
@@ -71,7 +71,11 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
         ax.set_xlabel("CPU s per simulated s")
         ax.set_ylabel("max interconnection force error [N]")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+    handles: dict[str, Any] = {}
+    for ax in axes[0]:  # one legend for all panels: a method has one colour everywhere
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(len(handles), 6), fontsize=8)
     return save_figure(fig, path)
 
 
