@@ -102,8 +102,8 @@ def plot_stability(points: Sequence[dict[str, Any]], path: Path) -> Path:
 
 
 def _best_to_reach(rows: Sequence[Row], tol: float) -> Row | None:
-    """The cheapest stable row with a force error ≤ tol [N]."""
-    good = [r for r in rows if r.stable and r.wrench_error <= tol]
+    """The cheapest stable row with a force error ≤ tol [N] that the energy monitor did not flag."""
+    good = [r for r in rows if r.stable and not r.energy_flag and r.wrench_error <= tol]
     return min(good, key=lambda r: r.cpu_per_sim_s, default=None)
 
 
