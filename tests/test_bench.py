@@ -55,4 +55,5 @@ def test_peer_comparison_on_the_panda_scene() -> None:
     assert mine.stable and theirs.stable
     assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05)  # the same method on the same system
     table = format_comparison(result)
-    assert "pandas k=1e+04" in table and "coopdyn / best peer" in table
+    assert "pandas k=1e+04" in table and "1 panda k=1e+04" in table and "coopdyn / best peer" in table
+    assert result["checks"]["1 panda k=1e+04"] < 1e-12  # the chain holding the box, too

@@ -71,10 +71,11 @@ def linear_case(t_final: float = 3.0) -> Case:
     return Case("linear", scene, drives_controller(d1, d2), t_final, scene.v0, reference, "exact (expm)", (params, d1, d2))
 
 
-def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1e-11) -> Case:
-    """Two Pandas holding a 2 kg box, joint PD 50/5 + gravity compensation, perturbed start;
-    reference: Dormand–Prince at a tight tolerance."""
-    scene = facing_arms("panda", stiffness=stiffness)
+def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1e-11, n_arms: int = 2) -> Case:
+    """Two Pandas (``n_arms``; one: a 7-link revolute chain the box hangs from) holding a 2 kg
+    box, joint PD 50/5 + gravity compensation, perturbed start; reference: Dormand–Prince at a
+    tight tolerance."""
+    scene = facing_arms("panda", stiffness=stiffness, n_arms=n_arms)
     ctrl = GravityCompensationPD(scene, 50.0, 5.0)
     v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
     ref = simulate(
@@ -94,4 +95,5 @@ def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1
         return ref_pos, ref_forces
 
     note = f"dopri5 rtol={reference_rtol:g}"
-    return Case(f"pandas k={stiffness:.0e}", scene, ctrl, t_final, v0, reference, note)
+    name = f"pandas k={stiffness:.0e}" if n_arms == 2 else f"{n_arms} panda{'s' * (n_arms > 1)} k={stiffness:.0e}"
+    return Case(name, scene, ctrl, t_final, v0, reference, note)

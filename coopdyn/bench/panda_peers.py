@@ -153,13 +153,17 @@ def compare(
     quick: bool = False,
     rounds: int = 5,
     progress: bool = True,
+    chain: bool = True,
 ) -> dict[str, Any]:
-    """Run the comparison; returns ``rows`` (:class:`Row`, MuJoCo's methods named ``"mujoco …"``)
+    """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first;
+    returns ``rows`` (:class:`Row`, MuJoCo's methods named ``"mujoco …"``)
     and ``checks`` (stiffness → largest relative acceleration difference MuJoCo vs coopdyn)."""
     from .measure import _bar
     from .mujoco_scene import MujocoScene
 
     cases = [panda_case(k, t_final) for k in stiffnesses]
+    if chain:  # one Panda: a 7-link revolute chain holding the box by one spring
+        cases.append(panda_case(stiffnesses[0], t_final, n_arms=1))
     checks = {}
     references: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # Exudyn's own, per scene
     plan: list[tuple[Case, str, str, float, float, Callable[[], tuple[float, Result | None]]]] = []
