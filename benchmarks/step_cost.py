@@ -60,6 +60,7 @@ def main() -> None:
     dyn = cd.Dynamics(scene, "native")
     tau = ctrl(0.0, scene.q0, v0)
     times: dict[tuple[str, str], list[float]] = {}
+    rhs_per_step: dict[str, float] = {}
     for _ in range(args.repeats):
         for method in METHODS:
             dt = 2.5e-4 if method == "symplectic_euler" else 5e-4 if method == "rk4" else 1e-3
@@ -68,12 +69,19 @@ def main() -> None:
                     scene, args.seconds, controller=ctrl, integrator=method, dt=dt, v0=v0, save_every=round(0.01 / dt), loop=loop
                 )
                 times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
+                if loop == "compiled":
+                    rhs_per_step[method] = res.n_rhs / res.n_steps  # incl. rejected attempts and short landing steps
             times.setdefault((method, "kernel"), []).append(_kernel_work(dyn, method, scene.q0, v0, tau, 2000))
     print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; two Pandas + box, k = 1e4 N/m")
-    print(f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}")
+    head = (
+        f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}"
+        f" {'RHS/step':>9s} {'compiled/RHS':>13s}"
+    )
+    print(head)
     for method in METHODS:
         c, p, k = (statistics.median(times[method, w]) * 1e6 for w in ("compiled", "python", "kernel"))
-        print(f"{method:18s} {c:9.2f} {p:9.2f} {k:9.2f} {c / k:16.2f} {p / c:16.1f}")
+        n = rhs_per_step[method]
+        print(f"{method:18s} {c:9.2f} {p:9.2f} {k:9.2f} {c / k:16.2f} {p / c:16.1f} {n:9.2f} {c / n:13.2f}")
 
 
 if __name__ == "__main__":
