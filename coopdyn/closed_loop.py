@@ -101,11 +101,14 @@ class System:
         """q̈ (nv,) at (t, q, v); counts one right-hand-side evaluation and records the net power
         ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
         self.n_rhs += 1
-        tau = self.torque(t, q, v)
-        w = None if self.object_wrench is None else self._wrench(t)
+        tau, w = self._inputs(t, q, v)
         a = self.dynamics.acceleration(q, v, tau, w)
         self._record(q, v, tau, w)
         return a
+
+    def _inputs(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The controller's torques and the external object wrench (or None) at (t, q, v)."""
+        return self.torque(t, q, v), None if self.object_wrench is None else self._wrench(t)
 
     def free_acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """q̈ (nv,) for given torques, without the controller or the object wrench (not counted)."""
@@ -156,8 +159,7 @@ class System:
         record = self._recorded(q, v)
         if record is not None:
             return record[2]
-        tau = self.torque(t, q, v)
-        w = None if self.object_wrench is None else self._wrench(t)
+        tau, w = self._inputs(t, q, v)
         self.dynamics.acceleration(q, v, tau, w)
         return self._net_power(v, tau, w)
 
@@ -168,8 +170,7 @@ class System:
         :meth:`acceleration`."""
         self.n_rhs += 1
         self.n_jac += 1
-        tau = self.torque(t, q, v)
-        w = None if self.object_wrench is None else self._wrench(t)
+        tau, w = self._inputs(t, q, v)
         terms = self.dynamics.implicit_terms(q, v, tau, w)
         self._record(q, v, tau, w)
         return terms
@@ -197,8 +198,7 @@ class System:
         self.n_rhs += 1
         self.n_jac += 1
         self.n_factor += 1
-        tau = self.torque(t, q, v)
-        w = None if self.object_wrench is None else self._wrench(t)
+        tau, w = self._inputs(t, q, v)
         kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
         v_new = self.dynamics.implicit_euler_velocity(q, v, tau, h, kp, kd, w)
         self._record(q, v, tau, w)
