@@ -7,6 +7,8 @@ in C++) and :class:`~coopdyn.errors.KernelError` for refused arguments.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..errors import CoopdynError, KernelError
@@ -28,14 +30,20 @@ class NativeDynamics(Dynamics):
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         super().__init__(scene, backend)
         links = [(lk.native, lk.tip_frame, lk.grasp_frame, tuple(lk.element.native_parameters())) for lk in scene.links]
+        actuated = np.asarray(scene.actuated, dtype=np.int32)
+        kernel = _backend.kernel_module().Kernel
+        self._kernel = self._call("the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame)
+
+    @staticmethod
+    def _call(what: str, method: Any, *args: Any) -> Any:
+        """``method(*args)`` on the kernel, what it raises turned into a :class:`CoopdynError`
+        (ValueError for sizes, Boost.Python.ArgumentError for types, RuntimeError)."""
         try:
-            self._kernel = _backend.kernel_module().Kernel(
-                self.model, self.data, links, self._damping, np.asarray(scene.actuated, dtype=np.int32), scene.object_frame
-            )
+            return method(*args)
         except CoopdynError:
             raise
         except Exception as exc:
-            raise _kernel_error(exc, "the scene") from exc
+            raise _kernel_error(exc, what) from exc
 
     @property
     def last_dissipation(self) -> float:
@@ -49,38 +57,18 @@ class NativeDynamics(Dynamics):
         self._kernel.clear_rotation_alarm()
 
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
-        try:
-            return self._kernel.acceleration(q, v, tau, object_wrench)
-        except CoopdynError:
-            raise
-        except Exception as exc:  # ValueError (sizes), Boost.Python.ArgumentError (types), RuntimeError
-            raise _kernel_error(exc, "acceleration(q, v, tau, object_wrench)") from exc
+        return self._call("acceleration(q, v, tau, object_wrench)", self._kernel.acceleration, q, v, tau, object_wrench)
 
     def implicit_terms(
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        try:
-            return self._kernel.implicit_terms(q, v, tau, object_wrench)
-        except CoopdynError:
-            raise
-        except Exception as exc:
-            raise _kernel_error(exc, "implicit_terms(q, v, tau, object_wrench)") from exc
+        return self._call("implicit_terms(q, v, tau, object_wrench)", self._kernel.implicit_terms, q, v, tau, object_wrench)
 
     def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
-        try:
-            self._kernel.factor(M, K, D, gh, kp, kd)
-        except CoopdynError:
-            raise
-        except Exception as exc:
-            raise _kernel_error(exc, "factor(M, K, D, gh, kp, kd)") from exc
+        self._call("factor(M, K, D, gh, kp, kd)", self._kernel.factor, M, K, D, gh, kp, kd)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        try:
-            return self._kernel.solve(f_q, Mf_v)
-        except CoopdynError:
-            raise
-        except Exception as exc:
-            raise _kernel_error(exc, "solve(f_q, Mf_v)") from exc
+        return self._call("solve(f_q, Mf_v)", self._kernel.solve, f_q, Mf_v)
 
     def implicit_euler_velocity(
         self,
@@ -92,34 +80,28 @@ class NativeDynamics(Dynamics):
         kd: np.ndarray,
         object_wrench: np.ndarray | None = None,
     ) -> np.ndarray:
-        try:
-            return self._kernel.implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)
-        except CoopdynError:
-            raise
-        except Exception as exc:
-            raise _kernel_error(exc, "implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)") from exc
+        return self._call(
+            "implicit_euler_velocity(q, v, tau, h, kp, kd, object_wrench)",
+            self._kernel.implicit_euler_velocity,
+            q,
+            v,
+            tau,
+            h,
+            kp,
+            kd,
+            object_wrench,
+        )
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        try:
-            return self._kernel.spring_force(q, v)
-        except Exception as exc:
-            raise _kernel_error(exc, "spring_force(q, v)") from exc
+        return self._call("spring_force(q, v)", self._kernel.spring_force, q, v)
 
     def compiled_loop(self, config: dict[str, object]) -> object:
         """A compiled run of this scene (coopdyn.compiled writes ``config``); the kernel object
         it steps stays alive with it."""
-        try:
-            return _backend.kernel_module().make_loop(self._kernel, config)
-        except CoopdynError:
-            raise
-        except Exception as exc:
-            raise _kernel_error(exc, "the compiled loop's configuration") from exc
+        return self._call("the compiled loop's configuration", _backend.kernel_module().make_loop, self._kernel, config)
 
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
-        try:
-            raw = self._kernel.element_states(q, v)
-        except Exception as exc:
-            raise _kernel_error(exc, "element_states(q, v)") from exc
+        raw = self._call("element_states(q, v)", self._kernel.element_states, q, v)
         out = []
         for (energy, e, f, power, S_K, S_D, theta), lk in zip(raw, self.scene.links, strict=True):
             out.append(ElementEval(energy, e[: lk.element.deformation_size], f, power, S_K, S_D, theta))
@@ -129,10 +111,8 @@ class NativeDynamics(Dynamics):
         return self._kernel.elastic_energies()
 
     def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
-        try:
-            E, U, P, WG, WT, PG, PT, PO, KP = self._kernel.readouts(np.asarray(Q, dtype=float), np.asarray(V, dtype=float))
-        except Exception as exc:
-            raise _kernel_error(exc, "readouts(Q, V)") from exc
+        Q, V = np.asarray(Q, dtype=float), np.asarray(V, dtype=float)
+        E, U, P, WG, WT, PG, PT, PO, KP = self._call("readouts(Q, V)", self._kernel.readouts, Q, V)
         n, L = len(Q), len(self.scene.links)  # reshape all: eigenpy returns an (n, 1) matrix as a vector
         return Readouts(
             E.reshape(n, L, 6),
