@@ -30,6 +30,7 @@ from scipy.linalg import cho_solve
 
 from . import _validate
 from .errors import SceneError
+from .grasp import squeeze_directions
 from .model.scene import Scene
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -263,12 +264,8 @@ class ObjectImpedance:
         A_inv = _moment_inverse(r)
         f = _distribute(r, A_inv, F_c)
         if ref.squeeze and len(points) > 1:
-            d = -r
-            norms = np.sqrt(np.einsum("ij,ij->i", d, d))
-            if np.any(norms < 1e-9):
-                raise SceneError("grasp points coincide with their centroid: no squeeze direction")
             inward = np.zeros((len(points), 6))
-            inward[:, :3] = ref.squeeze * d / norms[:, None]
+            inward[:, :3] = ref.squeeze * squeeze_directions(points)
             resultant = np.concatenate([inward[:, :3].sum(axis=0), _cross_rows(r, inward[:, :3]).sum(axis=0)])
             f += inward - _distribute(r, A_inv, resultant)  # keep only its internal (null-space) part
         return f
