@@ -20,6 +20,7 @@ from ..errors import DivergenceError, EnergyBalanceWarning
 from ..integrators import INTEGRATORS, Integrator, LinearlyImplicitEuler, get_integrator
 from ..problems.facing_arms import facing_arms
 from ..problems.linear_book import book_positions, linear_book_exact
+from ..result import Result
 from ..simulate import simulate
 from ..stability import advise
 from .cases import OUTPUT_INTERVAL, Case, Row, _forces
@@ -66,25 +67,40 @@ def work_precision(
     return rows
 
 
+def run_point(case: Case, integrator: Integrator, dt: float) -> tuple[Result, bool]:
+    """One run of ``case`` at step ``dt`` saved on the output grid: the result and whether the
+    energy monitor warned (errors such as DivergenceError propagate)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", EnergyBalanceWarning)
+        res = simulate(
+            case.scene,
+            case.t_final,
+            controller=case.controller,
+            integrator=integrator,
+            dt=dt,
+            save_every=max(1, round(OUTPUT_INTERVAL / dt)),
+            v0=case.v0,
+        )
+    return res, any(issubclass(w.category, EnergyBalanceWarning) for w in caught)
+
+
+def errors_against(res: Result, positions: np.ndarray, forces: np.ndarray) -> tuple[float, float]:
+    """Largest object-position error [m] and interconnection-force error [N] of ``res`` against
+    reference positions (n, 3) and forces (n, links, 3) on its output grid."""
+    return (
+        float(np.max(np.linalg.norm(res.object_position() - positions, axis=1))),
+        float(np.max(np.linalg.norm(_forces(res) - forces, axis=2))),
+    )
+
+
 def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeats: int) -> Row:
-    save_every = max(1, round(OUTPUT_INTERVAL / dt))
     cpu: list[float] = []
     res = None
     flagged = False
     for _ in range(repeats):
         try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", EnergyBalanceWarning)
-                res = simulate(
-                    case.scene,
-                    case.t_final,
-                    controller=case.controller,
-                    integrator=_make(method, rtol),
-                    dt=dt,
-                    save_every=save_every,
-                    v0=case.v0,
-                )
-            flagged = flagged or any(issubclass(w.category, EnergyBalanceWarning) for w in caught)
+            res, warned = run_point(case, _make(method, rtol), dt)
+            flagged = flagged or warned
         except DivergenceError:
             return Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, True)
         cpu.append(res.cpu_time)
@@ -92,12 +108,9 @@ def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeat
             break
     assert res is not None
     pos, forces = case.reference(res)
-    pos_err = (
-        float(np.max(np.linalg.norm(res.object_position() - pos, axis=1)))
-        if case.name != "linear"
-        else float(np.max(np.abs(book_positions(res.q, res.scene)[:, 1] - pos[:, 2])))
-    )
-    force_err = float(np.max(np.linalg.norm(_forces(res) - forces, axis=2)))
+    pos_err, force_err = errors_against(res, pos, forces)
+    if case.name == "linear":  # the object's position along the book's axis
+        pos_err = float(np.max(np.abs(book_positions(res.q, res.scene)[:, 1] - pos[:, 2])))
     return Row(
         case.name,
         method,

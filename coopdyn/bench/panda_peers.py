@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CoopdynError, EnergyBalanceWarning, SimulationError
+from ..errors import CoopdynError, SimulationError
 from ..integrators import INTEGRATORS, Integrator, Trapezoid
 from ..result import Result
-from ..simulate import simulate
 from .cases import OUTPUT_INTERVAL, Case, Row, _forces, panda_case
+from .measure import _bar, _make, errors_against, run_point
 
 PEERS = ("mujoco", "exudyn")
 
@@ -60,39 +60,17 @@ def _rtols(quick: bool) -> list[float]:
     return [1e-4, 1e-7, 1e-10] if quick else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
 
 
-def _errors(case: Case, res: Result) -> tuple[float, float]:
-    pos, forces = case.reference(res)
-    return (
-        float(np.max(np.linalg.norm(res.object_position() - pos, axis=1))),
-        float(np.max(np.linalg.norm(_forces(res) - forces, axis=2))),
-    )
-
-
 def _coopdyn_point(
     case: Case, method: str, dt: float, rtol: float, flags: set[int], i: int
 ) -> Callable[[], tuple[float, Result | None]]:
     def run() -> tuple[float, Result | None]:
-        if method in VARIANTS:
-            integrator = VARIANTS[method]()
-        else:
-            cls = INTEGRATORS[method]
-            integrator = cls(rtol=rtol, atol=rtol * 1e-3) if cls.adaptive else cls()  # type: ignore[call-arg]
+        integrator = VARIANTS[method]() if method in VARIANTS else _make(method, rtol)
         try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", EnergyBalanceWarning)
-                res = simulate(
-                    case.scene,
-                    case.t_final,
-                    controller=case.controller,
-                    integrator=integrator,
-                    dt=dt,
-                    save_every=max(1, round(OUTPUT_INTERVAL / dt)),
-                    v0=case.v0,
-                )
-            if any(issubclass(w.category, EnergyBalanceWarning) for w in caught):
-                flags.add(i)  # the energy monitor flagged it: never a "cheapest run"
+            res, warned = run_point(case, integrator, dt)
         except CoopdynError:  # diverged, or refused (step matrix, step control): a failed point
             return math.nan, None
+        if warned:
+            flags.add(i)  # the energy monitor flagged it: never a "cheapest run"
         return res.cpu_time, res
 
     return run
@@ -158,7 +136,6 @@ def compare(
     """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first;
     returns ``rows`` (:class:`Row`, MuJoCo's methods named ``"mujoco …"``)
     and ``checks`` (stiffness → largest relative acceleration difference MuJoCo vs coopdyn)."""
-    from .measure import _bar
     from .mujoco_scene import MujocoScene
 
     cases = [panda_case(k, t_final) for k in stiffnesses]
@@ -221,12 +198,8 @@ def compare(
         if res is None:
             rows.append(Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, False))
             continue
-        if method.startswith("exudyn"):
-            pos, forces = references[case.name]
-            pos_err = float(np.max(np.linalg.norm(res.object_position() - pos, axis=1)))
-            force_err = float(np.max(np.linalg.norm(_forces(res) - forces, axis=2)))
-        else:
-            pos_err, force_err = _errors(case, res)
+        reference = references[case.name] if method.startswith("exudyn") else case.reference(res)  # Exudyn: its own
+        pos_err, force_err = errors_against(res, *reference)
         rows.append(
             Row(
                 case.name,
