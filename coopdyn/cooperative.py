@@ -140,6 +140,11 @@ class GripLiftOscillate:
                 raise SceneError(f"GripLiftOscillate: {name} must be a finite number, got {value!r}")
         if float(self.cycles) < 0:
             raise SceneError(f"GripLiftOscillate: cycles must be >= 0, got {self.cycles!r}")
+        _validate.finite_array(self.start, "GripLiftOscillate: start", (3,))
+        if self.rotation is not None:
+            R = _validate.finite_array(self.rotation, "GripLiftOscillate: rotation", (3, 3))
+            if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+                raise SceneError("GripLiftOscillate: rotation must be a rotation matrix (orthonormal, det +1)")
         axis = _validate.finite_array(self.axis, "GripLiftOscillate: axis", (3,))
         if not np.linalg.norm(axis) > 0:
             raise SceneError("GripLiftOscillate: axis must not be zero")

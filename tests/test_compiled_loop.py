@@ -229,11 +229,13 @@ def test_python_references_stay_in_python(damped: cd.Scene, book: cd.Scene) -> N
         ("frequency", 0.0, "frequency must be a positive number"),
         ("cycles", -1, "cycles must be >= 0"),
         ("lift", np.nan, "lift must be a finite number"),
+        ("start", (np.nan, 0.0, 0.5), "start must be finite"),
+        ("rotation", np.ones((3, 3)), "rotation must be a rotation matrix"),
     ],
 )
 def test_grip_lift_oscillate_refuses_what_neither_loop_can_run(field: str, value: float, message: str) -> None:
     with pytest.raises(cd.SceneError, match=message):
-        GripLiftOscillate(start=(0.0, 0.0, 0.5), **{field: value})
+        GripLiftOscillate(**{"start": (0.0, 0.0, 0.5), field: value})
 
 
 def test_fractional_cycles_are_the_same_in_both_loops(damped: cd.Scene) -> None:
