@@ -172,7 +172,8 @@ struct ObjectImpedanceLaw : Controller {
     F.tail<3>() = Kr.cwiseProduct(e_r) + Dr.cwiseProduct(-V.angular()) + com_w.cross(-mass * gravity);
     // distribution over the grasps, moments about their centroid
     const std::size_t n = grasps.size();
-    Eigen::Matrix<double, Eigen::Dynamic, 3> r(n, 3);
+    auto & r = r_;  // per-call scratch kept as members: no allocation on the hot path
+    r.resize(n, 3);
     Vector3 c = Vector3::Zero();
     for (std::size_t i = 0; i < n; ++i) r.row(i) = data.oMf[grasps[i].grasp].translation().transpose();
     c = r.colwise().sum().transpose() / double(n);
@@ -184,7 +185,8 @@ struct ObjectImpedanceLaw : Controller {
     f.resize(n, 6);
     distribute(r, A_inv, F_c, f);
     if (squeeze != 0.0 && n > 1) {
-      Eigen::Matrix<double, Eigen::Dynamic, 6> inward = Eigen::Matrix<double, Eigen::Dynamic, 6>::Zero(n, 6);
+      auto & inward = inward_;
+      inward.setZero(n, 6);
       Eigen::Matrix<double, 6, 1> resultant = Eigen::Matrix<double, 6, 1>::Zero();
       for (std::size_t i = 0; i < n; ++i) {
         const Vector3 d = -r.row(i).transpose();
@@ -195,13 +197,14 @@ struct ObjectImpedanceLaw : Controller {
       for (std::size_t i = 0; i < n; ++i) resultant.head<3>() += inward.block<1, 3>(i, 0).transpose();
       for (std::size_t i = 0; i < n; ++i)
         resultant.tail<3>() += Vector3(r.row(i).transpose()).cross(Vector3(inward.block<1, 3>(i, 0).transpose()));
-      Eigen::Matrix<double, Eigen::Dynamic, 6> g(n, 6);
+      auto & g = internal_;
+      g.resize(n, 6);
       distribute(r, A_inv, resultant, g);
       f += inward - g;
     }
     // joint torques
     pinocchio::computeJointJacobians(model, data, q);
-    const VectorXd nle = pinocchio::nonLinearEffects(model, data, q, v);
+    const VectorXd & nle = pinocchio::nonLinearEffects(model, data, q, v);  // data.nle, untouched below
     pinocchio::difference(model, q, q0, posture);
     Eigen::Index offset = 0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -209,8 +212,12 @@ struct ObjectImpedanceLaw : Controller {
       J6.setZero();
       pinocchio::getFrameJacobian(model, data, gr.tip, pinocchio::LOCAL_WORLD_ALIGNED, J6);
       const Eigen::Index m = static_cast<Eigen::Index>(gr.v_index.size());
-      MatrixXd J(6, m);
-      VectorXd vi(m), x(m);
+      auto & J = J_;
+      auto & vi = vi_;
+      auto & x = x_;
+      J.resize(6, m);
+      vi.resize(m);
+      x.resize(m);
       for (Eigen::Index j = 0; j < m; ++j) {
         J.col(j) = J6.col(gr.v_index[j]);
         vi[j] = v[gr.v_index[j]];
@@ -219,9 +226,10 @@ struct ObjectImpedanceLaw : Controller {
       const Vector3 rr = data.oMf[gr.grasp].translation() - data.oMf[gr.tip].translation();
       Eigen::Matrix<double, 6, 1> w = f.row(i).transpose();
       w.tail<3>() += rr.cross(Vector3(f.block<1, 3>(i, 0).transpose()));
-      VectorXd ti = J.transpose() * w;
+      auto & ti = ti_;
+      ti.noalias() = J.transpose() * w;
       for (Eigen::Index j = 0; j < m; ++j) ti[j] = (ti[j] + nle[gr.v_index[j]]) - joint_damping * vi[j];
-      ti += null_space_part(J, x);
+      add_null_space_part(J, x, ti);
       tau.segment(offset, m) = ti;
       offset += m;
     }
@@ -238,23 +246,24 @@ struct ObjectImpedanceLaw : Controller {
     }
   }
 
-  // (I − J⁺J) x, closed form at full rank; a complete orthogonal decomposition near a singularity.
-  static VectorXd null_space_part(const MatrixXd & J, const VectorXd & x) {
-    const Eigen::Index n = J.cols();
-    if (n > 6) {
-      Eigen::LLT<MatrixXd> llt(J * J.transpose());
-      if (llt.info() == Eigen::Success) {
-        const VectorXd d = MatrixXd(llt.matrixL()).diagonal();
-        if (d.minCoeff() >= 1e-7 * d.maxCoeff()) return x - J.transpose() * llt.solve(J * x);
+  // out += (I − J⁺J) x: closed form at full rank (redundant arm: x − Jᵀ(J Jᵀ)⁻¹J x; otherwise
+  // J⁺J = I, nothing to add); a complete orthogonal decomposition near a singularity.
+  void add_null_space_part(const MatrixXd & J, const VectorXd & x, VectorXd & out) {
+    const auto well_conditioned = [](const auto & llt) {  // diag(L) spans less than 1e7: condition ≲ 1e14
+      const auto d = llt.matrixLLT().diagonal();
+      return llt.info() == Eigen::Success && d.minCoeff() >= 1e-7 * d.maxCoeff();
+    };
+    if (J.cols() > 6) {
+      llt6_.compute(J * J.transpose());
+      if (well_conditioned(llt6_)) {
+        out.noalias() += x - J.transpose() * llt6_.solve(J * x);
+        return;
       }
     } else {
-      Eigen::LLT<MatrixXd> llt(J.transpose() * J);
-      if (llt.info() == Eigen::Success) {
-        const VectorXd d = MatrixXd(llt.matrixL()).diagonal();
-        if (d.minCoeff() >= 1e-7 * d.maxCoeff()) return VectorXd::Zero(n);
-      }
+      llt_.compute(J.transpose() * J);
+      if (well_conditioned(llt_)) return;
     }
-    return x - J.completeOrthogonalDecomposition().pseudoInverse() * (J * x);
+    out.noalias() += x - J.completeOrthogonalDecomposition().pseudoInverse() * (J * x);
   }
 
   const Model & model;
@@ -268,7 +277,12 @@ struct ObjectImpedanceLaw : Controller {
   VectorXd q0;
   Eigen::Matrix<double, 6, Eigen::Dynamic> J6;
   VectorXd posture;
-  Eigen::Matrix<double, Eigen::Dynamic, 6> f;
+  Eigen::Matrix<double, Eigen::Dynamic, 6> f, inward_, internal_;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> r_;
+  MatrixXd J_;
+  VectorXd vi_, x_, ti_;
+  Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt6_;
+  Eigen::LLT<MatrixXd> llt_;
 };
 
 }  // namespace coopdyn_native
