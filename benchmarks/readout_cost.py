@@ -29,13 +29,14 @@ import coopdyn as cd
 N_SAMPLES = 10_000
 
 
-def _load_baseline(tree: Path) -> Any:
-    """Import ``tree/coopdyn`` as the package ``coopdyn_baseline`` (with this install's kernel)."""
+def _load_baseline(tree: Path, kernel: Path | None) -> Any:
+    """Import ``tree/coopdyn`` as the package ``coopdyn_baseline``, with ``kernel`` (that tree's
+    own compiled ``_native*.so``) if given; without it the old tree runs on its Python path
+    (this install's kernel has another interface)."""
     root = Path(tempfile.mkdtemp())
     shutil.copytree(tree / "coopdyn", root / "coopdyn_baseline")
-    spec = importlib.util.find_spec("coopdyn._native")
-    if spec is not None and spec.origin is not None:  # the old tree's kernel may differ: its Python path is the fallback
-        shutil.copy(spec.origin, root / "coopdyn_baseline")
+    if kernel is not None:
+        shutil.copy(kernel, root / "coopdyn_baseline")
     sys.path.insert(0, str(root))
     return importlib.import_module("coopdyn_baseline")
 
@@ -53,6 +54,7 @@ def _trajectory(pkg: Any, scene: Any) -> tuple[np.ndarray, np.ndarray]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--baseline", type=Path, default=None, help="another coopdyn source tree to compare with")
+    parser.add_argument("--baseline-kernel", type=Path, default=None, help="that tree's compiled kernel (_native*.so)")
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
 
@@ -67,7 +69,7 @@ def main() -> int:
 
         variants[f"this checkout, {backend}"] = make
     if args.baseline is not None:
-        old = _load_baseline(args.baseline)
+        old = _load_baseline(args.baseline, args.baseline_kernel)
         old_scene = old.scenes.facing_arms("panda", stiffness=1e4)
         np.testing.assert_array_equal(old_scene.q0, scene.q0)
 
