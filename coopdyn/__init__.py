@@ -4,15 +4,19 @@ from . import control, cooperative, integrators, reference, scenes
 from .bench.stability import measure_stable_dt
 from .dynamics import Dynamics, Energy, backend
 from .errors import (
+    AccuracyWarning,
     ControllerError,
     CoopdynError,
     DivergenceError,
     EnergyBalanceError,
     EnergyBalanceWarning,
     ModelLoadError,
+    OutputError,
     SceneError,
+    SceneFileError,
     SimulationError,
     SimulationInterrupted,
+    StepBudgetError,
 )
 from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal
 from .result import Result
@@ -20,6 +24,7 @@ from .simulate import simulate
 from .stability import Advice, advise
 
 __all__ = [
+    "AccuracyWarning",
     "Advice",
     "Arm",
     "ControllerError",
@@ -31,12 +36,15 @@ __all__ = [
     "EnergyBalanceWarning",
     "Interconnection",
     "ModelLoadError",
+    "OutputError",
     "Result",
     "RigidObject",
     "Scene",
     "SceneError",
+    "SceneFileError",
     "SimulationError",
     "SimulationInterrupted",
+    "StepBudgetError",
     "advise",
     "axial",
     "backend",

@@ -65,7 +65,7 @@ def _view(args: argparse.Namespace) -> int:
     if args.html:
         print(f"wrote {export_html(result, args.html)}")
         return 0
-    view(result, loops=args.loops)
+    view(result, loops=args.loops, host=args.host)
     return 0
 
 
@@ -103,6 +103,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     view.add_argument("--result", default=None, help="trajectory .npz (default: <output folder>/trajectory.npz)")
     view.add_argument("--loops", type=int, default=None, help="play this many times (default: until Ctrl-C)")
     view.add_argument("--html", default=None, help="write a standalone HTML animation to this path instead")
+    view.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address the viewer serves on (default 127.0.0.1: this machine only; others are warned about)",
+    )
     view.set_defaults(func=_view)
     book = sub.add_parser("book", help="the book's linear cooperative system vs its exact solution (Figure 11)")
     book.add_argument("--out", default="out", help="output folder (default: out)")
@@ -129,6 +134,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SimulationInterrupted as exc:
         _print_saved(exc)
         print(f"coopdyn: {exc}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt as exc:
+        print(f"coopdyn: interrupted{f' ({exc})' if str(exc) else ''}", file=sys.stderr)
         return 130
     print(f"done in {time.perf_counter() - t0:.1f} s")
     return code

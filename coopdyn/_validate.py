@@ -7,22 +7,65 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .errors import SceneError
+from .errors import CoopdynError, SceneError
 
 ArrayLike = Any
 
 
-def finite_array(value: ArrayLike, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """Return ``value`` as a float array, checking its shape and that every entry is finite."""
+def finite_array(
+    value: ArrayLike, name: str, shape: tuple[int, ...] | None = None, error: type[CoopdynError] = SceneError
+) -> np.ndarray:
+    """Return ``value`` as a float array, checking its shape and that every entry is finite.
+
+    Refused with ``error``: text, booleans, complex and object (non-numeric) entries — nothing is
+    silently converted (a complex value would lose its imaginary part) —, ragged or over-deep
+    nesting, and numbers beyond the float range."""
+    if isinstance(value, str | bytes | bool | np.bool_) or value is None:
+        raise error(f"{name} must be numeric, got {_short(value)}")
     try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f"{name} must be numeric, got {value!r}") from exc
+        raw = np.asarray(value)
+    except (TypeError, ValueError, OverflowError, RecursionError) as exc:
+        raise error(f"{name} must be a number or a (nested) list of numbers of one shape, got {_short(value)}") from exc
+    if raw.dtype.kind == "c":
+        raise error(f"{name} must be real, got a complex value {_short(value)}")
+    if raw.dtype.kind not in "iuf":
+        if raw.dtype.kind == "O" and all(isinstance(x, int | float) and not isinstance(x, bool) for x in raw.flat):
+            pass  # Python integers beyond int64: converted (and checked against the float range) below
+        else:
+            raise error(f"{name} must be numeric, got {_short(value)}")
+    try:
+        arr = raw.astype(float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise error(f"{name} must be within the float range (|x| < 1.8e308), got {_short(value)}") from exc
     if shape is not None and arr.shape != shape:
-        raise SceneError(f"{name} must have shape {shape}, got shape {arr.shape}")
+        raise error(f"{name} must have shape {shape}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise SceneError(f"{name} must be finite, got {arr.tolist()}")
+        raise error(f"{name} must be finite, got {_short(arr.tolist())}")
     return arr
+
+
+def number(value: Any, name: str, unit: str, error: type[CoopdynError] = SceneError) -> float:
+    """``value`` as a finite float (a real number: not text, bool, complex or an array)."""
+    return float(finite_array(value, f"{name} [{unit}]", (), error))
+
+
+def gain(value: Any, name: str, n: int, unit: str, error: type[CoopdynError] = SceneError) -> np.ndarray:
+    """A non-negative scalar or (n,) vector, returned as (n,)."""
+    arr = finite_array(value, name, None, error)
+    if arr.shape not in ((), (1,), (n,)):
+        raise error(f"{name} must be a scalar or one value per actuated joint ({n}) [{unit}], got shape {arr.shape}")
+    if np.any(arr < 0.0):
+        raise error(f"{name} must be >= 0 [{unit}], got {_short(arr.tolist())}")
+    return np.broadcast_to(arr.reshape(-1) if arr.shape == (1,) else arr, (n,)).copy()
+
+
+def _short(value: Any, limit: int = 120) -> str:
+    """``repr(value)`` cut to ``limit`` characters (an error message must stay readable)."""
+    try:
+        text = repr(value)
+    except Exception:
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[: limit - 5] + " …" + text[-3:]
 
 
 def positive(value: Any, name: str, unit: str) -> float:

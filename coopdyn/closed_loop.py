@@ -10,6 +10,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
+from . import _validate
 from .dynamics import Dynamics
 from .errors import ControllerError
 
@@ -41,6 +42,15 @@ class System:
     def __init__(
         self, dynamics: Dynamics, controller: Controller | None = None, object_wrench: Callable[[float], np.ndarray] | None = None
     ) -> None:
+        if controller is not None and not callable(controller):
+            raise ControllerError(
+                f"controller must be a callable controller(t, q, v) -> τ (e.g. coopdyn.GravityCompensationPD(scene)) "
+                f"or None, got {_validate._short(controller)}"
+            )
+        if object_wrench is not None and not callable(object_wrench):
+            raise ControllerError(
+                f"object_wrench must be a callable object_wrench(t) -> (6,) or None, got {_validate._short(object_wrench)}"
+            )
         self.dynamics = dynamics
         self._scene = dynamics.scene
         self._model = dynamics.model
@@ -60,7 +70,7 @@ class System:
         self._last: _Record | None = None
         self._previous_last: _Record | None = None
         gains = getattr(controller, "gains", None)
-        self._gains = gains() if callable(gains) else None
+        self._gains = _checked_gains(gains(), self.n_actuated) if callable(gains) else None
 
     @property
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +95,17 @@ class System:
         """The controller output, checked: (n_actuated,) finite floats."""
         if self.controller is None:
             return self._zero
-        tau = np.asarray(self.controller(t, q, v), dtype=float)
+        out = self.controller(t, q, v)
+        if isinstance(out, np.ndarray) and out.dtype == np.float64:
+            tau = out
+        else:  # lists, other dtypes, and what is not a torque vector at all
+            try:
+                tau = _validate.finite_array(out, "the controller's output", error=ControllerError)
+            except ControllerError as exc:
+                raise ControllerError(
+                    f"{exc} at t = {t:.6g} s; a controller must return one torque/force per arm joint, a real array of "
+                    f"shape ({self.n_actuated},), in scene order"
+                ) from None
         if tau.shape != (self.n_actuated,):
             raise ControllerError(
                 f"the controller returned shape {tau.shape} at t = {t:.6g} s; it must return one torque/force per "
@@ -142,10 +162,11 @@ class System:
 
     def _wrench(self, t: float) -> np.ndarray:
         assert self.object_wrench is not None
-        w = np.asarray(self.object_wrench(t), dtype=float)
-        if w.shape != (6,) or not math.isfinite(w.sum()):
-            raise ControllerError(f"object_wrench(t) must return 6 finite numbers [N, N·m] at t = {t:.6g} s, got {w!r}")
-        return w
+        out = self.object_wrench(t)
+        try:
+            return _validate.finite_array(out, "object_wrench(t)", (6,), error=ControllerError)
+        except ControllerError as exc:
+            raise ControllerError(f"{exc} at t = {t:.6g} s; it must return 6 finite real numbers [N, N·m]") from None
 
     def begin_step(self) -> None:
         """Mark the start of a step (for :meth:`power_at` and :meth:`recorded_torque`); the
@@ -236,3 +257,19 @@ class System:
         for s in self._chart:
             out[s] = np.linalg.solve(J[s, s], v[s])
         return out
+
+
+def _checked_gains(gains: object, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A controller's ``gains()``: two finite real arrays (Kp, Kd), each a scalar or (n,). A negative
+    gain is accepted here; the implicit methods' step matrix then says what it does."""
+    if not isinstance(gains, tuple | list) or len(gains) != 2:
+        raise ControllerError(
+            f"the controller's gains() must return (Kp, Kd), two arrays of shape ({n},), got {_validate._short(gains)}"
+        )
+    out = []
+    for value, name in zip(gains, ("Kp", "Kd"), strict=True):
+        arr = _validate.finite_array(value, f"the controller's gains() {name}", error=ControllerError)
+        if arr.shape not in ((), (n,)):
+            raise ControllerError(f"the controller's gains() {name} must have shape ({n},), got {arr.shape}")
+        out.append(np.broadcast_to(arr, (n,)).copy())
+    return out[0], out[1]

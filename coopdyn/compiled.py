@@ -23,6 +23,7 @@ from .monitor import ENERGY_RTOL
 #: what a chunk reports, by name (src/native/loop.hpp: Status; the kernel exports the names)
 STATUS_NAMES = ("running", "done", "diverged", "step_matrix", "energy", "h_min", "controller", "failed", "scene")
 RUNNING, DONE, DIVERGED, STEP_MATRIX, ENERGY, H_MIN, CONTROLLER, FAILED, SCENE = range(len(STATUS_NAMES))
+BUDGET = -1  #: set in Python between chunks: an adaptive run used up its step budget
 #: the kinds of event a chunk reports (src/native/loop.hpp: Event)
 ROTATION_ALARM, ENERGY_BALANCE = 0, 1
 #: wall time of one chunk [s]: how often Python looks (progress bar, warnings, Ctrl-C)

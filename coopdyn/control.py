@@ -12,6 +12,12 @@ from .errors import SceneError
 from .model.scene import Scene
 
 
+def _scene(scene: Any, who: str) -> Scene:
+    if not isinstance(scene, Scene):
+        raise SceneError(f"{who}: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+    return scene
+
+
 class GravityCompensationPD:
     """``τ = g(q) + Kp (q_d − q) − Kd q̇`` on every arm joint.
 
@@ -24,10 +30,10 @@ class GravityCompensationPD:
     """
 
     def __init__(self, scene: Scene, kp: Any = 50.0, kd: Any = 5.0, q_des: Any = None) -> None:
-        n = scene.n_actuated
+        n = _scene(scene, "GravityCompensationPD").n_actuated
         self.scene = scene
-        self.kp = np.broadcast_to(_validate.finite_array(kp, "kp"), (n,)).copy()
-        self.kd = np.broadcast_to(_validate.finite_array(kd, "kd"), (n,)).copy()
+        self.kp = _validate.gain(kp, "GravityCompensationPD: kp", n, "N·m/rad")
+        self.kd = _validate.gain(kd, "GravityCompensationPD: kd", n, "N·m·s/rad")
         self._q_index = np.concatenate([a.q_index for a in scene.arms])
         self.q_des = scene.q0.copy()  # a full configuration: pin.difference handles any joint type
         if q_des is not None:
@@ -67,11 +73,15 @@ class ComputedTorque:
     """
 
     def __init__(self, scene: Scene, kp: Any = 400.0, kd: Any = 40.0, reference: Any = None) -> None:
-        n = scene.n_actuated
+        n = _scene(scene, "ComputedTorque").n_actuated
         self.scene = scene
-        self.kp = np.broadcast_to(_validate.finite_array(kp, "kp"), (n,)).copy()
-        self.kd = np.broadcast_to(_validate.finite_array(kd, "kd"), (n,)).copy()
+        self.kp = _validate.gain(kp, "ComputedTorque: kp", n, "1/s²")
+        self.kd = _validate.gain(kd, "ComputedTorque: kd", n, "1/s")
         self._q_index = np.concatenate([a.q_index for a in scene.arms])
+        if reference is not None and not callable(reference):
+            raise SceneError(
+                f"ComputedTorque: reference must be a callable reference(t) -> (q_d, q̇_d, q̈_d), got {type(reference).__name__}"
+            )
         if self._q_index.size != n:
             raise SceneError("ComputedTorque needs arms made of 1-DOF joints (nq = nv)")
         q0 = scene.q0[self._q_index]

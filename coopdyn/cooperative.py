@@ -19,8 +19,7 @@ mass of the object plus the arms' reflected inertia at the grasps
 from __future__ import annotations
 
 import math
-import numbers
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -129,17 +128,10 @@ class GripLiftOscillate:
 
     def __post_init__(self) -> None:
         for name in ("t_grip", "lift_duration", "frequency"):
-            value = getattr(self, name)
-            if not (
-                isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value) and float(value) > 0
-            ):
-                raise SceneError(f"GripLiftOscillate: {name} must be a positive number, got {value!r}")
-        for name in ("squeeze", "lift", "t_lift", "amplitude", "t_osc", "cycles"):
-            value = getattr(self, name)
-            if not (isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)):
-                raise SceneError(f"GripLiftOscillate: {name} must be a finite number, got {value!r}")
-        if float(self.cycles) < 0:
-            raise SceneError(f"GripLiftOscillate: cycles must be >= 0, got {self.cycles!r}")
+            _validate.positive(getattr(self, name), f"GripLiftOscillate: {name}", "s" if name != "frequency" else "Hz")
+        for name, unit in (("squeeze", "N"), ("lift", "m"), ("t_lift", "s"), ("amplitude", "m"), ("t_osc", "s")):
+            _validate.number(getattr(self, name), f"GripLiftOscillate: {name}", unit)
+        _validate.non_negative(self.cycles, "GripLiftOscillate: cycles", "periods")
         _validate.finite_array(self.start, "GripLiftOscillate: start", (3,))
         if self.rotation is not None:
             R = _validate.finite_array(self.rotation, "GripLiftOscillate: rotation", (3, 3))
@@ -183,6 +175,24 @@ class GripLiftOscillate:
         return self.t_osc + self.cycles / self.frequency
 
 
+def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """(linear, angular) object gains, each a non-negative scalar or 3-vector, as two (3,) arrays."""
+    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray) or len(value) != 2:
+        raise SceneError(
+            f"ObjectImpedance: {name} must be a pair (linear [{units[0]}], angular [{units[1]}]), each a scalar or "
+            f"3-vector, e.g. {name}=(2000.0, 100.0); got {_validate._short(value)}"
+        )
+    out = []
+    for part, unit, label in zip(value, units, ("linear", "angular"), strict=True):
+        arr = _validate.finite_array(part, f"ObjectImpedance: {name} ({label}) [{unit}]")
+        if arr.shape not in ((), (3,)):
+            raise SceneError(f"ObjectImpedance: {name} ({label}) must be a scalar or a 3-vector [{unit}], got shape {arr.shape}")
+        if np.any(arr < 0.0):
+            raise SceneError(f"ObjectImpedance: {name} ({label}) must be >= 0 [{unit}], got {arr.tolist()}")
+        out.append(np.broadcast_to(arr, (3,)).copy())
+    return out[0], out[1]
+
+
 class ObjectImpedance:
     """Cooperative impedance control of the held object with internal-force regulation.
 
@@ -208,18 +218,21 @@ class ObjectImpedance:
         null_stiffness: float = 20.0,
         null_damping: float = 5.0,
     ) -> None:
+        if not isinstance(scene, Scene):
+            raise SceneError(f"ObjectImpedance: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+        if reference is not None and not callable(reference):
+            raise SceneError(
+                f"ObjectImpedance: reference must be a callable reference(t) -> ObjectReference (e.g. a "
+                f"GripLiftOscillate), got {type(reference).__name__}"
+            )
         self.scene = scene
         model = scene.model
         self._data = model.createData()
-        self.Kp = np.broadcast_to(_validate.finite_array(stiffness[0], "object stiffness (linear)"), (3,)).copy()
-        self.Kr = np.broadcast_to(_validate.finite_array(stiffness[1], "object stiffness (angular)"), (3,)).copy()
-        self.Dp = np.broadcast_to(_validate.finite_array(damping[0], "object damping (linear)"), (3,)).copy()
-        self.Dr = np.broadcast_to(_validate.finite_array(damping[1], "object damping (angular)"), (3,)).copy()
-        for name, value in (("stiffness", (self.Kp, self.Kr)), ("damping", (self.Dp, self.Dr))):
-            if np.any(np.concatenate(value) < 0.0):
-                raise SceneError(f"object {name} must be >= 0, got {np.concatenate(value).tolist()}")
-        self.joint_damping = _validate.non_negative(joint_damping, "joint_damping", "N·m·s/rad")
-        self.null_stiffness, self.null_damping = float(null_stiffness), float(null_damping)
+        self.Kp, self.Kr = _pair(stiffness, "stiffness", ("N/m", "N·m/rad"))
+        self.Dp, self.Dr = _pair(damping, "damping", ("N·s/m", "N·m·s/rad"))
+        self.joint_damping = _validate.non_negative(joint_damping, "ObjectImpedance: joint_damping", "N·m·s/rad")
+        self.null_stiffness = _validate.non_negative(null_stiffness, "ObjectImpedance: null_stiffness", "N·m/rad")
+        self.null_damping = _validate.non_negative(null_damping, "ObjectImpedance: null_damping", "N·m·s/rad")
         data = self._data
         pin.framesForwardKinematics(model, data, scene.q0)
         oMo = data.oMf[scene.object_frame]

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 
 from .cooperative import GripLiftOscillate, ObjectImpedance
-from .errors import DivergenceError, SimulationInterrupted
+from .errors import DivergenceError, SimulationInterrupted, StepBudgetError
+from .outputs import save_partial, write_outputs
 from .problems.facing_arms import facing_arms, object_start
-from .result import save_partial
 from .simulate import simulate
 from .viz.plotting import cooperative_figure
 
@@ -48,7 +48,7 @@ def run_demo(
             save_every=max(1, round(0.01 / dt)),  # 100 samples per second
             progress=progress,
         )
-    except (DivergenceError, SimulationInterrupted) as exc:
+    except (DivergenceError, SimulationInterrupted, StepBudgetError) as exc:
         exc.saved = save_partial(exc, out_dir)  # type: ignore[union-attr]
         raise
     wall = time.perf_counter() - wall0
@@ -68,15 +68,24 @@ def run_demo(
         "wall_s": wall,
         "rhs_evaluations": res.n_rhs,
     }
-    files = [res.save(out_dir / "trajectory.npz"), res.save(out_dir / "trajectory.csv")]
-    cooperative_figure(res, task, out_dir / "demo.png")
-    files.append(out_dir / "demo.png")
-    if html:
+
+    def figure(folder: Path) -> Path:
+        cooperative_figure(res, task, folder / "demo.png")
+        return folder / "demo.png"
+
+    def animation(folder: Path) -> Path:
         from .viz.viewer import export_html
 
-        files.append(export_html(res, out_dir / "demo.html"))
-    summary["files"] = [str(f) for f in files]
-    summary["output_folder"] = str(out_dir.resolve())
+        return export_html(res, folder / "demo.html")
+
+    written = write_outputs(
+        out_dir,
+        [("trajectory", lambda folder: [res.save(folder / "trajectory.npz"), res.save(folder / "trajectory.csv")])],
+        [("plot", figure), *([("animation", animation)] if html else [])],
+    )
+    summary["files"] = [str(f) for f in written.files]
+    summary["problems"] = list(written.problems)
+    summary["output_folder"] = str(written.folder)
     return summary
 
 
@@ -93,4 +102,5 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"output folder: {summary['output_folder']}",
     ]
     lines += [f"  wrote {f}" for f in summary["files"]]
+    lines += [f"  not written: {p}" for p in summary.get("problems", ())]
     return "\n".join(lines)

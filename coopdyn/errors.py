@@ -41,6 +41,16 @@ class SimulationInterrupted(KeyboardInterrupt):
         self.result = result
 
 
+class StepBudgetError(SimulationError):
+    """An adaptive method used up ``simulate``'s ``max_steps`` (accepted and rejected steps) before
+    the end: its steps shrank to follow a mode it cannot step over. ``result`` holds the
+    trajectory so far."""
+
+    def __init__(self, message: str, *, result: object = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
 class StepMatrixError(SimulationError):
     """The step matrix of a linearly implicit step, M + γh·D̃ + (γh)²·K̃, is not positive definite
     (a negative gain or stiffness, or a state that is no longer finite). Raised by ``simulate``
@@ -63,6 +73,14 @@ class SceneFileError(SceneError):
     """A scene file is malformed; the message names the file, the key and its line."""
 
 
+class OutputError(CoopdynError, OSError):
+    """A run's outputs could not be written where asked; the message says where they went instead."""
+
+
+class ViewerError(CoopdynError, RuntimeError):
+    """The live viewer's server could not start."""
+
+
 class MissingDependencyError(CoopdynError, ImportError):
     """A dependency a feature needs is not installed."""
 
@@ -79,6 +97,11 @@ class EnergyBalanceWarning(UserWarning):
     """Total energy grew more than the net input work explains."""
 
 
+class AccuracyWarning(UserWarning):
+    """A stable method's step does not resolve an oscillatory mode: the run completes, but the
+    forces that mode carries are damped away or out of phase (see :func:`coopdyn.advise`)."""
+
+
 class LogMapWarning(UserWarning):
     """A deformation's rotation neared π, where the SE(3) logarithm jumps."""
 
@@ -89,7 +112,9 @@ class NativeBackendWarning(UserWarning):
 
 def did_you_mean(name: str, candidates: Iterable[str], *, n: int = 3) -> str:
     """Return ``" Did you mean 'a', 'b'?"`` for the closest candidates, or ``""``."""
-    close = difflib.get_close_matches(name, list(candidates), n=n, cutoff=0.5)
+    if not isinstance(name, str):  # a wrong type gets no suggestion (its message says what is valid)
+        return ""
+    close = difflib.get_close_matches(name, [c for c in candidates if isinstance(c, str)], n=n, cutoff=0.5)
     if not close:
         return ""
     return " Did you mean " + ", ".join(repr(c) for c in close) + "?"

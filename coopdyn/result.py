@@ -46,7 +46,7 @@ class Result:
     n_factor: int = 0
     n_steps: int = 0
     n_rejected: int = 0
-    status: str = "completed"  #: "completed", "interrupted" (Ctrl-C) or "diverged"
+    status: str = "completed"  #: "completed", "interrupted" (Ctrl-C), "diverged" or "stopped" (step budget)
     backend: str | None = None  #: the dynamics backend of the run; readouts use the same
     loop: str = "python"  #: the step loop that ran: "compiled" or "python" (see coopdyn.simulate)
 
@@ -140,21 +140,26 @@ class Result:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.tmp")
-        W = self.wrenches().reshape(len(self.t), -1)
-        if path.suffix == ".npz":
-            with open(tmp, "wb") as f:
-                np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, integrator=self.integrator, dt=self.dt)
-        elif path.suffix == ".csv":
-            qn = [f"q[{i}]" for i in range(self.scene.nq)]
-            vn = [f"v[{i}]" for i in range(self.scene.nv)]
-            joints = [name for a in self.scene.arms for name in a.joint_names]
-            taun = [f"tau[{joints[i] if len(joints) == self.scene.n_actuated else i}]" for i in range(self.scene.n_actuated)]
-            wn = [f"link{i}_{c}" for i in range(len(self.scene.links)) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
-            header = ",".join(["t", *qn, *vn, *taun, *wn])
-            np.savetxt(tmp, np.column_stack([self.t, self.q, self.v, self.tau, W]), delimiter=",", header=header, comments="")
-        else:
+        if path.suffix not in (".npz", ".csv"):
             raise SimulationError(f"unknown result format {path.suffix!r}: use .npz or .csv")
-        os.replace(tmp, path)
+        W = self.wrenches().reshape(len(self.t), -1)
+        try:
+            if path.suffix == ".npz":
+                with open(tmp, "wb") as f:
+                    np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, integrator=self.integrator, dt=self.dt)
+            else:
+                qn = [f"q[{i}]" for i in range(self.scene.nq)]
+                vn = [f"v[{i}]" for i in range(self.scene.nv)]
+                joints = [name for a in self.scene.arms for name in a.joint_names]
+                taun = [f"tau[{joints[i] if len(joints) == self.scene.n_actuated else i}]" for i in range(self.scene.n_actuated)]
+                wn = [f"link{i}_{c}" for i in range(len(self.scene.links)) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
+                header = ",".join(["t", *qn, *vn, *taun, *wn])
+                data = np.column_stack([self.t, self.q, self.v, self.tau, W])
+                np.savetxt(tmp, data, delimiter=",", header=header, comments="")
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)  # no .tmp left behind (disk full, read-only, Ctrl-C)
+            raise
         return path
 
     def tracking_error(self, reference: Callable[[float], Any]) -> np.ndarray:
@@ -173,22 +178,3 @@ class Result:
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
         return self.readouts.object_position
-
-
-def save_partial(error: BaseException, folder: str | os.PathLike[str]) -> list[Path]:
-    """After a ``DivergenceError`` or ``SimulationInterrupted``: write the trajectory it carries
-    (``trajectory.npz``, ``trajectory.csv``) and the message (``diagnosis.txt``) to ``folder``,
-    atomically. Returns the paths written."""
-    result = getattr(error, "result", None)
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    if isinstance(result, Result) and len(result.t):
-        written += [result.save(folder / "trajectory.npz"), result.save(folder / "trajectory.csv")]
-    note = folder / "diagnosis.txt"
-    tmp = note.with_name(".diagnosis.txt.tmp")
-    advice = getattr(error, "advice", None)
-    tmp.write_text(f"{type(error).__name__}: {error}\n" + (f"\n{advice}\n" if advice is not None else ""))
-    os.replace(tmp, note)
-    written.append(note)
-    return written

@@ -11,10 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from . import compiled
+from . import _signals, _validate, compiled
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import (
+    AccuracyWarning,
     ControllerError,
     DivergenceError,
     EnergyBalanceError,
@@ -24,13 +25,14 @@ from .errors import (
     SceneError,
     SimulationError,
     SimulationInterrupted,
+    StepBudgetError,
     StepMatrixError,
 )
 from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result
-from .stability import advise
+from .stability import advise, unresolved_mode_message
 
 
 def simulate(
@@ -48,6 +50,8 @@ def simulate(
     object_wrench: Callable[[float], np.ndarray] | None = None,
     backend: str | None = None,
     loop: str = "auto",
+    max_steps: int | None = 10**7,
+    max_memory: float | None = 4e9,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -79,6 +83,12 @@ def simulate(
             otherwise; ``"compiled"`` requires the compiled loop (SimulationError saying which
             piece is Python); ``"python"`` forces the Python loop. Both give the same result to
             round-off; ``Result.loop`` says which ran.
+        max_steps: refuse a run whose ``t_final / dt`` exceeds this many steps, before it starts
+            (the message estimates its CPU time); for adaptive methods, also the most steps
+            (accepted and rejected) they may take (:class:`StepBudgetError` past it). ``None``:
+            no limit.
+        max_memory: refuse a run whose saved trajectory would take more than this many bytes
+            (the message proposes a ``save_every``); ``None``: no limit.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -89,28 +99,40 @@ def simulate(
         SimulationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), carrying the trajectory so far.
         StepMatrixError: an implicit method's step matrix is not positive definite (with .result).
         EnergyBalanceError: with ``energy_check="raise"``, when the energy balance breaks.
-        SimulationError: on invalid arguments. ControllerError: on a bad controller output.
+        StepBudgetError: an adaptive method used up ``max_steps`` (with .result).
+        SimulationError: on invalid arguments and runs refused as too long or too large.
+        ControllerError: a controller that is not callable or returns a bad output.
         KernelError: what the compiled kernel refuses.
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
-    t_final = _number(t_final, "t_final")
-    dt = _number(dt, "dt")
+    t_final = _validate.number(t_final, "t_final", "s", SimulationError)
+    dt = _validate.number(dt, "dt", "s", SimulationError)
     if t_final < 0.0:
         raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
-    if dt <= 0.0:
-        raise SimulationError(f"dt must be > 0 [s], got {dt}")
+    if not dt >= MIN_DT:
+        raise SimulationError(
+            f"dt must be >= {MIN_DT:g} [s] (a step shorter than this is below the clock's resolution), got {dt}"
+        )
     if not isinstance(save_every, int | np.integer) or isinstance(save_every, bool) or save_every < 1:
-        raise SimulationError(f"save_every must be an integer >= 1, got {save_every!r}")
-    if energy_check not in ("warn", "raise", "off"):
-        raise SimulationError(f"energy_check must be 'warn', 'raise' or 'off', got {energy_check!r}")
-    if loop not in ("auto", "compiled", "python"):
-        raise SimulationError(f"loop must be 'auto', 'compiled' or 'python', got {loop!r}")
+        raise SimulationError(f"save_every must be an integer >= 1, got {_validate._short(save_every)}")
+    max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
+    if max_speed <= 0.0:
+        raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {max_speed}")
+    for name, value, valid in (("energy_check", energy_check, ENERGY_CHECKS), ("loop", loop, LOOPS)):
+        if not isinstance(value, str) or value not in valid:
+            raise SimulationError(f"{name} must be one of {list(valid)}, got {_validate._short(value)}")
+    if not isinstance(progress, bool | np.bool_):
+        raise SimulationError(f"progress must be True or False, got {_validate._short(progress)}")
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
+    budget = _budget(scene, t_final, dt, save_every, max_steps, max_memory)
 
     system = System(Dynamics(scene, backend), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
+    run.budget = budget
+    if method.a_stable and not method.adaptive and not method.exact_discretisation and t_final > 0:
+        _warn_unresolved(scene, system, method, q, v, dt)
     cpu0 = time.process_time()  # the compiled loop's preparation (e.g. the exponential's expm) counts too
     config, why = None, "loop='python'"
     if loop != "python":
@@ -142,11 +164,15 @@ def simulate(
                 _adaptive_loop(run, q, v, monitor, bar)
             else:
                 _fixed_loop(run, q, v, monitor, bar)
+        run.cpu_time = time.process_time() - cpu0
+        return run.result()
     except KeyboardInterrupt as exc:
         if isinstance(exc, SimulationInterrupted):
             raise
-        run.cpu_time = time.process_time() - cpu0
-        partial = run.result("interrupted")
+        with _signals.interrupts_deferred(reraise=False):  # a second Ctrl-C cannot cut the partial result
+            run.cpu_time = time.process_time() - cpu0
+            done = bool(run.t) and run.t[-1] >= t_final and len(run.t) == len(run.q) == len(run.v) == len(run.tau)
+            partial = run.result("completed" if done else "interrupted")
         raise SimulationInterrupted(
             f"interrupted at t = {partial.t[-1]:.6g} s of {t_final:g} s; the trajectory so far is in this exception's .result",
             result=partial,
@@ -154,11 +180,11 @@ def simulate(
     finally:
         if bar is not None:
             bar.close()
-    run.cpu_time = time.process_time() - cpu0
-    return run.result()
 
 
-MAX_STEPS = 10**9  #: a run asking for more steps is refused (it would not finish)
+MIN_DT = 1e-12  #: [s] the shortest step ``simulate`` takes
+ENERGY_CHECKS = ("warn", "raise", "off")
+LOOPS = ("auto", "compiled", "python")
 
 
 class _Run:
@@ -170,13 +196,7 @@ class _Run:
         self.scene, self.system, self.method, self.dt, self.t_final = scene, system, method, dt, t_final
         self.max_speed = max_speed
         self._max_speed_sq = max_speed * max_speed
-        n_steps = max(0, math.ceil(t_final / dt - 1e-9))
-        self.n_steps = n_steps
-        if n_steps > MAX_STEPS:
-            raise SimulationError(
-                f"t_final / dt = {t_final:g} / {dt:g} asks for {n_steps:.3g} steps (more than {MAX_STEPS:.0e}); "
-                "shorten the run or enlarge dt"
-            )
+        self.n_steps = _step_count(t_final, dt)
         self.save_every = save_every
         self.t: list[float] = []
         self.q: list[np.ndarray] = []
@@ -188,6 +208,21 @@ class _Run:
         self.ws = method.workspace(system)  # the method's own per-run scratch
         self._warned_links: set[int] = set()
         self.loop = "python"
+        self.budget: int | None = None  # an adaptive method's limit on attempted steps
+
+    def over_budget(self, t: float) -> StepBudgetError | None:
+        """The error to raise when an adaptive run has used up its step budget, else None."""
+        attempts = self.n_accepted + self.n_rejected
+        if self.budget is None or attempts < self.budget or not self.method.adaptive:
+            return None
+        partial = self.result("stopped")
+        return StepBudgetError(
+            f"{self.method.name} took {attempts:,} steps (max_steps = {self.budget:,}) and reached only t = {t:.6g} s of "
+            f"{self.t_final:g} s: its steps shrank to follow a fast mode (mean step {t / max(self.n_accepted, 1):.3g} s). "
+            "An L-stable method (implicit_euler, ros2) steps over stiff modes; coopdyn.advise(scene) lists what is stable "
+            "at which dt. Pass max_steps=None to let it run. The trajectory so far is in this error's .result",
+            result=partial,
+        )
 
     def save(self, t: float, q: np.ndarray, v: np.ndarray, step_follows: bool = True) -> None:
         """Keep a sample. When a step from it follows, its torque is taken from that step's own
@@ -273,8 +308,14 @@ class _Run:
 
     def result(self, status: str = "completed") -> Result:
         s = self.system
-        self.settle_torque()  # a run stopped right after a save
-        n = len(self.t)
+        # A Ctrl-C can land between the appends of one save: keep the samples saved whole.
+        n = min(len(self.t), len(self.q), len(self.v), len(self.tau))
+        del self.t[n:], self.q[n:], self.v[n:], self.tau[n:]
+        try:
+            self.settle_torque()  # a run stopped right after a save
+        except Exception:
+            if self.tau and self.tau[-1] is None:
+                self.tau[-1] = np.full(self.scene.n_actuated, np.nan)
         return Result(
             scene=self.scene,
             t=np.array(self.t),
@@ -344,6 +385,12 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
                     warnings.warn(message, EnergyBalanceWarning, stacklevel=3)
             if bar is not None:
                 bar.update(native.t - bar.n)
+            if status == compiled.RUNNING and run.budget is not None and run.method.adaptive:
+                counters = native.counters()
+                run.n_accepted, run.n_rejected = int(counters[3]), int(counters[4])
+                if run.n_accepted + run.n_rejected >= run.budget:
+                    status = compiled.BUDGET
+                    break
     finally:  # also on Ctrl-C between chunks: the samples so far make the partial result
         samples = compiled.samples(native, run.scene)
         run.t, run.q, run.v = samples.t.tolist(), list(samples.q), list(samples.v)
@@ -355,6 +402,10 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
         run.n_accepted, run.n_rejected = samples.n_accepted, samples.n_rejected
     if status == compiled.DONE:
         return
+    if status == compiled.BUDGET:
+        error = run.over_budget(native.t)
+        assert error is not None
+        raise error
     message, t, h, q, v = native.failure()
     if status == compiled.DIVERGED:
         run.check(t, np.asarray(q, dtype=float), np.asarray(v, dtype=float), h)
@@ -395,6 +446,12 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 raise run.step_failed(exc, t, h_try) from None
             run.settle_torque()
             h = method.next_step(h_try, out.error)
+            if run.budget is not None and (run.n_accepted + run.n_rejected) % 1024 == 1023:
+                error = run.over_budget(t)
+                if error is not None:
+                    raise error
+                if bar is not None:
+                    bar.update(t - bar.n)
             if not (out.error <= 1.0):  # also rejects NaN
                 system.dynamics.clear_rotation_alarm()  # a rejected attempt's stages may go anywhere
                 run.n_rejected += 1
@@ -419,14 +476,72 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
         monitor.finish(t, q, v)
 
 
-def _number(x: Any, name: str) -> float:
+def _warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float) -> None:
+    """Warn once when a stable method's step does not resolve the fastest oscillatory mode at the
+    initial state (:func:`coopdyn.stability.unresolved_mode_message`)."""
     try:
-        value = float(x)
-    except (TypeError, ValueError) as exc:
-        raise SimulationError(f"{name} must be a number [s], got {x!r}") from exc
-    if not math.isfinite(value):
-        raise SimulationError(f"{name} must be finite [s], got {value}")
-    return value
+        M, K, D = system.dynamics.stiffness(q, v)  # not system.stiffness: the run's counters stay the run's
+        kp, kd = system.gains
+        system.dynamics.add_joint_gains(K, D, kp, kd)
+        n = scene.nv
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
+        message = unresolved_mode_message(scene, A, method, dt)
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # e.g. a destabilising gain: the run says more
+        return
+    if message is not None:
+        warnings.warn(message, AccuracyWarning, stacklevel=3)
+
+
+def _step_count(t_final: float, dt: float) -> int:
+    """Steps on the grid k·dt up to ``t_final`` (the last one shortened)."""
+    return max(0, math.ceil(t_final / dt - 1e-9))
+
+
+#: bytes one saved sample takes, per float it holds (t, q, v, τ): the samples, the lists they are
+#: collected in and the result's arrays (measured in ``tests/test_budget.py``)
+BYTES_PER_VALUE = 24.0
+
+
+def _budget(scene: Scene, t_final: float, dt: float, save_every: int, max_steps: Any, max_memory: Any) -> int | None:
+    """Refuse a run that would not finish in reasonable time or memory, before it starts; returns the
+    step budget (``None``: unlimited). An adaptive method's budget counts its attempts."""
+    if max_steps is not None:
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
+            raise SimulationError(f"max_steps must be a positive integer or None (no limit), got {_validate._short(max_steps)}")
+    if max_memory is not None:
+        max_memory = _validate.number(max_memory, "max_memory", "bytes", SimulationError)
+        if max_memory <= 0:
+            raise SimulationError(f"max_memory must be > 0 [bytes] or None (no limit), got {max_memory:g}")
+    ratio = t_final / dt
+    if not ratio < 1e15 or (max_steps is not None and ratio > max_steps):
+        limit = " (beyond what a run can count)" if max_steps is None else f", more than max_steps = {max_steps:,}"
+        raise SimulationError(
+            f"t_final / dt = {t_final:g} s / {dt:g} s asks for {ratio:.3g} steps{limit}. At ~10 µs per step (the "
+            f"compiled loop on two Pandas; Python controllers cost ~10× more) that is {_duration(ratio * 1e-5)} of CPU. "
+            "Enlarge dt or shorten t_final, or pass max_steps=None (or a larger number) to run it anyway"
+        )
+    n_saved = _step_count(t_final, dt) // save_every + 2
+    values = 1 + scene.nq + scene.nv + scene.n_actuated
+    memory = n_saved * values * BYTES_PER_VALUE
+    if max_memory is not None and memory > max_memory:
+        suggest = math.ceil(save_every * memory / max_memory)
+        raise SimulationError(
+            f"saving {n_saved:,} samples of {values} values (t, q, v, τ) takes about {memory / 1e9:.3g} GB, more than "
+            f"max_memory = {max_memory / 1e9:.3g} GB. Save fewer samples (save_every = {suggest} or more), shorten the run, "
+            "or pass max_memory=None (or a larger number of bytes) to run it anyway"
+        )
+    return None if max_steps is None else int(max_steps)
+
+
+def _duration(seconds: float) -> str:
+    """A rough duration for messages: ``"3.2 min"``, ``"5.1 h"``, ``"12 days"``."""
+    if seconds < 120:
+        return f"{seconds:.3g} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.3g} min"
+    if seconds < 172800:
+        return f"{seconds / 3600:.3g} h"
+    return f"{seconds / 86400:.3g} days"
 
 
 def _progress_bar(t_final: float, desc: str) -> Any:

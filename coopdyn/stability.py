@@ -21,6 +21,13 @@ from .errors import SimulationError
 from .integrators import Integrator, get_integrator
 from .model.scene import Scene
 
+#: |λ|·dt above which a step does not resolve an oscillatory mode (fewer than 2π steps per
+#: period). Measured on the book's system with undamped interconnections (``.venv/bin/python
+#: benchmarks/unresolved_modes.py``): from |λ|·dt ≈ 1 on, implicit Euler's and the trapezoid's
+#: force errors stop falling with dt and equal the mode's whole force swing (150–310 N on a
+#: 290 N signal); below it they fall with dt.
+RESOLVE_LIMIT = 1.0
+
 #: Methods :func:`advise` reports on by default.
 ADVISED = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "exponential")
 
@@ -36,6 +43,41 @@ class MethodAdvice:
 
 
 @dataclass(frozen=True)
+class Oscillation:
+    """The fastest oscillatory mode of the linearised scene (a complex eigenvalue pair)."""
+
+    rate: float  #: |λ| [1/s] (the undamped natural frequency ω_n of the mode)
+    damping_ratio: float  #: −Re λ / |λ|
+
+    @property
+    def frequency(self) -> float:
+        """Its damped frequency |Im λ| / 2π [Hz]."""
+        return self.rate * math.sqrt(max(1.0 - self.damping_ratio**2, 0.0)) / (2.0 * math.pi)
+
+    @property
+    def max_resolved_dt(self) -> float:
+        """Largest step that resolves it, :data:`RESOLVE_LIMIT` / |λ| [s]."""
+        return RESOLVE_LIMIT / self.rate
+
+
+#: Modes damped more than this (overshoot below 16 %) die out within a period on their own; a
+#: step that does not resolve them costs a transient, not a force signal.
+OSCILLATORY_DAMPING = 0.5
+
+
+def fastest_oscillation(A: np.ndarray) -> Oscillation | None:
+    """The oscillatory eigenvalue pair (damping ratio below :data:`OSCILLATORY_DAMPING`) of the
+    state matrix ``A`` with the largest |λ|, if any."""
+    lam = np.linalg.eigvals(A)
+    mag = np.abs(lam)
+    osc = (np.abs(lam.imag) > 1e-6 * np.maximum(mag, 1e-300)) & (-lam.real < OSCILLATORY_DAMPING * mag)
+    if not np.any(osc):
+        return None
+    k = int(np.argmax(np.where(osc, mag, -1.0)))
+    return Oscillation(float(mag[k]), float(-lam[k].real / mag[k]))
+
+
+@dataclass(frozen=True)
 class Advice:
     """The result of :func:`advise`."""
 
@@ -45,6 +87,14 @@ class Advice:
     linear: bool  #: whether the scene's dynamics are exactly linear
     methods: tuple[MethodAdvice, ...]
     recommendation: str
+    oscillation: Oscillation | None = None  #: the fastest oscillatory mode (accuracy: see ``max_resolved_dt``)
+
+    @property
+    def max_resolved_dt(self) -> float:
+        """Largest step [s] that resolves every oscillatory mode (``inf``: none oscillates). Above
+        it, stable implicit methods (``implicit_euler``, ``ros2``, ``trapezoid``) still run but damp
+        or mis-phase that mode, and the forces it carries are wrong."""
+        return math.inf if self.oscillation is None else self.oscillation.max_resolved_dt
 
     def max_stable_dt(self, name: str) -> float:
         """Predicted largest stable step of the method ``name`` [s]."""
@@ -66,6 +116,13 @@ class Advice:
         for m in self.methods:
             dt = "unconditional" if math.isinf(m.max_stable_dt) else f"{m.max_stable_dt * 1e3:.4g} ms"
             lines.append(f"{m.name:<18} {dt if m.applicable else 'n/a':>18}  {m.note}")
+        if self.oscillation is not None:
+            o = self.oscillation
+            lines.append(
+                f"accuracy: the fastest oscillatory mode ({o.frequency:.4g} Hz, |λ| = {o.rate:.4g} 1/s, damping ratio "
+                f"{o.damping_ratio:.3g}) is resolved at dt ≤ {o.max_resolved_dt * 1e3:.4g} ms; above that even stable "
+                "methods get the forces it carries wrong"
+            )
         lines.append(self.recommendation)
         return "\n".join(lines)
 
@@ -131,7 +188,7 @@ def advise(
         if name == "exponential":
             note = "exact discretisation: any dt; error only from the torque hold"
         elif math.isinf(h):
-            note = f"stable at any dt (order {method.order}); accuracy sets dt"
+            note = f"stable at any dt (order {method.order}); accuracy sets dt (see below)"
         else:
             note = f"ω_max·dt limit = {omega_max * h:.3g}" + (
                 " (adaptive: its step control finds this)" if method.adaptive else ""
@@ -148,10 +205,51 @@ def advise(
             if fastest is not None
             else "use 'implicit_euler' or 'ros2'"
         )
+    oscillation = fastest_oscillation(A)
     if dt is not None:
         ok = [a.name for a in advice if a.applicable and dt <= a.max_stable_dt]
         rec += f". At dt = {dt * 1e3:.4g} ms these are stable: {ok}"
-    return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec)
+        if oscillation is not None and dt > oscillation.max_resolved_dt and why_nonlinear is not None:
+            rec += (
+                f"; but dt > {oscillation.max_resolved_dt * 1e3:.4g} ms does not resolve the {oscillation.frequency:.4g} Hz mode"
+            )
+    return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec, oscillation)
 
 
-__all__ = ["ADVISED", "Advice", "MethodAdvice", "advise", "linearize", "predicted_stable_dt"]
+def unresolved_mode_message(scene: Scene, A: np.ndarray, method: Integrator, dt: float) -> str | None:
+    """The accuracy warning for a stable method whose step ``dt`` [s] does not resolve the
+    scene's fastest oscillatory mode (|λ|·dt > :data:`RESOLVE_LIMIT`), or None when it does."""
+    o = fastest_oscillation(A)
+    if o is None or o.rate * dt <= RESOLVE_LIMIT:
+        return None
+    z = complex(-o.damping_ratio, math.sqrt(max(1.0 - o.damping_ratio**2, 0.0))) * o.rate * dt
+    kept = float(abs(method.stability_function(np.array([z]))[0]) / math.exp(z.real))
+    effect = (
+        f"the method keeps {kept:.0%} of its amplitude per step (relative to its true decay)"
+        if kept < 0.999
+        else "the method keeps its amplitude but not its phase"
+    )
+    stiffnesses = [np.asarray(getattr(lk.element, "K", np.zeros((3, 3))), dtype=float) for lk in scene.links]
+    k = max((float(np.max(np.diag(K)[:3])) for K in stiffnesses), default=0.0)  # translational [N/m]
+    force = f"; with k = {k:.3g} N/m, each 1 mm of its amplitude is {k * 1e-3:.3g} N of contact force" if k > 0 else ""
+    return (
+        f"{method.name} at dt = {dt * 1e3:.4g} ms does not resolve the scene's fastest oscillatory mode, "
+        f"{o.frequency:.4g} Hz (|λ| = {o.rate:.4g} 1/s, damping ratio {o.damping_ratio:.3g}; |λ|·dt = {o.rate * dt:.3g} > "
+        f"{RESOLVE_LIMIT:g}): {effect}, so the forces it carries can be off by their whole swing{force}. "
+        f"Resolve it with dt ≤ {o.max_resolved_dt * 1e3:.4g} ms (trapezoid keeps its amplitude), or let dopri5 follow it; "
+        "coopdyn.advise(scene, dt=dt) says more"
+    )
+
+
+__all__ = [
+    "ADVISED",
+    "RESOLVE_LIMIT",
+    "Advice",
+    "MethodAdvice",
+    "Oscillation",
+    "advise",
+    "fastest_oscillation",
+    "linearize",
+    "predicted_stable_dt",
+    "unresolved_mode_message",
+]

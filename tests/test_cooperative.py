@@ -91,7 +91,7 @@ def test_object_answers_a_step_wrench_with_the_designed_dynamics() -> None:
 
 
 def test_object_impedance_refuses_negative_gains(pandas: cd.Scene) -> None:
-    with pytest.raises(cd.SceneError, match=r"object damping must be >= 0"):
+    with pytest.raises(cd.SceneError, match=r"damping \(linear\) must be >= 0 \[N·s/m\], got -1.0"):
         ObjectImpedance(pandas, damping=(-1.0, 6.0))
 
 

@@ -32,12 +32,12 @@ def test_missing_dependency_names_the_install(monkeypatch: pytest.MonkeyPatch, b
 
 
 def test_nan_in_an_external_wrench(pandas: cd.Scene) -> None:
-    with pytest.raises(cd.ControllerError, match=r"object_wrench\(t\) must return 6 finite numbers"):
+    with pytest.raises(cd.ControllerError, match=r"object_wrench\(t\) must be finite.*6 finite real numbers"):
         cd.simulate(pandas, 0.01, dt=1e-3, object_wrench=lambda t: np.full(6, np.nan))
 
 
 def test_a_run_too_long_to_finish_is_refused(book: cd.Scene) -> None:
-    with pytest.raises(cd.SimulationError, match=r"asks for 1e\+12 steps .*shorten the run or enlarge dt"):
+    with pytest.raises(cd.SimulationError, match=r"asks for 1e\+12 steps, more than max_steps = 10,000,000.*Enlarge dt"):
         cd.simulate(book, 1e3, dt=1e-9)
 
 

@@ -8,7 +8,6 @@ naming the file, the key, its line and what is valid. See ``examples/scenes/*.to
 from __future__ import annotations
 
 import inspect
-import math
 import re
 import sys
 from collections.abc import Callable, Mapping
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import scenes
+from .._validate import _short
 from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
 from ..errors import CoopdynError, SceneFileError
@@ -97,19 +97,19 @@ class _File:
 
 def _check_type(f: _File, table: str, key: str, value: Any, kind: Any) -> Any:
     if kind is float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise f.error(f"must be a finite number, got {value!r}", table, key)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not (abs(value) <= sys.float_info.max):
+            raise f.error(f"must be a finite number, got {_short(value)}", table, key)
         return float(value)
     if kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise f.error(f"must be an integer, got {value!r}", table, key)
+            raise f.error(f"must be an integer, got {_short(value)}", table, key)
         return value
     if kind is bool:
         if not isinstance(value, bool):
-            raise f.error(f"must be true or false, got {value!r}", table, key)
+            raise f.error(f"must be true or false, got {_short(value)}", table, key)
         return value
     if kind is str and not isinstance(value, str):
-        raise f.error(f"must be a string, got {value!r}", table, key)
+        raise f.error(f"must be a string, got {_short(value)}", table, key)
     return value
 
 
@@ -140,17 +140,41 @@ def _params(
     return out
 
 
+MAX_FILE_BYTES = 1 << 20  #: a scene file is a few kB; a larger one is refused unread
+
+
+def _read_text(path: Path) -> str:
+    """The file's text: UTF-8 (TOML's encoding), at most :data:`MAX_FILE_BYTES`."""
+    try:
+        if not path.is_file():
+            raise SceneFileError(f"scene file not found: {path}")
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise SceneFileError(f"{path}: {path.stat().st_size:,} bytes; a scene file has at most {MAX_FILE_BYTES:,}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise SceneFileError(f"cannot read the scene file {path}: {exc.strerror or exc}") from exc
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise SceneFileError(
+            f"{path}, line {line}: not UTF-8 text (byte {data[exc.start]:#04x} at offset {exc.start}); TOML files are UTF-8"
+        ) from None
+
+
 def load(path: str | Path) -> Run:
     """Read and validate a scene file; build the scene, controller and task."""
+    if not isinstance(path, str | Path):
+        raise SceneFileError(f"a scene file path must be a str or pathlib.Path, got {type(path).__name__}")
     path = Path(path)
-    if not path.is_file():
-        raise SceneFileError(f"scene file not found: {path}")
-    text = path.read_text()
+    text = _read_text(path)
     f = _File(path, text)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneFileError(f"{path}: not valid TOML: {exc}") from exc
+    except RecursionError:
+        raise SceneFileError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
     for table, value in doc.items():
         if not isinstance(value, dict):
             raise f.error(f"a top-level key; everything goes in one of the tables {list(TABLES)}", None, table)
@@ -195,6 +219,8 @@ def load(path: str | Path) -> Run:
         if key not in OUTPUT_KEYS:
             raise f.error(f"unknown key; valid keys: {sorted(OUTPUT_KEYS)}", "output", key)
         output[key] = _check_type(f, "output", key, value, OUTPUT_KEYS[key])
+    folder = Path(str(output["folder"]))
+    output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
     return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
 
 
@@ -214,7 +240,10 @@ def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
     if cls is None:
         return None
     kwargs = _params(f, "task", cls, doc, skip=("start",))
-    return cls(start=object_start(scene), **kwargs)
+    try:
+        return cls(start=object_start(scene), **kwargs)
+    except CoopdynError as exc:
+        raise f.error(str(exc), "task") from exc
 
 
 def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str, scene_kwargs: dict[str, Any]) -> Any:
@@ -229,7 +258,10 @@ def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder:
                 "'book_drives' drives the book's linear system: it needs [scene] builder = 'linear_book'", "controller", "type"
             )
         kwargs = _params(f, "controller", scenes.book_task, doc, skip=("params",))
-        return scenes.drives_controller(*scenes.book_task(BookParameters.from_kwargs(**scene_kwargs), **kwargs))
+        try:
+            return scenes.drives_controller(*scenes.book_task(BookParameters.from_kwargs(**scene_kwargs), **kwargs))
+        except CoopdynError as exc:
+            raise f.error(str(exc), "controller") from exc
     kwargs = _params(f, "controller", target, doc, skip=("scene", "reference"))
     try:
         if target is ObjectImpedance:
@@ -258,12 +290,12 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
     ``diagnosis.txt``) and the error is re-raised with those paths in its ``saved`` attribute."""
     import numpy as np
 
-    from ..errors import DivergenceError, SimulationInterrupted
-    from ..result import save_partial
+    from ..errors import DivergenceError, SimulationInterrupted, StepBudgetError
+    from ..outputs import save_partial, write_outputs
     from ..simulate import simulate
     from ..viz.plotting import book_figure, cooperative_figure
 
-    out = Path(folder or loaded.output["folder"])
+    out = Path(folder or loaded.output["folder"]).absolute()
     try:
         res = simulate(
             loaded.scene,
@@ -274,31 +306,37 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
             save_every=loaded.save_every,
             progress=progress,
         )
-    except (DivergenceError, SimulationInterrupted) as exc:
+    except (DivergenceError, SimulationInterrupted, StepBudgetError) as exc:
         exc.saved = save_partial(exc, out)  # type: ignore[union-attr]
         raise
-    written = []
-    out.mkdir(parents=True, exist_ok=True)
-    copy = out / "scene.toml"
-    tmp = copy.with_name(".scene.toml.tmp")
-    tmp.write_text(loaded.path.read_text())
-    tmp.replace(copy)
-    written.append(copy)
-    if loaded.output["npz"]:
-        written.append(res.save(out / "trajectory.npz"))
-    if loaded.output["csv"]:
-        written.append(res.save(out / "trajectory.csv"))
-    if loaded.output["plot"]:
-        png = out / "plot.png"
+    source = loaded.path.read_bytes()
+
+    def trajectory(folder: Path) -> list[Path]:
+        (folder / "scene.toml").write_bytes(source)
+        files = [folder / "scene.toml"]
+        if loaded.output["npz"]:
+            files.append(res.save(folder / "trajectory.npz"))
+        if loaded.output["csv"]:
+            files.append(res.save(folder / "trajectory.csv"))
+        return files
+
+    def plot(folder: Path) -> Path:
+        png = folder / "plot.png"
         if loaded.scene.object.joint == "prismatic" and len(loaded.scene.links) == 2 and loaded.scene.nv == 3:
             book_figure(res, None, png)
         else:
             cooperative_figure(res, loaded.task, png)
-        written.append(png)
-    if loaded.output["html"]:
+        return png
+
+    def animation(folder: Path) -> Path:
         from ..viz.viewer import export_html
 
-        written.append(export_html(res, out / "animation.html"))
+        return export_html(res, folder / "animation.html")
+
+    optional = [("plot", plot)] if loaded.output["plot"] else []
+    optional += [("animation", animation)] if loaded.output["html"] else []
+    done = write_outputs(out, [("trajectory", trajectory)], optional)
+    written = list(done.files)
     summary = [
         f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s",
         f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS",
@@ -309,6 +347,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
         summary.append(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
     if len(loaded.scene.links) > 1:
         summary.append(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
+    summary += [f"  not written: {p}" for p in done.problems]
     return RunReport(res, tuple(written), tuple(summary))
 
 
@@ -321,19 +360,30 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
     path = Path(path) if path is not None else Path(loaded.output["folder"]) / "trajectory.npz"
     if not path.is_file():
         raise SceneFileError(f"no saved trajectory at {path}: run `coopdyn simulate {loaded.path}` first (with npz = true)")
-    with np.load(path) as z:
-        if z["q"].shape[1] != loaded.scene.nq:
+    scene = loaded.scene
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: np.asarray(z[k]) for k in ("t", "q", "v", "tau", "integrator", "dt")}
+    except Exception as exc:
+        raise SceneFileError(f"{path} is not a trajectory coopdyn wrote ({type(exc).__name__}: {exc})") from exc
+    n = arrays["t"].shape[0] if arrays["t"].ndim == 1 else -1
+    shapes = {"q": (n, scene.nq), "v": (n, scene.nv), "tau": (n, scene.n_actuated)}
+    for key, shape in shapes.items():
+        if arrays[key].shape != shape or arrays[key].dtype.kind != "f":
             raise SceneFileError(
-                f"{path} holds configurations of size {z['q'].shape[1]}, the scene of {loaded.path} has nq = {loaded.scene.nq}"
+                f"{path}: {key} has shape {arrays[key].shape}, the scene of {loaded.path} needs {shape} "
+                "(a trajectory of another scene, or a damaged file)"
             )
-        return Result(
-            scene=loaded.scene,
-            t=z["t"],
-            q=z["q"],
-            v=z["v"],
-            tau=z["tau"],
-            integrator=str(z["integrator"]),
-            dt=float(z["dt"]),
-            n_rhs=0,
-            cpu_time=0.0,
-        )
+    if not all(np.all(np.isfinite(arrays[k])) for k in ("t", "q", "v")):
+        raise SceneFileError(f"{path}: the trajectory holds non-finite values")
+    return Result(
+        scene=scene,
+        t=arrays["t"].astype(float),
+        q=arrays["q"],
+        v=arrays["v"],
+        tau=arrays["tau"],
+        integrator=str(arrays["integrator"]),
+        dt=float(arrays["dt"]),
+        n_rhs=0,
+        cpu_time=0.0,
+    )

@@ -240,14 +240,8 @@ class Scene:
 
     def check_state(self, q: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
         """Validated copies of a state: shapes, finiteness and normalised quaternions."""
-        q = np.array(q, dtype=float)
-        v = np.array(v, dtype=float)
-        if q.shape != (self.nq,):
-            raise SceneError(f"q must have shape ({self.nq},), got {q.shape}")
-        if v.shape != (self.nv,):
-            raise SceneError(f"v must have shape ({self.nv},), got {v.shape}")
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-            raise SceneError("q and v must be finite")
+        q = _validate.finite_array(q, "q (a configuration)", (self.nq,)).copy()
+        v = _validate.finite_array(v, "v (a velocity)", (self.nv,)).copy()
         if not pin.isNormalized(self.model, q, 1e-9):
             raise SceneError("q is not a valid configuration (a quaternion is not of unit norm); use pin.normalize")
         return q, v

@@ -314,9 +314,25 @@ def book_task(
     Each tip carries the inertial force of its own mass and half the object's. Every drive is
     continuous in time (no force jumps), so fixed-step methods keep their order.
     """
+    if params is not None and not isinstance(params, BookParameters):
+        raise SceneError(f"book_task: params must be a BookParameters or None, got {type(params).__name__}")
     p = params or BookParameters()
-    if not 0.0 < t_grip <= t_lift and t_lift + lift_duration <= t_oscillate:
-        raise ValueError("book_task needs 0 < t_grip <= t_lift and t_lift + lift_duration <= t_oscillate")
+    squeeze, lift, amplitude = (
+        _validate.number(x, f"book_task: {n}", "N" if n == "squeeze" else "m")
+        for n, x in (("squeeze", squeeze), ("lift", lift), ("amplitude", amplitude))
+    )
+    t_grip, lift_duration, frequency = (
+        _validate.positive(x, f"book_task: {n}", "Hz" if n == "frequency" else "s")
+        for n, x in (("t_grip", t_grip), ("lift_duration", lift_duration), ("frequency", frequency))
+    )
+    t_lift, t_oscillate = (
+        _validate.number(x, f"book_task: {n}", "s") for n, x in (("t_lift", t_lift), ("t_oscillate", t_oscillate))
+    )
+    if not (t_grip <= t_lift and t_lift + lift_duration <= t_oscillate):
+        raise SceneError(
+            f"book_task needs 0 < t_grip <= t_lift and t_lift + lift_duration <= t_oscillate [s]; got t_grip = {t_grip:g}, "
+            f"t_lift = {t_lift:g}, lift_duration = {lift_duration:g}, t_oscillate = {t_oscillate:g}"
+        )
     A_lift = 2.0 * np.pi * lift / lift_duration**2
     w_lift = 2.0 * np.pi / lift_duration
     w_osc = 2.0 * np.pi * frequency

@@ -11,17 +11,24 @@ from __future__ import annotations
 import base64
 import logging
 import os
+import signal
+import threading
 import time
+import warnings
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from ..errors import SceneError
 from ..model.arm import load_arm
 from ..model.scene import Scene
 from ..result import Result
+from .meshcat_server import LOOPBACK, is_loopback
+from .meshcat_server import start as start_server
 
 FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
 
@@ -237,26 +244,73 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
 
 
 def view(
-    result: Result, *, fps: float = 30.0, loops: int | None = None, zmq_url: str | None = None, meshes: str = "visual"
+    result: Result,
+    *,
+    fps: float = 30.0,
+    loops: int | None = None,
+    zmq_url: str | None = None,
+    meshes: str = "visual",
+    host: str = LOOPBACK,
 ) -> str:
-    """Play ``result`` in a live meshcat viewer (starts a local meshcat server unless ``zmq_url``
-    is given) and return the viewer's URL. Plays ``loops`` times (``None``: until Ctrl-C)."""
+    """Play ``result`` in a live meshcat viewer and return the viewer's URL. Plays ``loops`` times
+    (``None``: until Ctrl-C or SIGTERM).
+
+    Unless ``zmq_url`` names a running meshcat server, it starts one serving on ``host`` (default
+    127.0.0.1: this machine only; any other address warns, since anyone who can reach it sees the
+    scene) and stops it however the viewing ends (Ctrl-C, SIGTERM, an error, or this process
+    dying)."""
     meshcat = _meshcat()
-    vis = meshcat.Visualizer(zmq_url=zmq_url)
-    animator = _Animator(result.scene, vis, meshes)
-    idx = _frames(result, fps)
-    wrenches = result.wrenches()
-    url = vis.url()
-    _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
-    n = 0
+    if not isinstance(host, str) or not host:
+        raise SceneError(f"host must be an address string such as '127.0.0.1', got {host!r}")
+    server = None
+    if zmq_url is None:
+        if not is_loopback(host):
+            warnings.warn(
+                f"serving the viewer on {host}: anyone who can reach this address can watch it; "
+                "use the default host 127.0.0.1 to keep it on this machine",
+                UserWarning,
+                stacklevel=2,
+            )
+        server = start_server(host)
+        zmq_url = server.zmq_url
     try:
-        while loops is None or n < loops:
-            for k in idx:
-                t0 = time.perf_counter()
-                for name, T, scale in animator.poses(result.q[k], wrenches[k]):
-                    vis[name].set_transform(_scaled(T, scale))
-                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
-            n += 1
-    except KeyboardInterrupt:
-        pass
+        with _sigterm_as_interrupt():
+            vis = meshcat.Visualizer(zmq_url=zmq_url)
+            animator = _Animator(result.scene, vis, meshes)
+            idx = _frames(result, fps)
+            wrenches = result.wrenches()
+            url = server.web_url if server is not None else vis.url()
+            _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
+            n = 0
+            try:
+                while loops is None or n < loops:
+                    for k in idx:
+                        t0 = time.perf_counter()
+                        for name, T, scale in animator.poses(result.q[k], wrenches[k]):
+                            vis[name].set_transform(_scaled(T, scale))
+                        time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
+                    n += 1
+            except KeyboardInterrupt:
+                pass
+    finally:
+        if server is not None:
+            server.stop()
     return str(url)
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a closed terminal, a killed job) ends the viewing like Ctrl-C, so that the
+    ``finally`` clauses stop the server."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

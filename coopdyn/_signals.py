@@ -1,0 +1,33 @@
+"""Ctrl-C deferred while something must not be cut in half (internal)."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+
+@contextmanager
+def interrupts_deferred(reraise: bool = True) -> Iterator[None]:
+    """Hold SIGINT (Ctrl-C) for the duration of the block: a partial result being assembled or a
+    file being written is finished first. With ``reraise``, a Ctrl-C that arrived meanwhile is
+    raised as ``KeyboardInterrupt`` when the block ends; without, it is dropped (the caller is
+    already stopping because of one). Only the main thread receives signals; elsewhere this does
+    nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        pending.append(signum)
+
+    previous = signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous if previous is not None else signal.default_int_handler)
+    if pending and reraise:
+        raise KeyboardInterrupt("Ctrl-C arrived while writing; the writing was finished first")

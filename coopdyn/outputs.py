@@ -1,0 +1,174 @@
+"""A run's output folder, written whole or not at all.
+
+The files go into a staging folder beside the target, which then replaces the target in two
+renames: a reader (``coopdyn view``) never sees a mix of two runs, a kill leaves the previous
+run or this one (plus a hidden staging folder, removed by the next run), and Ctrl-C waits until
+the folder is in place. A plot or an animation that fails is reported, not fatal: the trajectory
+is kept. When the folder cannot be written (read-only, disk full), the trajectory goes to a
+rescue folder in the system's temporary directory and the error says where.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ._signals import interrupts_deferred
+from .errors import OutputError
+from .result import Result
+
+#: Files coopdyn writes into an output folder; a folder holding anything else is not replaced.
+KNOWN_FILES = frozenset(
+    {
+        "scene.toml",
+        "trajectory.npz",
+        "trajectory.csv",
+        "plot.png",
+        "animation.html",
+        "demo.png",
+        "demo.html",
+        "diagnosis.txt",
+    }
+)
+
+Writer = Callable[[Path], Any]  #: writes into the given folder; returns the path(s) written
+
+
+@dataclass(frozen=True)
+class Written:
+    """What :func:`write_outputs` did."""
+
+    folder: Path  #: absolute
+    files: tuple[Path, ...]  #: absolute, in the final folder
+    problems: tuple[str, ...]  #: optional outputs that failed, each "name: why"
+
+
+def write_outputs(
+    folder: str | os.PathLike[str], essential: Sequence[tuple[str, Writer]], optional: Sequence[tuple[str, Writer]] = ()
+) -> Written:
+    """Write ``essential`` outputs (all must succeed) and ``optional`` ones (failures reported in
+    ``problems``) into ``folder``, replacing what an earlier run wrote there.
+
+    Raises:
+        OutputError: the folder holds files coopdyn did not write, or it cannot be written; the
+            message says where the essential outputs went instead, if anywhere.
+    """
+    target = Path(folder).absolute()
+    _refuse_foreign(target)
+    with interrupts_deferred():  # a Ctrl-C now would lose a finished run: it waits for the folder
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            _remove_stale(target)
+            staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.writing-{os.getpid()}-", dir=target.parent))
+        except OSError as exc:
+            raise OutputError(f"cannot write to {target.parent}: {_reason(exc)}. {_rescue(essential)}") from exc
+        try:
+            files = _run(essential, staging)
+        except OSError as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise OutputError(f"cannot write the outputs to {target}: {_reason(exc)}. {_rescue(essential)}") from exc
+        problems = []
+        for name, writer in optional:
+            try:
+                files += _run([(name, writer)], staging)
+            except Exception as exc:
+                problems.append(f"{name}: {type(exc).__name__}: {exc}")
+        try:
+            _publish(staging, target)
+        except OSError as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise OutputError(f"cannot move the outputs into {target}: {_reason(exc)}. {_rescue(essential)}") from exc
+    return Written(target, tuple(target / f.relative_to(staging) for f in files), tuple(problems))
+
+
+def _run(writers: Sequence[tuple[str, Writer]], folder: Path) -> list[Path]:
+    out: list[Path] = []
+    for _, writer in writers:
+        written = writer(folder)
+        out += [Path(p) for p in (written if isinstance(written, list | tuple) else [written]) if p is not None]
+    return out
+
+
+def _refuse_foreign(target: Path) -> None:
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"the output folder {target} is a file")
+    if target.is_dir():
+        foreign = sorted(p.name for p in target.iterdir() if p.name not in KNOWN_FILES)
+        if foreign:
+            shown = ", ".join(foreign[:5]) + (", …" if len(foreign) > 5 else "")
+            raise OutputError(
+                f"the output folder {target} holds files coopdyn did not write ({shown}); a run replaces its folder "
+                "whole, so choose another (an empty or new folder, or one an earlier run wrote)"
+            )
+
+
+def _remove_stale(target: Path) -> None:
+    """Staging folders of earlier runs that were killed (their process is gone)."""
+    for p in target.parent.glob(f".{target.name}.writing-*"):
+        parts = p.name.rsplit(".writing-", 1)[1].split("-")
+        if parts[0].isdigit() and not _alive(int(parts[0])):
+            shutil.rmtree(p, ignore_errors=True)
+    for p in target.parent.glob(f".{target.name}.old-*"):
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _publish(staging: Path, target: Path) -> None:
+    """Put ``staging`` in place of ``target`` (two renames: never a mix of both)."""
+    old = None
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.monotonic_ns()}")
+        os.rename(target, old)
+    os.rename(staging, target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _reason(exc: OSError) -> str:
+    return f"{exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
+
+
+def _rescue(essential: Sequence[tuple[str, Writer]]) -> str:
+    """Write the essential outputs to a fresh folder in the temporary directory; say where."""
+    try:
+        rescue = Path(tempfile.mkdtemp(prefix="coopdyn-rescue-"))
+        files = _run(essential, rescue)
+    except Exception as exc:
+        return f"The trajectory could not be saved anywhere else either ({type(exc).__name__}: {exc})"
+    return "The trajectory was saved to " + ", ".join(str(f) for f in files) + " instead"
+
+
+def save_partial(error: BaseException, folder: str | os.PathLike[str]) -> list[Path]:
+    """After a ``DivergenceError``, ``SimulationInterrupted`` or ``StepBudgetError``: write the
+    trajectory it carries (``trajectory.npz``, ``trajectory.csv``) and the message
+    (``diagnosis.txt``) to ``folder``, replacing the folder whole (see
+    :func:`write_outputs`). Returns the paths written."""
+    result = getattr(error, "result", None)
+    advice = getattr(error, "advice", None)
+
+    def trajectory(folder: Path) -> list[Path]:
+        if isinstance(result, Result) and len(result.t):
+            return [result.save(folder / "trajectory.npz"), result.save(folder / "trajectory.csv")]
+        return []
+
+    def diagnosis(folder: Path) -> Path:
+        note = folder / "diagnosis.txt"
+        note.write_text(f"{type(error).__name__}: {error}\n" + (f"\n{advice}\n" if advice is not None else ""))
+        return note
+
+    return list(write_outputs(folder, [("trajectory", trajectory), ("diagnosis", diagnosis)]).files)

@@ -1,0 +1,600 @@
+"""Every front door answers bad input with a CoopdynError naming what was given and what is
+valid; runs that cannot finish are refused up front; a stable method that cannot resolve a mode
+says so; Ctrl-C and failing disks lose nothing that was computed.
+
+Each cluster the fuzzing of the first release found is reproduced here."""
+
+from __future__ import annotations
+
+import os
+import signal
+import stat
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import coopdyn as cd
+from coopdyn.control import ComputedTorque, GravityCompensationPD
+from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.io.scenefile import load
+from coopdyn.outputs import write_outputs
+from coopdyn.problems.facing_arms import object_start
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
+
+
+def _zero(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.zeros(2)
+
+
+SIMULATE_CASES = [
+    ({"t_final": 10**400}, cd.SimulationError, r"t_final \[s\] must be within the float range"),
+    ({"dt": 5e-324}, cd.SimulationError, r"dt must be >= 1e-12 \[s\]"),
+    ({"dt": 0}, cd.SimulationError, r"dt must be >= 1e-12 \[s\]"),
+    ({"dt": "1e-3"}, cd.SimulationError, r"dt \[s\] must be numeric, got '1e-3'"),
+    ({"dt": 1e-3 + 1e-9j}, cd.SimulationError, r"dt \[s\] must be real"),
+    ({"t_final": 1.0, "dt": 1e-9}, cd.SimulationError, r"asks for 1e\+09 steps, more than max_steps"),
+    ({"q0": "abc"}, cd.SceneError, r"q \(a configuration\) must be numeric, got 'abc'"),
+    ({"q0": np.array([0.15, 0.25, 0.0]) + 1e-3j}, cd.SceneError, r"q \(a configuration\) must be real"),
+    ({"v0": np.array([None, 0, 0])}, cd.SceneError, r"v \(a velocity\) must be numeric"),
+    ({"controller": 5}, cd.ControllerError, r"controller must be a callable controller\(t, q, v\)"),
+    ({"controller": lambda t, q, v: "abc"}, cd.ControllerError, r"the controller's output must be numeric, got 'abc'"),
+    ({"controller": lambda t, q, v: {"tau": 1}}, cd.ControllerError, r"the controller's output must be numeric"),
+    ({"controller": lambda t, q, v: np.zeros(2) + 1j}, cd.ControllerError, r"the controller's output must be real"),
+    ({"controller": lambda t, q, v: [0.0]}, cd.ControllerError, r"returned shape \(1,\)"),
+    ({"integrator": 3.5}, cd.SimulationError, r"unknown integrator 3.5; valid"),
+    ({"integrator": ["rk4"]}, cd.SimulationError, r"unknown integrator \['rk4'\]"),
+    ({"energy_check": [1]}, cd.SimulationError, r"energy_check must be one of \['warn', 'raise', 'off'\], got \[1\]"),
+    ({"max_speed": float("inf")}, cd.SimulationError, r"max_speed \[rad/s or m/s\] must be finite"),
+    ({"max_speed": -1.0}, cd.SimulationError, r"max_speed must be > 0"),
+    ({"save_every": 2.0}, cd.SimulationError, r"save_every must be an integer >= 1, got 2.0"),
+    ({"progress": "yes"}, cd.SimulationError, r"progress must be True or False"),
+    ({"object_wrench": 3}, cd.ControllerError, r"object_wrench must be a callable"),
+    ({"object_wrench": lambda t: "x"}, cd.ControllerError, r"object_wrench\(t\) must be numeric"),
+    ({"max_steps": 0}, cd.SimulationError, r"max_steps must be a positive integer or None"),
+    ({"max_memory": "lots"}, cd.SimulationError, r"max_memory \[bytes\] must be numeric"),
+]
+
+
+@pytest.mark.parametrize(("kwargs", "error", "message"), SIMULATE_CASES)
+def test_simulate_refuses_bad_arguments(book: cd.Scene, kwargs: dict[str, Any], error: type, message: str) -> None:
+    kwargs = {"t_final": 0.01, **kwargs}
+    with pytest.raises(error, match=message):
+        cd.simulate(book, **kwargs)
+
+
+def test_a_complex_input_is_refused_not_silently_made_real(book: cd.Scene) -> None:
+    """NumPy would drop the imaginary part with only a ComplexWarning; coopdyn refuses it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(cd.SceneError, match="must be real"):
+            cd.simulate(book, 0.01, v0=np.zeros(3, dtype=complex))
+
+
+CONTROLLER_CASES = [
+    (lambda s: ObjectImpedance(s, stiffness=2000.0), r"stiffness must be a pair \(linear \[N/m\], angular \[N·m/rad\]\)"),
+    (lambda s: ObjectImpedance(s, damping=("a", 1.0)), r"damping \(linear\) \[N·s/m\] must be numeric"),
+    (lambda s: ObjectImpedance(s, null_stiffness=-1.0), r"null_stiffness must be >= 0"),
+    (lambda s: ObjectImpedance(s, reference=3), r"reference must be a callable"),
+    (lambda s: GravityCompensationPD(s, kp=[50] * 13), r"kp must be a scalar or one value per actuated joint \(14\)"),
+    (lambda s: GravityCompensationPD(s, kd=-1.0), r"kd must be >= 0 \[N·m·s/rad\]"),
+    (lambda s: GravityCompensationPD(s, kp=1j), r"kp must be real"),
+    (lambda s: GravityCompensationPD("scene"), r"scene must be a coopdyn.Scene, got str"),
+    (lambda s: ComputedTorque(s, kp=np.array([[1.0]])), r"kp must be a scalar or one value per actuated joint"),
+    (lambda s: ComputedTorque(s, reference="hold"), r"reference must be a callable"),
+]
+
+
+@pytest.mark.parametrize(("make", "message"), CONTROLLER_CASES)
+def test_controllers_validate_their_arguments(pandas: cd.Scene, make: Any, message: str) -> None:
+    with pytest.raises(cd.SceneError, match=message):
+        make(pandas)
+
+
+TASK_CASES = [
+    ({"t_grip": 0}, r"t_grip must be > 0 \[s\]"),
+    ({"rotation": [1, 2, 3]}, r"rotation must have shape \(3, 3\)"),
+    ({"lift": 10**400}, r"lift \[m\] must be within the float range"),
+    ({"squeeze": "20"}, r"squeeze \[N\] must be numeric"),
+    ({"frequency": True}, r"frequency must be numeric, got True"),
+    ({"cycles": -1}, r"cycles must be >= 0"),
+    ({"axis": [0, 0, 0]}, r"axis must not be zero"),
+]
+
+
+@pytest.mark.parametrize(("kwargs", "message"), TASK_CASES)
+def test_grip_lift_oscillate_validates(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(cd.SceneError, match=message):
+        GripLiftOscillate(start=(0.0, 0.0, 0.5), **kwargs)
+
+
+def test_book_task_refuses_an_impossible_timeline_with_a_scene_error() -> None:
+    """It raised a bare ValueError, and `not A and B` let t_grip > t_lift through."""
+    with pytest.raises(cd.SceneError, match=r"0 < t_grip <= t_lift .*got t_grip = 2"):
+        cd.scenes.book_task(t_grip=2.0)
+    with pytest.raises(cd.SceneError, match=r"t_grip must be > 0"):
+        cd.scenes.book_task(t_grip=0.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (b'[scene]\nbuilder = "linear_book"\n\xff\xfe = 1\n', r"line 3: not UTF-8 text \(byte 0xff"),
+        (b"[scene]\nx = " + b"[" * 1000 + b"]" * 1000 + b"\n", r"nested too deeply"),
+        (
+            b'[scene]\nbuilder = "linear_book"\nm = ' + str(10**400).encode() + b"\n[simulation]\nduration = 1.0\n",
+            r"m: must be a finite",
+        ),
+        (b'[scene]\nbuilder = "linear_book"\n[simulation]\nduration = 1.0\ndt = 1' + b"0" * 400 + b"\n", r"dt: must be a finite"),
+    ],
+)
+def test_scene_file_text_errors(tmp_path: Path, text: bytes, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_bytes(text)
+    with pytest.raises(cd.SceneError, match=message):
+        load(path)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ('[task]\ntype = "grip_lift_oscillate"\nt_grip = 0\n', r"\[task\]: GripLiftOscillate: t_grip must be > 0"),
+        (
+            '[task]\ntype = "grip_lift_oscillate"\nrotation = [1, 2, 3]\n',
+            r"\[task\]: GripLiftOscillate: rotation must have shape",
+        ),
+        (
+            '[controller]\ntype = "object_impedance"\nstiffness = 2000.0\n',
+            r"\[controller\]: ObjectImpedance: stiffness must be a pair",
+        ),
+        ('[controller]\ntype = "gravity_pd"\nkp = -5.0\n', r"\[controller\]: GravityCompensationPD: kp must be >= 0"),
+    ],
+)
+def test_scene_file_controller_and_task_errors_name_the_table(tmp_path: Path, table: str, message: str) -> None:
+    text = (EXAMPLES / "two_pandas.toml").read_text()
+    start = text.index("[controller]")
+    end = text.index("[simulation]")
+    path = tmp_path / "s.toml"
+    path.write_text(text[:start] + table + text[end:])
+    with pytest.raises(cd.SceneFileError, match=message):
+        load(path)
+
+
+def test_relative_output_folders_resolve_against_the_scene_file(tmp_path: Path) -> None:
+    path = tmp_path / "sub" / "s.toml"
+    path.parent.mkdir()
+    path.write_text((EXAMPLES / "linear_book.toml").read_text())
+    assert load(path).output["folder"] == str((tmp_path / "sub" / "out" / "linear_book").resolve())
+
+
+def test_an_arm_with_every_joint_locked_is_refused() -> None:
+    from coopdyn.resources import urdf_path
+
+    arm = cd.Arm("a", str(urdf_path("slider_z.urdf")), tip_frame="tip", locked_joints=["slide"])
+    obj = cd.RigidObject.box(1.0, [0.1, 0.1, 0.1], joint="prismatic")
+    try:
+        scene = cd.Scene([arm], obj, [cd.Interconnection("a", stiffness=np.full(6, 1e3))])
+    except cd.CoopdynError:
+        return
+    res = cd.simulate(scene, 0.01)  # a scene that builds must run
+    assert np.all(np.isfinite(res.q))
+
+
+# --- runs that cannot finish ---------------------------------------------------------------
+
+
+def test_adaptive_methods_have_a_step_budget() -> None:
+    """dopri5 on a very stiff interconnection crawls (its step follows the fast mode): it stops at
+    max_steps with the trajectory so far, for either loop."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e10)
+    for loop in ("compiled", "python"):
+        with pytest.raises(cd.StepBudgetError, match=r"dopri5 took [\d,]+ steps \(max_steps = 2,000\)") as info:
+            cd.simulate(scene, 1.0, integrator="dopri5", loop=loop, max_steps=2000, energy_check="off")
+        res = info.value.result
+        assert res.status == "stopped" and 0 < res.t[-1] < 1.0 and res.n_steps + res.n_rejected >= 2000
+
+
+def test_a_trajectory_too_large_for_memory_is_refused_with_a_save_every(pandas: cd.Scene) -> None:
+    with pytest.raises(
+        cd.SimulationError, match=r"about 1.34 GB, more than max_memory = 1 GB. Save fewer samples \(save_every = 2"
+    ):
+        cd.simulate(pandas, 1000.0, dt=1e-3, max_memory=1e9)
+    with pytest.raises(cd.SimulationError, match=r"more than max_steps"):
+        cd.simulate(pandas, 1e5, dt=1e-3, max_memory=None)
+
+
+def test_the_memory_estimate_bounds_what_a_run_keeps(book: cd.Scene) -> None:
+    """BYTES_PER_VALUE is an upper bound of the result's own arrays and the lists behind them."""
+    from coopdyn.simulate import BYTES_PER_VALUE
+
+    res = cd.simulate(book, 1.0, integrator="rk4", dt=1e-4, loop="python")
+    values = res.t.size + res.q.size + res.v.size + res.tau.size
+    assert res.t.nbytes + res.q.nbytes + res.v.nbytes + res.tau.nbytes <= values * BYTES_PER_VALUE / 2
+
+
+# --- accuracy honesty ------------------------------------------------------------------------
+
+
+def _accuracy_warnings(scene: cd.Scene, **kwargs: Any) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cd.simulate(scene, 0.004, controller=GravityCompensationPD(scene), **kwargs)
+    return [str(w.message) for w in caught if issubclass(w.category, cd.AccuracyWarning)]
+
+
+@pytest.mark.parametrize("method", ["implicit_euler", "ros2", "trapezoid"])
+def test_an_unresolved_interconnection_mode_is_named(method: str) -> None:
+    scene = cd.scenes.facing_arms("panda", stiffness=1e7)
+    (message,) = _accuracy_warnings(scene, integrator=method, dt=2e-3)
+    assert f"{method} at dt = 2 ms does not resolve" in message and "905.7 Hz" in message
+    assert "each 1 mm of its amplitude is 1e+04 N" in message and "dt ≤ 0.1757 ms" in message
+
+
+def test_resolved_modes_stay_quiet(pandas: cd.Scene) -> None:
+    assert _accuracy_warnings(pandas, integrator="implicit_euler", dt=1e-3) == []
+    assert _accuracy_warnings(pandas, integrator="rk4", dt=1e-3) == []  # explicit: stability is its check
+
+
+def test_advise_reports_accuracy_next_to_stability() -> None:
+    scene = cd.scenes.facing_arms("panda", stiffness=1e6)
+    advice = cd.advise(scene, controller=GravityCompensationPD(scene), dt=2e-3)
+    assert advice.max_resolved_dt == pytest.approx(1.0 / advice.oscillation.rate)
+    assert advice.oscillation.frequency == pytest.approx(286.1, abs=0.5)
+    assert "does not resolve the 286.1 Hz mode" in advice.recommendation
+    assert "accuracy: the fastest oscillatory mode (286.1 Hz" in str(advice)
+
+
+# --- interrupts and faults ----------------------------------------------------------------------
+
+
+def _interrupt_after(seconds: float) -> threading.Timer:
+    timer = threading.Timer(seconds, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    return timer
+
+
+@pytest.mark.parametrize("loop", ["python", "compiled"])
+def test_ctrl_c_at_random_moments_always_gives_a_consistent_result(book: cd.Scene, loop: str) -> None:
+    """SIGINT at 12 random wall-clock moments: never another exception, and the partial result is
+    whole (equal lengths, finite, torques filled)."""
+    rng = np.random.default_rng(7)
+    seen = 0
+    for delay in rng.uniform(0.0, 0.15, 12):
+        timer = _interrupt_after(float(delay))
+        try:
+            try:
+                cd.simulate(book, 0.5, integrator="rk4", dt=1e-5, loop=loop, max_steps=None, energy_check="off")
+            except cd.SimulationInterrupted as exc:
+                res = exc.result
+                n = len(res.t)
+                assert res.q.shape[0] == res.v.shape[0] == res.tau.shape[0] == n >= 1
+                assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.tau))
+                seen += 1
+            timer.join()
+            time.sleep(0.02)
+        except KeyboardInterrupt:  # the timer fired after the run had finished: not this test's subject
+            timer.join()
+    assert seen >= 6
+
+
+def test_a_ctrl_c_after_the_last_step_keeps_the_completed_run(book: cd.Scene) -> None:
+    module = sys.modules["coopdyn.simulate"]
+
+    original = module._Run.result
+    calls = []
+
+    def interrupted_once(self: Any, status: str = "completed") -> Any:
+        if not calls:
+            calls.append(status)
+            raise KeyboardInterrupt
+        return original(self, status)
+
+    module._Run.result = interrupted_once  # type: ignore[method-assign]
+    try:
+        with pytest.raises(cd.SimulationInterrupted) as info:
+            cd.simulate(book, 0.05, loop="python")
+    finally:
+        module._Run.result = original  # type: ignore[method-assign]
+    assert info.value.result.status == "completed" and info.value.result.t[-1] == 0.05
+
+
+def _result(book: cd.Scene) -> cd.Result:
+    return cd.simulate(book, 0.02)
+
+
+def test_outputs_replace_the_folder_whole_and_keep_the_trajectory_when_a_plot_fails(book: cd.Scene, tmp_path: Path) -> None:
+    res = _result(book)
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "plot.png").write_text("from an earlier run")
+
+    def bad_plot(folder: Path) -> Path:
+        raise RuntimeError("no display")
+
+    done = write_outputs(out, [("trajectory", lambda f: res.save(f / "trajectory.npz"))], [("plot", bad_plot)])
+    assert sorted(p.name for p in out.iterdir()) == ["trajectory.npz"]  # the old plot went with the old run
+    assert done.problems == ("plot: RuntimeError: no display",)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging or .tmp left
+
+
+def test_a_folder_with_foreign_files_is_not_replaced(book: cd.Scene, tmp_path: Path) -> None:
+    (tmp_path / "thesis.tex").write_text("mine")
+    with pytest.raises(cd.OutputError, match=r"holds files coopdyn did not write \(thesis.tex\)"):
+        write_outputs(tmp_path, [("trajectory", lambda f: _result(book).save(f / "trajectory.npz"))])
+    assert (tmp_path / "thesis.tex").read_text() == "mine"
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root writes into read-only folders")
+def test_a_read_only_folder_saves_the_trajectory_elsewhere_and_says_where(book: cd.Scene, tmp_path: Path) -> None:
+    res = _result(book)
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    try:
+        with pytest.raises(cd.OutputError, match=r"cannot write to .*locked.*The trajectory was saved to (\S+) instead") as info:
+            write_outputs(locked / "run", [("trajectory", lambda f: res.save(f / "trajectory.npz"))])
+    finally:
+        locked.chmod(stat.S_IRWXU)
+    rescued = Path(str(info.value).split("saved to ")[1].split(" instead")[0])
+    with np.load(rescued) as z:
+        assert np.array_equal(z["q"], res.q)
+
+
+def test_a_read_only_file_system_saves_the_trajectory_elsewhere(book: cd.Scene, tmp_path: Path, monkeypatch: Any) -> None:
+    """The same as root, who may write into read-only folders: the staging folder cannot be made."""
+    import tempfile
+
+    res = _result(book)
+    real_mkdtemp = tempfile.mkdtemp
+
+    def read_only(*args: Any, **kwargs: Any) -> str:
+        if Path(kwargs.get("dir") or tempfile.gettempdir()) == tmp_path:
+            raise OSError(30, "Read-only file system", str(tmp_path))
+        return real_mkdtemp(*args, **kwargs)
+
+    monkeypatch.setattr(tempfile, "mkdtemp", read_only)
+    with pytest.raises(cd.OutputError, match=r"Read-only file system .*The trajectory was saved to .*coopdyn-rescue-"):
+        write_outputs(tmp_path / "run", [("trajectory", lambda f: res.save(f / "trajectory.npz"))])
+
+
+def test_disk_full_while_writing_cleans_up_and_rescues(book: cd.Scene, tmp_path: Path, monkeypatch: Any) -> None:
+    res = _result(book)
+    real_savez = np.savez
+    failed = []
+
+    def full(file: Any, *args: Any, **kwargs: Any) -> None:
+        if not failed:  # the first write fails (disk full), the rescue's succeeds
+            failed.append(1)
+            raise OSError(28, "No space left on device")
+        real_savez(file, *args, **kwargs)
+
+    monkeypatch.setattr(np, "savez", full)
+    with pytest.raises(cd.OutputError, match=r"No space left on device.*The trajectory was saved to"):
+        write_outputs(tmp_path / "run", [("trajectory", lambda f: res.save(f / "trajectory.npz"))])
+    assert list(tmp_path.iterdir()) == []  # no half-written folder, no .tmp
+
+
+CLI_WRITER = r"""
+import sys, time
+import coopdyn.outputs as outputs
+from coopdyn.__main__ import main
+real = outputs._publish
+def slow(staging, target):
+    print("PUBLISHING", flush=True)
+    time.sleep(float(sys.argv[2]))
+    real(staging, target)
+outputs._publish = slow
+sys.exit(main(["simulate", sys.argv[1], "--out", sys.argv[3]]))
+"""
+
+
+def _scene_file(tmp_path: Path, duration: float) -> Path:
+    text = (EXAMPLES / "linear_book.toml").read_text()
+    text = text.replace("duration = 3.0", f"duration = {duration}").replace("plot = true", "plot = false")
+    path = tmp_path / "book.toml"
+    path.write_text(text)
+    return path
+
+
+def _cli(tmp_path: Path, *args: str) -> subprocess.Popen[str]:
+    script = tmp_path / "writer.py"
+    script.write_text(CLI_WRITER)
+    return subprocess.Popen([sys.executable, str(script), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_kill_9_while_the_cli_writes_leaves_the_old_run_or_the_new_never_a_mix(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    first = _cli(tmp_path, str(_scene_file(tmp_path, 0.1)), "0", str(out))
+    assert first.wait(120) == 0, first.stderr.read()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    second = _cli(tmp_path, str(_scene_file(tmp_path, 0.2)), "30", str(out))
+    assert second.stdout.readline().strip() == "PUBLISHING"
+    second.kill()
+    second.wait()
+    after = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert after == before  # the old run, whole
+    assert b"duration = 0.1" in after["scene.toml"]
+
+
+def test_ctrl_c_while_the_cli_writes_finishes_the_writing(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = _cli(tmp_path, str(_scene_file(tmp_path, 0.2)), "1", str(out))
+    assert proc.stdout.readline().strip() == "PUBLISHING"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    with np.load(out / "trajectory.npz") as z:
+        assert z["t"][-1] == pytest.approx(0.2)  # the completed run is in place
+    assert "Traceback" not in err
+
+
+# --- property-based: controllers, tasks and simulate --------------------------------------------
+
+junk = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.text(max_size=4),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(min_value=-(10**400), max_value=10**400),
+    st.complex_numbers(max_magnitude=1e3),
+    st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=15),
+    st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
+    st.just(np.array([object()])),
+)
+
+
+def _maybe(valid: st.SearchStrategy[Any]) -> st.SearchStrategy[Any]:
+    return st.integers(0, 3).flatmap(lambda i: junk if i == 0 else valid)
+
+
+SIMULATE_ARGS = {
+    "t_final": _maybe(st.floats(min_value=0.0, max_value=0.02)),
+    "dt": _maybe(st.sampled_from([1e-4, 1e-3, 5e-3])),
+    "integrator": _maybe(st.sampled_from(["rk4", "implicit_euler", "dopri5", "exponential", "trapezoid"])),
+    "save_every": _maybe(st.integers(1, 5)),
+    "max_speed": _maybe(st.floats(min_value=1.0, max_value=1e4)),
+    "energy_check": _maybe(st.sampled_from(["warn", "off", "raise"])),
+    "loop": _maybe(st.sampled_from(["auto", "python", "compiled"])),
+    "q0": _maybe(st.lists(st.floats(min_value=0.1, max_value=0.3), min_size=3, max_size=3)),
+    "controller": _maybe(
+        st.sampled_from(
+            [
+                None,
+                _zero,
+                lambda t, q, v: "x",
+                lambda t, q, v: np.full(2, np.nan),
+                lambda t, q, v: np.zeros(3),
+                lambda t, q, v: None,
+            ]
+        )
+    ),
+}
+
+
+def _check_simulate(book: cd.Scene, kwargs: dict[str, Any]) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            res = cd.simulate(book, **kwargs)
+        except cd.CoopdynError:
+            return
+    assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v))
+
+
+FUZZ = {"deadline": None, "database": None, "suppress_health_check": [HealthCheck.too_slow, HealthCheck.function_scoped_fixture]}
+
+
+@settings(max_examples=300, derandomize=True, **FUZZ)
+@given(kwargs=st.fixed_dictionaries({}, optional=SIMULATE_ARGS))
+def test_simulate_gives_a_result_or_a_coopdyn_error(book: cd.Scene, kwargs: dict[str, Any]) -> None:
+    _check_simulate(book, {"t_final": 0.01, **kwargs})
+
+
+TASK_ARGS = {
+    name: _maybe(st.floats(min_value=0.01, max_value=2.0))
+    for name in ("squeeze", "t_grip", "lift", "t_lift", "lift_duration", "amplitude", "frequency", "cycles", "t_osc")
+}
+TASK_ARGS["axis"] = _maybe(st.lists(st.floats(min_value=-1, max_value=1), min_size=3, max_size=3))
+TASK_ARGS["rotation"] = _maybe(st.just(np.eye(3)))
+CONTROLLER_ARGS = {
+    "stiffness": _maybe(st.tuples(st.floats(0, 5e3), st.floats(0, 200))),
+    "damping": _maybe(st.tuples(st.floats(0, 200), st.lists(st.floats(0, 10), min_size=3, max_size=3))),
+    "joint_damping": _maybe(st.floats(0, 10)),
+    "null_stiffness": _maybe(st.floats(0, 50)),
+}
+
+
+@settings(max_examples=150, derandomize=True, **FUZZ)
+@given(task=st.fixed_dictionaries({}, optional=TASK_ARGS), ctrl=st.fixed_dictionaries({}, optional=CONTROLLER_ARGS))
+def test_object_impedance_and_its_task_give_a_result_or_a_coopdyn_error(
+    pandas: cd.Scene, task: dict[str, Any], ctrl: dict[str, Any]
+) -> None:
+    try:
+        controller = ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas), **task), **ctrl)
+        res = cd.simulate(pandas, 0.005, controller=controller, integrator="implicit_euler", energy_check="off")
+    except cd.CoopdynError:
+        return
+    assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.tau))
+
+
+@settings(max_examples=150, derandomize=True, **FUZZ)
+@given(kp=junk | st.floats(0, 100), kd=junk | st.floats(0, 10), which=st.sampled_from([GravityCompensationPD, ComputedTorque]))
+def test_joint_controllers_give_a_result_or_a_coopdyn_error(pandas: cd.Scene, kp: Any, kd: Any, which: type) -> None:
+    try:
+        res = cd.simulate(pandas, 0.005, controller=which(pandas, kp=kp, kd=kd), integrator="implicit_euler", energy_check="off")
+    except cd.CoopdynError:
+        return
+    assert np.all(np.isfinite(res.q))
+
+
+@pytest.mark.slow
+@settings(max_examples=3000, derandomize=False, **FUZZ)
+@given(kwargs=st.fixed_dictionaries({}, optional=SIMULATE_ARGS))
+def test_simulate_fuzz_thousands(book: cd.Scene, kwargs: dict[str, Any]) -> None:
+    _check_simulate(book, {"t_final": 0.01, **kwargs})
+
+
+# --- the viewer's server --------------------------------------------------------------------------
+
+
+def _listening(port: int) -> list[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) listening on ``port``."""
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not os.path.exists(table):
+            continue
+        for line in Path(table).read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            address, hexport = local.rsplit(":", 1)
+            if state == "0A" and int(hexport, 16) == port:
+                found.append(address)
+    return found
+
+
+VIEWER = r"""
+import logging, sys
+logging.basicConfig(level=logging.INFO, stream=sys.stderr)
+import coopdyn as cd
+from coopdyn.viz.viewer import view
+res = cd.simulate(cd.scenes.linear_book(), 0.05)
+view(res, fps=5)
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="reads /proc/net/tcp")
+def test_the_viewer_serves_on_loopback_only_and_stops_with_sigterm(tmp_path: Path) -> None:
+    pytest.importorskip("meshcat")
+    script = tmp_path / "viewer.py"
+    script.write_text(VIEWER)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        url = None
+        while url is None and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if "meshcat viewer at" in line:
+                url = line.split("meshcat viewer at ")[1].split()[0]
+            elif not line and proc.poll() is not None:
+                break
+        assert url is not None, proc.stderr.read()
+        port = int(url.split(":")[2].split("/")[0])
+        addresses = _listening(port)
+        assert addresses and all(a in ("0100007F", "0000000000000000FFFF00000100007F") for a in addresses), addresses
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(30)
+        deadline = time.monotonic() + 10
+        while _listening(port) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert _listening(port) == []  # the server went with the viewer
+    finally:
+        if proc.poll() is None:
+            proc.kill()
