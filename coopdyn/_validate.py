@@ -20,6 +20,8 @@ def finite_array(
     Refused with ``error``: text, booleans, complex and object (non-numeric) entries — nothing is
     silently converted (a complex value would lose its imaginary part) —, ragged or over-deep
     nesting, and numbers beyond the float range."""
+    if isinstance(value, np.ma.MaskedArray):
+        raise error(f"{name} must be a plain array; a masked array's masked entries have no value")
     if isinstance(value, str | bytes | bool | np.bool_) or value is None:
         raise error(f"{name} must be numeric, got {_short(value)}")
     try:
@@ -68,11 +70,11 @@ def _short(value: Any, limit: int = 120) -> str:
     return text if len(text) <= limit else text[: limit - 5] + " …" + text[-3:]
 
 
-def positive(value: Any, name: str, unit: str) -> float:
+def positive(value: Any, name: str, unit: str, error: type[CoopdynError] = SceneError) -> float:
     """Return ``value`` as a float, checking it is finite and > 0."""
-    x = float(finite_array(value, name, ()))
+    x = float(finite_array(value, name, (), error))
     if x <= 0.0:
-        raise SceneError(f"{name} must be > 0 [{unit}], got {x}")
+        raise error(f"{name} must be > 0 [{unit}], got {x}")
     return x
 
 

@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from . import _validate
 from .dynamics import Dynamics
-from .errors import ControllerError
+from .errors import ControllerError, CoopdynError
 
 Controller = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 _Record = tuple[np.ndarray, np.ndarray, float, np.ndarray]
@@ -95,8 +95,13 @@ class System:
         """The controller output, checked: (n_actuated,) finite floats."""
         if self.controller is None:
             return self._zero
-        out = self.controller(t, q, v)
-        if isinstance(out, np.ndarray) and out.dtype == np.float64:
+        try:
+            out = self.controller(t, q, v)
+        except (CoopdynError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # the user's code (or a reference it calls) failed: say where
+            raise ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}") from exc
+        if type(out) is np.ndarray and out.dtype == np.float64:  # not a subclass (masked arrays)
             tau = out
         else:  # lists, other dtypes, and what is not a torque vector at all
             try:
@@ -162,7 +167,12 @@ class System:
 
     def _wrench(self, t: float) -> np.ndarray:
         assert self.object_wrench is not None
-        out = self.object_wrench(t)
+        try:
+            out = self.object_wrench(t)
+        except (CoopdynError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            raise ControllerError(f"object_wrench raised {type(exc).__name__} at t = {t:.6g} s: {exc}") from exc
         try:
             return _validate.finite_array(out, "object_wrench(t)", (6,), error=ControllerError)
         except ControllerError as exc:

@@ -15,6 +15,8 @@ from .model.scene import Scene
 def _scene(scene: Any, who: str) -> Scene:
     if not isinstance(scene, Scene):
         raise SceneError(f"{who}: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+    if not scene.arms:
+        raise SceneError(f"{who} drives arm joints; this scene has no arms (its object is held by fixtures only)")
     return scene
 
 

@@ -114,7 +114,11 @@ def did_you_mean(name: str, candidates: Iterable[str], *, n: int = 3) -> str:
     """Return ``" Did you mean 'a', 'b'?"`` for the closest candidates, or ``""``."""
     if not isinstance(name, str):  # a wrong type gets no suggestion (its message says what is valid)
         return ""
-    close = difflib.get_close_matches(name, [c for c in candidates if isinstance(c, str)], n=n, cutoff=0.5)
+    try:
+        names = [c for c in candidates if isinstance(c, str)]
+    except TypeError:
+        return ""
+    close = difflib.get_close_matches(name, names, n=n, cutoff=0.5)
     if not close:
         return ""
     return " Did you mean " + ", ".join(repr(c) for c in close) + "?"

@@ -59,6 +59,8 @@ def write_outputs(
         OutputError: the folder holds files coopdyn did not write, or it cannot be written; the
             message says where the essential outputs went instead, if anywhere.
     """
+    if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
+        raise OutputError(f"the output folder must be a path, got {folder!r}")
     target = Path(folder).absolute()
     _refuse_foreign(target)
     with interrupts_deferred():  # a Ctrl-C now would lose a finished run: it waits for the folder

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -12,9 +13,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ._validate import finite_array
 from .dynamics import Dynamics, Energy
 from .dynamics.dynamics import Readouts
-from .errors import SimulationError
+from .errors import OutputError, SimulationError
 from .model.scene import Scene
 
 
@@ -104,6 +106,8 @@ class Result:
 
                 raise SimulationError(f"no frame {frame!r} in the scene.{did_you_mean(frame, [f.name for f in model.frames])}")
             frame = int(model.getFrameId(frame))
+        elif isinstance(frame, bool) or not isinstance(frame, int | np.integer) or not 0 <= frame < model.nframes:
+            raise SimulationError(f"frame must be a frame name or an index in [0, {model.nframes}), got {frame!r}")
         data = model.createData()
         out = np.empty((len(self.t), 3))
         for k, q in enumerate(self.q):
@@ -137,8 +141,14 @@ class Result:
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the trajectory atomically (temporary file, then rename): ``.npz`` (t, q, v, tau
         and the interconnection wrenches) or ``.csv`` (one row per sample). Returns the path."""
+        if not isinstance(path, str | os.PathLike) or not str(path) or "\0" in str(path):
+            raise SimulationError(f"path must be a file name ending in .npz or .csv, got {path!r}")
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except (OSError, ValueError) as exc:
+            reason = getattr(exc, "strerror", None) or exc
+            raise OutputError(getattr(exc, "errno", None), f"cannot write {path}: {reason}", str(path)) from exc
         tmp = path.with_name(f".{path.name}.tmp")
         if path.suffix not in (".npz", ".csv"):
             raise SimulationError(f"unknown result format {path.suffix!r}: use .npz or .csv")
@@ -157,18 +167,28 @@ class Result:
                 data = np.column_stack([self.t, self.q, self.v, self.tau, W])
                 np.savetxt(tmp, data, delimiter=",", header=header, comments="")
             os.replace(tmp, path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)  # no .tmp left behind (disk full, read-only, Ctrl-C)
+        except BaseException as exc:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)  # no .tmp left behind (disk full, read-only, Ctrl-C)
+            if isinstance(exc, OSError) and not isinstance(exc, OutputError):
+                raise OutputError(exc.errno, f"cannot write {path}: {exc.strerror or exc}", str(path)) from exc
             raise
         return path
 
     def tracking_error(self, reference: Callable[[float], Any]) -> np.ndarray:
         """Object position error ‖p − p_d‖ (n,) [m] against ``reference(t).position`` (e.g. a
         :class:`coopdyn.cooperative.GripLiftOscillate`) or ``reference(t)`` returning (3,)."""
+        if not callable(reference):
+            raise SimulationError(f"reference must be a callable reference(t), got {type(reference).__name__}")
         desired = []
         for t in self.t:
-            ref = reference(float(t))
-            desired.append(np.asarray(getattr(ref, "position", ref), dtype=float))
+            try:
+                ref = reference(float(t))
+            except Exception as exc:
+                raise SimulationError(f"reference({float(t):g}) raised {type(exc).__name__}: {exc}") from exc
+            desired.append(
+                finite_array(getattr(ref, "position", ref), f"reference({float(t):g}) position", (3,), SimulationError)
+            )
         return np.linalg.norm(self.object_position() - np.array(desired), axis=1)
 
     def tip_position(self, arm: int | str) -> np.ndarray:

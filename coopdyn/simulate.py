@@ -50,7 +50,7 @@ def simulate(
     object_wrench: Callable[[float], np.ndarray] | None = None,
     backend: str | None = None,
     loop: str = "auto",
-    max_steps: int | None = 10**7,
+    max_steps: int | None = 2 * 10**6,
     max_memory: float | None = 4e9,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.

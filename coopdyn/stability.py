@@ -169,6 +169,10 @@ def advise(
         methods: names of the methods to report on.
         dt: the step the user intends [s]; the recommendation then says which methods are stable at it.
     """
+    if dt is not None:
+        from ._validate import positive
+
+        dt = positive(dt, "dt", "s", SimulationError)
     A = linearize(scene, q, v, controller)
     n = scene.nv
     lam = np.linalg.eigvals(A)

@@ -176,17 +176,30 @@ def test_relative_output_folders_resolve_against_the_scene_file(tmp_path: Path) 
     assert load(path).output["folder"] == str((tmp_path / "sub" / "out" / "linear_book").resolve())
 
 
-def test_an_arm_with_every_joint_locked_is_refused() -> None:
+def test_an_arm_with_every_joint_locked_runs_or_is_refused(pandas: cd.Scene) -> None:
+    """A fully locked arm holds the object like a fixture (tests/test_elements.py); ObjectImpedance,
+    which commands the object through joints, refuses it (it crashed the compiled loop)."""
     from coopdyn.resources import urdf_path
 
     arm = cd.Arm("a", str(urdf_path("slider_z.urdf")), tip_frame="tip", locked_joints=["slide"])
     obj = cd.RigidObject.box(1.0, [0.1, 0.1, 0.1], joint="prismatic")
-    try:
-        scene = cd.Scene([arm], obj, [cd.Interconnection("a", stiffness=np.full(6, 1e3))])
-    except cd.CoopdynError:
-        return
-    res = cd.simulate(scene, 0.01)  # a scene that builds must run
-    assert np.all(np.isfinite(res.q))
+    scene = cd.Scene([arm], obj, [cd.Interconnection("a", stiffness=np.full(6, 1e3))])
+    assert np.all(np.isfinite(cd.simulate(scene, 0.01).q))
+    left, right = pandas.arm_specs
+    held = {f"panda_joint{i}": float(x) for i, x in enumerate(left.q0, start=1)}
+    locked = left.replace(q0=None, locked_joints=held | {"panda_finger_joint1": 0.0, "panda_finger_joint2": 0.0})
+    scene = cd.Scene([locked, right], pandas.object, pandas.interconnection_specs, gravity=pandas.gravity)
+    with pytest.raises(cd.SceneError, match=r"every joint of \['left'\] is locked"):
+        ObjectImpedance(scene)
+
+
+def test_a_single_sample_result_reads_the_same_forces_on_both_backends(pandas: cd.Scene) -> None:
+    """The native readouts read past a writeable (1, nq) input: t_final = 0 showed 1e83 N."""
+    native = cd.simulate(pandas, 0.0, backend="native")
+    python = cd.simulate(pandas, 0.0, backend="python")
+    assert native.t.shape == (1,)
+    np.testing.assert_allclose(native.wrenches(), python.wrenches(), atol=1e-9)
+    assert np.max(np.abs(native.wrenches())) < 1e-6  # unloaded at the initial state
 
 
 # --- runs that cannot finish ---------------------------------------------------------------

@@ -63,7 +63,7 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
             lacks an element of the scene.
     """
     name = os.environ.get("COOPDYN_BACKEND", "auto") if backend is None else backend
-    if name not in BACKENDS:
+    if not isinstance(name, str) or name not in BACKENDS:
         raise BackendError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")
     module, why = _load()
     if name == "python":

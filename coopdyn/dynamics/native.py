@@ -112,19 +112,22 @@ class NativeDynamics(Dynamics):
 
     def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
         Q, V = np.asarray(Q, dtype=float), np.asarray(V, dtype=float)
+        n = len(Q)
+        if n == 1:  # eigenpy maps a writeable (1, nq) array with the row stride as the column stride
+            Q, V = np.repeat(Q, 2, axis=0), np.repeat(V, 2, axis=0)  # (reading past its end): send two rows
         E, U, P, WG, WT, PG, PT, PO, KP = self._call("readouts(Q, V)", self._kernel.readouts, Q, V)
-        n, L = len(Q), len(self.scene.links)  # reshape all: eigenpy returns an (n, 1) matrix as a vector
+        m, L = len(Q), len(self.scene.links)  # reshape all: eigenpy returns an (n, 1) matrix as a vector
         return Readouts(
-            E.reshape(n, L, 6),
-            U.reshape(n, L),
-            P.reshape(n, L),
-            WG.reshape(n, L, 6),
-            WT.reshape(n, L, 6),
-            PG.reshape(n, L, 3),
-            PT.reshape(n, L, 3),
-            PO.reshape(n, 3),
-            KP.reshape(n, 2)[:, 0].copy(),
-            KP.reshape(n, 2)[:, 1].copy(),
+            E.reshape(m, L, 6)[:n],
+            U.reshape(m, L)[:n],
+            P.reshape(m, L)[:n],
+            WG.reshape(m, L, 6)[:n],
+            WT.reshape(m, L, 6)[:n],
+            PG.reshape(m, L, 3)[:n],
+            PT.reshape(m, L, 3)[:n],
+            PO.reshape(m, 3)[:n],
+            KP.reshape(m, 2)[:n, 0].copy(),
+            KP.reshape(m, 2)[:n, 1].copy(),
         )
 
 

@@ -155,12 +155,12 @@ class AdaptiveIntegrator(Integrator):
     error_order: ClassVar[int]
 
     def __init__(self, rtol: float = 1e-6, atol: float = 1e-9, h_min: float = 1e-12) -> None:
+        from .._validate import positive
         from ..errors import SimulationError
 
-        for name, value in (("rtol", rtol), ("atol", atol), ("h_min", h_min)):
-            if not (np.isfinite(value) and value > 0.0):
-                raise SimulationError(f"{name} must be a positive number, got {value!r}")
-        self.rtol, self.atol, self.h_min = float(rtol), float(atol), float(h_min)
+        self.rtol = positive(rtol, "rtol", "1", SimulationError)
+        self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
+        self.h_min = positive(h_min, "h_min", "s", SimulationError)
 
     @abstractmethod
     def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:

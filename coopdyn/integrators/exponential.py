@@ -88,7 +88,7 @@ class Exponential(Integrator):
     exact_discretisation = True
 
     def __init__(self, hold: str = "cubic") -> None:
-        if hold not in HOLDS:
+        if not isinstance(hold, str) or hold not in HOLDS:
             raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {hold!r}")
         self.hold = hold
 

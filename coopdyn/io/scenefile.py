@@ -206,8 +206,10 @@ def load(path: str | Path) -> Run:
     integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "rk4"), str)
     if integrator not in INTEGRATORS:
         raise f.error(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)}", "simulation", "integrator")
+    if not dt >= 1e-12:
+        raise f.error(f"must be >= 1e-12 [s], got {dt:g}", "simulation", "dt")
     save_every = _check_type(f, "simulation", "save_every", sim.get("save_every", max(1, round(0.01 / dt))), int)
-    if duration < 0 or dt <= 0 or save_every < 1:
+    if duration < 0 or save_every < 1:
         raise f.error("need duration >= 0 [s], dt > 0 [s], save_every >= 1", "simulation")
 
     task = _task(f, doc.get("task"), scene)
@@ -374,8 +376,11 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
                 f"{path}: {key} has shape {arrays[key].shape}, the scene of {loaded.path} needs {shape} "
                 "(a trajectory of another scene, or a damaged file)"
             )
-    if not all(np.all(np.isfinite(arrays[k])) for k in ("t", "q", "v")):
-        raise SceneFileError(f"{path}: the trajectory holds non-finite values")
+    if arrays["t"].dtype.kind not in "iuf" or not all(np.all(np.isfinite(arrays[k])) for k in ("t", "q", "v")):
+        raise SceneFileError(f"{path}: the trajectory's t, q and v must be finite numbers")
+    dt = arrays["dt"]
+    if dt.shape != () or dt.dtype.kind not in "iuf" or not float(dt) > 0 or arrays["integrator"].dtype.kind != "U":
+        raise SceneFileError(f"{path}: dt must be one positive number and integrator a name (a damaged file?)")
     return Result(
         scene=scene,
         t=arrays["t"].astype(float),
@@ -383,7 +388,7 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
         v=arrays["v"],
         tau=arrays["tau"],
         integrator=str(arrays["integrator"]),
-        dt=float(arrays["dt"]),
+        dt=float(dt),
         n_rhs=0,
         cpu_time=0.0,
     )

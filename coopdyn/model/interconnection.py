@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .. import _validate
+from ..errors import SceneError
 from .body import axis_vector
 from .elements import Element, ElementType, lookup
 
@@ -23,9 +24,13 @@ from .elements import Element, ElementType, lookup
 def diagonal(linear: float | Sequence[float], angular: float | Sequence[float]) -> np.ndarray:
     """A 6x6 diagonal stiffness or damping: ``linear`` [N/m or N·s/m] (scalar or x, y, z) and
     ``angular`` [N·m/rad or N·m·s/rad] (scalar or about x, y, z)."""
-    lin = np.broadcast_to(_validate.finite_array(linear, "linear"), (3,))
-    ang = np.broadcast_to(_validate.finite_array(angular, "angular"), (3,))
-    return np.diag(np.concatenate([lin, ang]))
+    parts = []
+    for value, name in ((linear, "linear"), (angular, "angular")):
+        arr = _validate.finite_array(value, f"diagonal: {name}")
+        if arr.shape not in ((), (3,)):
+            raise SceneError(f"diagonal: {name} must be a scalar or 3 values (x, y, z), got shape {arr.shape}")
+        parts.append(np.broadcast_to(arr, (3,)))
+    return np.diag(np.concatenate(parts))
 
 
 def axial(value: float, axis: str | Sequence[float] = "z") -> np.ndarray:

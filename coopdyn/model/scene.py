@@ -17,7 +17,7 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
-from .body import RigidObject
+from .body import OBJECT_JOINTS, RigidObject
 from .elements import Element
 from .interconnection import Interconnection
 
@@ -102,6 +102,9 @@ class Scene:
             arms = [arms]
         if isinstance(interconnections, Interconnection):
             interconnections = [interconnections]
+        for what, value in (("arms", arms), ("interconnections", interconnections)):
+            if isinstance(value, str | bytes) or not isinstance(value, Sequence):
+                raise SceneError(f"{what} must be a list, got {type(value).__name__}")
         for a in arms:
             if not isinstance(a, Arm):
                 raise SceneError(f"arms must be coopdyn.Arm instances, got {type(a).__name__}")
@@ -112,7 +115,11 @@ class Scene:
             raise SceneError(f"arm names must be unique, got {names}")
         if not isinstance(obj, RigidObject):
             raise SceneError(f"obj must be a coopdyn.RigidObject, got {type(obj).__name__}")
-        if not interconnections:
+        if not isinstance(obj.name, str) or not obj.name:
+            raise SceneError(f"the object's name must be a non-empty string, got {obj.name!r}")
+        if not isinstance(obj.joint, str) or obj.joint not in OBJECT_JOINTS:
+            raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {obj.joint!r}")
+        if len(interconnections) == 0:
             raise SceneError("a scene needs at least one interconnection (arm tip or world fixture ↔ object)")
 
         loaded = [load_arm(a) for a in arms]
@@ -234,6 +241,8 @@ class Scene:
             if arm not in names:
                 raise SceneError(f"no arm named {arm!r}.{did_you_mean(arm, names)} Arms: {names}")
             return names.index(arm)
+        if isinstance(arm, bool) or not isinstance(arm, int | np.integer):
+            raise SceneError(f"an arm is given by name or index, got {arm!r}")
         if not 0 <= int(arm) < len(self.arms):
             raise SceneError(f"arm index {arm} out of range: the scene has {len(self.arms)} arms")
         return int(arm)

@@ -19,6 +19,9 @@ from ..model.scene import Scene
 PLACEMENT: dict[str | None, tuple[float, float]] = {"panda": (1.2, 0.7), "ur5": (1.0, 0.5), "kinova": (1.2, 0.6)}
 
 
+MAX_ARMS = 16  #: more arms than this do not fit around a box (and would take minutes to build)
+
+
 def facing_arms(
     robot: str = "panda",
     *,
@@ -60,8 +63,8 @@ def facing_arms(
     """
     from ..model.ik import solve_ik
 
-    if isinstance(n_arms, bool) or not isinstance(n_arms, int) or n_arms < 1:
-        raise SceneError(f"n_arms must be an integer >= 1, got {n_arms!r}")
+    if isinstance(n_arms, bool) or not isinstance(n_arms, int) or not 1 <= n_arms <= MAX_ARMS:
+        raise SceneError(f"n_arms must be an integer from 1 to {MAX_ARMS} (arms around one box), got {n_arms!r}")
 
     name = robot if isinstance(robot, str) and robot in PLACEMENT else None
     default_sep, default_h = PLACEMENT[name] if name else (1.2, 0.7)
@@ -69,7 +72,8 @@ def facing_arms(
     box = RigidObject.box(box_mass, box_size, pose=[0.0, 0.0, h])
     half = float(np.asarray(box_size, dtype=float)[1]) / 2.0
     sep = _validate.positive(default_sep if separation is None else separation, "separation", "m")
-    K = diagonal(stiffness, rotational_ratio * stiffness)
+    stiffness = _validate.positive(stiffness, "stiffness", "N/m")
+    K = diagonal(stiffness, _validate.non_negative(rotational_ratio, "rotational_ratio", "m²/rad") * stiffness)
     D = _validate.non_negative(damping, "damping", "s") * K
     # In each base frame: tool at distance sep/2 − half ahead, approach (tool z) along base x, tool x up.
     R_tool = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
@@ -89,6 +93,8 @@ def facing_arms(
 
 def object_start(scene: Scene) -> np.ndarray:
     """Initial world position of the scene's object frame (3,) [m] — the start of a task."""
+    if not isinstance(scene, Scene):
+        raise SceneError(f"object_start needs a coopdyn.Scene, got {type(scene).__name__}")
     data = scene.model.createData()
     pin.framesForwardKinematics(scene.model, data, scene.q0)
     return data.oMf[scene.object_frame].translation.copy()

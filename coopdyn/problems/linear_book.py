@@ -140,7 +140,12 @@ class Drive:
     """
 
     def __init__(self, segments: Sequence[Segment]) -> None:
+        if isinstance(segments, str | bytes) or not isinstance(segments, Sequence):
+            raise SceneError(f"a drive takes a list of Segment, got {type(segments).__name__}")
         segs = tuple(segments)
+        bad = [type(s).__name__ for s in segs if not isinstance(s, Segment)]
+        if bad:
+            raise SceneError(f"a drive takes a list of Segment, got elements of type {bad}")
         if not segs or segs[0].start != 0.0:
             raise SceneError("a drive needs at least one segment, the first starting at t = 0")
         if any(b.start <= a.start for a, b in itertools.pairwise(segs)):
@@ -160,11 +165,11 @@ class Drive:
 
     def __call__(self, t: Any) -> Any:
         """The force at time(s) t [s]."""
-        if isinstance(t, float | int):
+        if isinstance(t, float | int) and not isinstance(t, bool) and math.isfinite(t):
             seg = self.segment_at(t)
             s = t - seg.start
             return seg.constant + seg.ramp * s + seg.amplitude * math.sin(seg.omega * s + seg.phase)
-        t = np.asarray(t, dtype=float)
+        t = _validate.finite_array(t, "a drive's time t [s]")
         idx = np.clip(np.searchsorted(self._starts, t, side="right") - 1, 0, None)
         out = np.empty_like(t)
         for i, seg in enumerate(self.segments):
@@ -325,6 +330,10 @@ def book_task(
         _validate.positive(x, f"book_task: {n}", "Hz" if n == "frequency" else "s")
         for n, x in (("t_grip", t_grip), ("lift_duration", lift_duration), ("frequency", frequency))
     )
+    if min(t_grip, lift_duration) < 1e-6 or frequency > 1e6:
+        raise SceneError(
+            "book_task: t_grip and lift_duration must be >= 1 µs and frequency <= 1 MHz (the drives' slopes overflow)"
+        )
     t_lift, t_oscillate = (
         _validate.number(x, f"book_task: {n}", "s") for n, x in (("t_lift", t_lift), ("t_oscillate", t_oscillate))
     )
@@ -380,4 +389,7 @@ class DrivesController:
 
 def drives_controller(*drives: Drive) -> DrivesController:
     """A controller applying open-loop drives, one per arm joint: ``τ_i = drive_i(t)``."""
+    for k, drive in enumerate(drives):
+        if not callable(drive):
+            raise SceneError(f"drives_controller: drive {k} must be a Drive or a callable drive(t) -> τ [N], got {drive!r}")
     return DrivesController(drives)
