@@ -177,7 +177,12 @@ class GripLiftOscillate:
 
 def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
     """(linear, angular) object gains, each a non-negative scalar or 3-vector, as two (3,) arrays."""
-    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray) or getattr(value, "ndim", 1) == 0 or len(value) != 2:
+    if (
+        isinstance(value, str | bytes)
+        or not isinstance(value, Sequence | np.ndarray)
+        or getattr(value, "ndim", 1) == 0
+        or len(value) != 2
+    ):
         raise SceneError(
             f"ObjectImpedance: {name} must be a pair (linear [{units[0]}], angular [{units[1]}]), each a scalar or "
             f"3-vector, e.g. {name}=(2000.0, 100.0); got {_validate._short(value)}"
@@ -255,9 +260,7 @@ class ObjectImpedance:
         self._links = [(lk.grasp_frame, lk.tip_frame, scene.arms[lk.arm]) for lk in scene.links if lk.arm is not None]
         rigid = [arm.name for _, _, arm in self._links if arm.v_index.size == 0]
         if rigid:
-            raise SceneError(
-                f"ObjectImpedance commands the object through the arms' joints; every joint of {rigid} is locked"
-            )
+            raise SceneError(f"ObjectImpedance commands the object through the arms' joints; every joint of {rigid} is locked")
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
@@ -365,7 +368,7 @@ class ObjectImpedance:
         the damping (joint damping b along the least-norm joint motion; the posture task damps
         the rest of the null space)."""
         model, data, scene = self.scene.model, self._data, self.scene
-        q = scene.q0 if q is None else q
+        q = scene.q0 if q is None else scene.check_state(q, scene.v0)[0]
         u = _validate.finite_array(direction, "direction", (3,))
         if not np.linalg.norm(u) > 0.0:
             raise SceneError("direction must not be zero")

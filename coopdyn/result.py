@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -198,3 +199,56 @@ class Result:
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
         return self.readouts.object_position
+
+
+class SampleFiles:
+    """A run's samples streamed to ``.npy`` files in ``folder`` (``t``, ``q``, ``v``, ``tau``)
+    instead of kept in memory: the files are made at their final size up front and filled as
+    the run goes; :meth:`arrays` maps them back read-only. A run that stops early leaves files
+    cut to the samples it made.
+
+    Args:
+        folder: a new or empty folder. n: samples the run will save. nq, nv, na: sizes.
+    """
+
+    NAMES = ("t", "q", "v", "tau")
+
+    def __init__(self, folder: str | os.PathLike[str], n: int, nq: int, nv: int, na: int) -> None:
+        if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
+            raise SimulationError(f"stream_to must be a folder path, got {folder!r}")
+        self.folder = Path(folder).absolute()
+        if self.folder.exists() and (not self.folder.is_dir() or any(self.folder.iterdir())):
+            raise SimulationError(f"stream_to: {self.folder} must be a new or empty folder")
+        need = n * (1 + nq + nv + na) * 8
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            free = shutil.disk_usage(self.folder).free
+            if need > free:
+                raise OutputError(28, f"streaming needs {need / 1e9:.3g} GB, {self.folder} has {free / 1e9:.3g} GB free")
+            shapes = {"t": (n,), "q": (n, nq), "v": (n, nv), "tau": (n, na)}
+            self._files = {k: np.lib.format.open_memmap(self.folder / f"{k}.npy", mode="w+", shape=s) for k, s in shapes.items()}
+        except OSError as exc:
+            if isinstance(exc, OutputError):
+                raise
+            raise OutputError(exc.errno, f"cannot stream to {self.folder}: {exc.strerror or exc}", str(self.folder)) from exc
+        self.size, self.n = n, 0
+
+    def append(self, t: Any, q: Any, v: Any, tau: Any) -> None:
+        """Write rows (m,), (m, nq), (m, nv), (m, na) after those written so far."""
+        m = len(t)
+        for name, rows in zip(self.NAMES, (t, q, v, tau), strict=True):
+            self._files[name][self.n : self.n + m] = rows
+        self.n += m
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """(t, q, v, tau), memory-mapped read-only; files longer than what was written are cut."""
+        for name, mm in self._files.items():
+            mm.flush()
+            if self.n < self.size:
+                path = self.folder / f"{name}.npy"
+                tmp = path.with_name(f".{name}.npy.tmp")
+                with open(tmp, "wb") as f:  # (np.save on a name would append .npy)
+                    np.save(f, np.asarray(mm[: self.n]))
+                os.replace(tmp, path)
+        self._files = {}
+        return tuple(np.load(self.folder / f"{k}.npy", mmap_mode="r") for k in self.NAMES)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import time
 import warnings
 from collections.abc import Callable
@@ -31,7 +32,7 @@ from .errors import (
 from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
-from .result import Result
+from .result import Result, SampleFiles
 from .stability import advise, unresolved_mode_message
 
 
@@ -52,6 +53,7 @@ def simulate(
     loop: str = "auto",
     max_steps: int | None = 2 * 10**6,
     max_memory: float | None = 4e9,
+    stream_to: str | os.PathLike[str] | None = None,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -89,6 +91,9 @@ def simulate(
             no limit.
         max_memory: refuse a run whose saved trajectory would take more than this many bytes
             (the message proposes a ``save_every``); ``None``: no limit.
+        stream_to: a new or empty folder: the samples go to ``t.npy``, ``q.npy``, ``v.npy`` and
+            ``tau.npy`` there as the run goes (sized up front, checked against the free disk
+            space) instead of memory, and the result's arrays are read-only memory maps of them.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -126,11 +131,14 @@ def simulate(
         raise SimulationError(f"progress must be True or False, got {_validate._short(progress)}")
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
-    budget = _budget(scene, t_final, dt, save_every, max_steps, max_memory)
+    budget = _budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
 
     system = System(Dynamics(scene, backend), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
+    if stream_to is not None:
+        n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
+        run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
     if method.a_stable and not method.adaptive and not method.exact_discretisation and t_final > 0:
         _warn_unresolved(scene, system, method, q, v, dt)
     cpu0 = time.process_time()  # the compiled loop's preparation (e.g. the exponential's expm) counts too
@@ -182,6 +190,7 @@ def simulate(
             bar.close()
 
 
+STREAM_BATCH = 1024  #: samples kept in memory between writes to ``stream_to``
 MIN_DT = 1e-12  #: [s] the shortest step ``simulate`` takes
 ENERGY_CHECKS = ("warn", "raise", "off")
 LOOPS = ("auto", "compiled", "python")
@@ -209,6 +218,16 @@ class _Run:
         self._warned_links: set[int] = set()
         self.loop = "python"
         self.budget: int | None = None  # an adaptive method's limit on attempted steps
+        self.stream: SampleFiles | None = None  # samples go to files instead of these lists
+
+    def flush(self, keep_last: bool = True) -> None:
+        """Move the saved samples (all but the last, whose torque may be pending) to the stream."""
+        assert self.stream is not None
+        m = len(self.t) - (1 if keep_last else 0)
+        if m <= 0:
+            return
+        self.stream.append(np.array(self.t[:m]), np.array(self.q[:m]), np.array(self.v[:m]), np.array(self.tau[:m]))
+        del self.t[:m], self.q[:m], self.v[:m], self.tau[:m]
 
     def over_budget(self, t: float) -> StepBudgetError | None:
         """The error to raise when an adaptive run has used up its step budget, else None."""
@@ -231,6 +250,8 @@ class _Run:
         self.q.append(q)
         self.v.append(v)
         self.tau.append(None if step_follows else self.system.torque(t, q, v))
+        if self.stream is not None and len(self.t) > STREAM_BATCH:
+            self.flush()
 
     def settle_torque(self) -> None:
         """Fill the last sample's pending torque: reused from the step just taken from it, or
@@ -316,12 +337,20 @@ class _Run:
         except Exception:
             if self.tau and self.tau[-1] is None:
                 self.tau[-1] = np.full(self.scene.n_actuated, np.nan)
+        if self.stream is not None:
+            self.flush(keep_last=False)
+            t, q, v, tau = self.stream.arrays()
+        else:
+            t = np.array(self.t)
+            q = np.array(self.q).reshape(n, self.scene.nq)
+            v = np.array(self.v).reshape(n, self.scene.nv)
+            tau = np.array(self.tau).reshape(n, self.scene.n_actuated)
         return Result(
             scene=self.scene,
-            t=np.array(self.t),
-            q=np.array(self.q).reshape(n, self.scene.nq),
-            v=np.array(self.v).reshape(n, self.scene.nv),
-            tau=np.array(self.tau).reshape(n, self.scene.n_actuated),
+            t=t,
+            q=q,
+            v=v,
+            tau=tau,
             integrator=self.method.name,
             dt=self.dt,
             n_rhs=s.n_rhs,
@@ -385,6 +414,8 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
                     warnings.warn(message, EnergyBalanceWarning, stacklevel=3)
             if bar is not None:
                 bar.update(native.t - bar.n)
+            if run.stream is not None:
+                _stream_chunk(run, native)
             if status == compiled.RUNNING and run.budget is not None and run.method.adaptive:
                 counters = native.counters()
                 run.n_accepted, run.n_rejected = int(counters[3]), int(counters[4])
@@ -422,6 +453,20 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
     if status == compiled.SCENE:
         raise SceneError(f"{message} (at t = {t:.6g} s)")
     raise KernelError(f"the compiled loop stopped at t = {run.t[-1]:.6g} s: {message}")
+
+
+def _stream_chunk(run: _Run, native: Any) -> None:
+    """Move a compiled run's finished samples (all but the last) to its stream."""
+    assert run.stream is not None
+    t, Q, V, TAU = native.take_samples()
+    m, scene = len(np.atleast_1d(t)), run.scene
+    if m:
+        run.stream.append(
+            np.asarray(t, dtype=float).reshape(m),
+            np.asarray(Q, dtype=float).reshape(m, scene.nq),
+            np.asarray(V, dtype=float).reshape(m, scene.nv),
+            np.asarray(TAU, dtype=float).reshape(m, scene.n_actuated),
+        )
 
 
 def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:

@@ -611,3 +611,81 @@ def test_the_viewer_serves_on_loopback_only_and_stops_with_sigterm(tmp_path: Pat
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+# --- streaming to disk --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("loop", "integrator"), [("compiled", "rk4"), ("python", "rk4"), ("compiled", "dopri5"), ("python", "dopri5")]
+)
+def test_a_streamed_run_equals_the_run_in_memory(book: cd.Scene, tmp_path: Path, loop: str, integrator: str) -> None:
+    """3001 samples (more than one batch of 1024 and several compiled chunks) go to .npy files."""
+    controller = cd.scenes.drives_controller(*cd.scenes.book_task())
+    kwargs = {"controller": controller, "integrator": integrator, "dt": 1e-3, "loop": loop}
+    memory = cd.simulate(book, 3.0, **kwargs)
+    streamed = cd.simulate(book, 3.0, stream_to=tmp_path / "run", **kwargs)
+    assert isinstance(streamed.q, np.memmap) and len(streamed.t) == len(memory.t) == 3001
+    for name in ("t", "q", "v", "tau"):
+        np.testing.assert_array_equal(getattr(streamed, name), getattr(memory, name))
+        assert np.load(tmp_path / "run" / f"{name}.npy").shape == getattr(memory, name).shape
+    np.testing.assert_array_equal(streamed.wrench(0), memory.wrench(0))
+
+
+def test_a_streamed_run_that_stops_early_leaves_files_of_what_it_made(book: cd.Scene, tmp_path: Path) -> None:
+    drives = cd.scenes.drives_controller(*cd.scenes.book_task())
+
+    def controller(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.array([1e9, -1e9]) if t > 1.5 else drives(t, q, v)  # it blows up after 1.5 s
+
+    with pytest.raises(cd.DivergenceError) as info:
+        cd.simulate(book, 3.0, controller=controller, integrator="rk4", dt=1e-3, stream_to=tmp_path / "run")
+    partial = info.value.result
+    assert 1.4 < partial.t[-1] < 3.0 and len(partial.t) > 1024  # more than one batch went to disk
+    np.testing.assert_array_equal(np.load(tmp_path / "run" / "t.npy"), partial.t)
+
+
+def test_streaming_refuses_a_folder_in_use(book: cd.Scene, tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(cd.SimulationError, match=r"must be a new or empty folder"):
+        cd.simulate(book, 0.01, stream_to=tmp_path)
+
+
+# --- package:// meshes -----------------------------------------------------------------------------
+
+STL = """solid t
+facet normal 0 0 1
+outer loop
+vertex 0 0 0
+vertex 0.05 0 0
+vertex 0 0.05 0
+endloop
+endfacet
+endsolid t
+"""
+
+
+def test_package_meshes_resolve_only_against_the_given_package_dirs(tmp_path: Path) -> None:
+    """A URDF at pkgs/mypkg/urdf/ naming package://mypkg/... is not resolved by walking up its
+    parent folders (which could reach anything on the disk), only through package_dirs."""
+    from coopdyn.model.arm import load_arm
+    from coopdyn.resources import urdf_path
+
+    pkg = tmp_path / "pkgs" / "mypkg"
+    (pkg / "meshes").mkdir(parents=True)
+    (pkg / "urdf").mkdir()
+    (pkg / "meshes" / "plate.stl").write_text(STL)
+    text = (
+        urdf_path("slider_z.urdf")
+        .read_text()
+        .replace(
+            '<geometry><box size="0.04 0.04 0.01"/></geometry>',
+            '<geometry><mesh filename="package://mypkg/meshes/plate.stl"/></geometry>',
+        )
+    )
+    urdf = pkg / "urdf" / "robot.urdf"
+    urdf.write_text(text)
+    with pytest.raises(cd.ModelLoadError, match="could not load the visual geometry"):
+        load_arm(cd.Arm("a", urdf, tip_frame="tip"), meshes="visual")
+    loaded = load_arm(cd.Arm("a", urdf, tip_frame="tip", package_dirs=[tmp_path / "pkgs"]), meshes="visual")
+    assert loaded.visual is not None and loaded.visual.ngeoms == 1

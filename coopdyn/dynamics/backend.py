@@ -19,14 +19,11 @@ import os
 import warnings
 from functools import cache
 from types import ModuleType
-from typing import TYPE_CHECKING
 
 import pinocchio as pin
 
-if TYPE_CHECKING:
-    from ..model.scene import Scene
-
 from ..errors import BackendError, NativeBackendWarning
+from ..model.scene import Scene
 
 BACKENDS = ("auto", "native", "python")
 
@@ -62,6 +59,8 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
         BackendError: for an unknown name, or ``"native"`` when the kernel is unavailable or
             lacks an element of the scene.
     """
+    if scene is not None and not isinstance(scene, Scene):
+        raise BackendError(f"dynamics need a coopdyn.Scene, got {type(scene).__name__}")
     name = os.environ.get("COOPDYN_BACKEND", "auto") if backend is None else backend
     if not isinstance(name, str) or name not in BACKENDS:
         raise BackendError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from ..errors import KernelError, StepMatrixError
+from ..errors import KernelError, SceneError, StepMatrixError
 from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
@@ -200,6 +200,8 @@ class Dynamics:
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
         """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
+        if np.shape(q) != (self.scene.nq,) or np.shape(v) != (self.scene.nv,):
+            raise SceneError(f"energy: q must have shape ({self.scene.nq},) and v ({self.scene.nv},)")
         model, data = self.model, self.data
         kinetic = float(pin.computeKineticEnergy(model, data, q, v))  # runs forward kinematics (q, v)
         potential = float(pin.computePotentialEnergy(model, data))

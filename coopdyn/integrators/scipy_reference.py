@@ -30,9 +30,13 @@ class ScipyReference(Integrator):
     order = 8
 
     def __init__(self, method: str = "DOP853", rtol: float = 1e-10, atol: float = 1e-12) -> None:
-        if method not in _METHODS:
+        from .._validate import positive
+
+        if not isinstance(method, str) or method not in _METHODS:
             raise SimulationError(f"unknown scipy method {method!r}; valid: {list(_METHODS)}")
-        self.method, self.rtol, self.atol = method, float(rtol), float(atol)
+        self.method = method
+        self.rtol = positive(rtol, "rtol", "1", SimulationError)
+        self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
 
     def step(
         self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None

@@ -54,6 +54,10 @@ class Arm:
             value per unlocked joint, or ``"urdf"`` for the URDF ``<dynamics damping>`` values.
         mass_overrides: mapping ``joint name -> total mass [kg]`` of the body that joint carries;
             that body's spatial inertia is scaled to the new mass (centre of mass kept).
+        package_dirs: folders that hold the ROS packages a URDF's ``package://NAME/...`` mesh
+            paths name (each folder contains ``NAME/``), for the viewer's meshes. Searched after
+            them: the folders of ``ROS_PACKAGE_PATH`` and example-robot-data's models — never
+            the URDF's parent folders.
     """
 
     name: str
@@ -64,6 +68,7 @@ class Arm:
     locked_joints: Sequence[str] | Mapping[str, float] | None = None
     joint_damping: float | Sequence[float] | str = 0.0
     mass_overrides: Mapping[str, float] = field(default_factory=dict)
+    package_dirs: Sequence[str | os.PathLike[str]] = ()
 
     def replace(self, **changes: Any) -> Arm:
         """A copy with some fields changed."""
@@ -90,8 +95,24 @@ def _robot_name(robot: str | os.PathLike[str]) -> str | None:
     return text
 
 
+def package_search_path(extra: Sequence[str | os.PathLike[str]] = ()) -> list[str]:
+    """Where ``package://`` paths are looked up: ``extra`` (an arm's ``package_dirs``), then the
+    entries of ``ROS_PACKAGE_PATH``, then example-robot-data's model folders."""
+    if isinstance(extra, str | bytes) or not isinstance(extra, Sequence):
+        raise SceneError(f"package_dirs must be a list of folders, got {extra!r}")
+    dirs = [os.fspath(p) for p in extra]
+    dirs += [p for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p]
+    try:
+        from example_robot_data.path import EXAMPLE_ROBOT_DATA_MODEL_DIR
+
+        dirs += [str(Path(EXAMPLE_ROBOT_DATA_MODEL_DIR)), str(Path(EXAMPLE_ROBOT_DATA_MODEL_DIR).parent)]
+    except ImportError:
+        pass
+    return [d for d in dirs if Path(d).is_dir()]
+
+
 def _load_urdf(
-    robot: str | os.PathLike[str], meshes: str | None = None
+    robot: str | os.PathLike[str], meshes: str | None = None, package_dirs: Sequence[str | os.PathLike[str]] = ()
 ) -> tuple[pin.Model, np.ndarray | None, pin.GeometryModel | None]:
     """Load the kinematic/inertial model, the reference posture where one exists and, with
     ``meshes`` ("visual" or "collision"), that geometry of the URDF (meshes resolved through
@@ -106,7 +127,7 @@ def _load_urdf(
         except Exception as exc:  # Pinocchio raises plain ValueError/RuntimeError with XML details
             raise ModelLoadError(f"could not parse URDF {path}: {exc}") from exc
         model = model.copy()
-        return model, None, _geometry(model, path, [str(p) for p in path.resolve().parents], meshes) if meshes else None
+        return model, None, _geometry(model, path, package_search_path(package_dirs), meshes) if meshes else None
     try:
         from example_robot_data import robots_loader
     except ImportError as exc:  # pragma: no cover - a dependency of coopdyn
@@ -189,7 +210,7 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
             )
     if not isinstance(arm.mass_overrides, Mapping) or not all(isinstance(k, str) for k in arm.mass_overrides):
         raise SceneError(f"{what}: mass_overrides must be a mapping joint name -> mass [kg], got {arm.mass_overrides!r}")
-    model, q_ref, visual = _load_urdf(arm.robot, meshes)
+    model, q_ref, visual = _load_urdf(arm.robot, meshes, arm.package_dirs)
     if model.nq == 0:
         raise ModelLoadError(f"arm {arm.name!r}: the URDF {arm.robot} has no movable joint")
     q_full = _inside_limits(model, pin.neutral(model)) if q_ref is None else q_ref

@@ -46,6 +46,9 @@ class Link:
     native: str | None  #: name of the element's C++ twin, or None (Python path only)
 
 
+STATE_LIMIT = 1e6  #: |q|, |v| beyond this [m, rad, m/s, rad/s] is refused (energies would overflow)
+
+
 class Scene:
     """Arms + one rigid object + elastic interconnections, as one Pinocchio model.
 
@@ -251,6 +254,9 @@ class Scene:
         """Validated copies of a state: shapes, finiteness and normalised quaternions."""
         q = _validate.finite_array(q, "q (a configuration)", (self.nq,)).copy()
         v = _validate.finite_array(v, "v (a velocity)", (self.nv,)).copy()
+        for name, x, unit in (("q", q, "m or rad"), ("v", v, "m/s or rad/s")):
+            if x.size and np.max(np.abs(x)) > STATE_LIMIT:
+                raise SceneError(f"{name} has an entry of {np.max(np.abs(x)):.3g} [{unit}]; a state is within ±{STATE_LIMIT:g}")
         if not pin.isNormalized(self.model, q, 1e-9):
             raise SceneError("q is not a valid configuration (a quaternion is not of unit norm); use pin.normalize")
         return q, v

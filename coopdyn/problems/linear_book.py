@@ -222,7 +222,9 @@ def linear_book_exact(
         x0: initial state [Y1, Y2, Y3, Ẏ1, Ẏ2, Ẏ3]; default: at rest at (Y10, Y20, Y30).
     """
     p = params or BookParameters()
-    t = np.atleast_1d(np.asarray(t, dtype=float))
+    if not isinstance(drive1, Drive) or not isinstance(drive2, Drive):
+        raise SceneError("linear_book_exact: drive1 and drive2 must be Drives (e.g. from book_task())")
+    t = np.atleast_1d(_validate.finite_array(t, "t [s]"))
     if t.ndim != 1 or np.any(t < 0.0) or not np.all(np.isfinite(t)):
         raise SceneError("t must be a 1-D array of finite, non-negative times [s]")
     x = np.array([p.Y10, p.Y20, p.Y30, 0.0, 0.0, 0.0]) if x0 is None else _validate.finite_array(x0, "x0", (6,))
@@ -289,7 +291,9 @@ def linear_book(**params: Any) -> Scene:
 
 def book_positions(q: np.ndarray, scene: Scene) -> np.ndarray:
     """Heights Y1, Y2, Y3 (n, 3) [m] of the linear book scene's configurations q (n, nq)."""
-    q = np.atleast_2d(q)
+    q = np.atleast_2d(_validate.finite_array(q, "q"))
+    if q.ndim != 2 or q.shape[1] != scene.nq:
+        raise SceneError(f"q must be configurations of shape (n, {scene.nq}), got shape {q.shape}")
     Y20 = float(_validate.se3(scene.object.pose, "object pose").translation[2])
     return np.stack([q[:, scene.arms[0].q_index[0]], Y20 + q[:, scene.object_q[0]], q[:, scene.arms[1].q_index[0]]], axis=1)
 

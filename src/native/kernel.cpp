@@ -215,6 +215,7 @@ BOOST_PYTHON_MODULE(_native) {
     "Loop", "A compiled simulation run (see coopdyn.compiled).", bp::no_init)
     .def("advance", &Loop::advance, bp::args("self", "budget"))
     .def("samples", &Loop::samples, bp::args("self"))
+    .def("take_samples", &Loop::take_samples, bp::args("self"))
     .def("take_events", &Loop::take_events, bp::args("self"))
     .def("counters", &Loop::counters, bp::args("self"))
     .def("failure", &Loop::failure, bp::args("self"))

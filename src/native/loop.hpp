@@ -162,6 +162,25 @@ public:
     return bp::make_tuple(t, Q, V, TAU, pending_);
   }
 
+  // The samples so far except the last (which may still wait for its torque), removed from the
+  // loop's buffers: a run streamed to disk keeps one sample in memory between chunks.
+  bp::tuple take_samples() {
+    const Eigen::Index n = static_cast<Eigen::Index>(T_.size()) - 1;
+    const Eigen::Index m = n > 0 ? n : 0;
+    using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const VectorXd t = Eigen::Map<const VectorXd>(T_.data(), m);
+    const MatrixXd Q = Eigen::Map<const RowMat>(Q_.data(), m, model_.nq);
+    const MatrixXd V = Eigen::Map<const RowMat>(V_.data(), m, model_.nv);
+    const MatrixXd TAU = Eigen::Map<const RowMat>(TAU_.data(), m, na_);
+    if (m > 0) {
+      T_.erase(T_.begin(), T_.begin() + m);
+      Q_.erase(Q_.begin(), Q_.begin() + m * model_.nq);
+      V_.erase(V_.begin(), V_.begin() + m * model_.nv);
+      TAU_.erase(TAU_.begin(), TAU_.begin() + m * na_);
+    }
+    return bp::make_tuple(t, Q, V, TAU);
+  }
+
   bp::list take_events() {
     bp::list out;
     for (const Event & e : events_) out.append(bp::make_tuple(e.kind, e.a, e.b, e.c, e.d, e.e));
