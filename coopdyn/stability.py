@@ -229,7 +229,9 @@ def unresolved_mode_message(scene: Scene, A: np.ndarray, method: Integrator, dt:
     if o is None or o.rate * dt <= RESOLVE_LIMIT:
         return None
     z = complex(-o.damping_ratio, math.sqrt(max(1.0 - o.damping_ratio**2, 0.0))) * o.rate * dt
-    kept = float(abs(method.stability_function(np.array([z]))[0]) / math.exp(z.real))
+    with np.errstate(all="ignore"):  # |R| and the true decay e^Re z may both underflow: compare logs
+        log_r = float(np.log(np.abs(method.stability_function(np.array([z]))[0])))
+    kept = math.exp(min(log_r - z.real, 0.0)) if math.isfinite(log_r) else 0.0
     effect = (
         f"the method keeps {kept:.0%} of its amplitude per step (relative to its true decay)"
         if kept < 0.999

@@ -549,13 +549,6 @@ def test_joint_controllers_give_a_result_or_a_coopdyn_error(pandas: cd.Scene, kp
     assert np.all(np.isfinite(res.q))
 
 
-@pytest.mark.slow
-@settings(max_examples=3000, derandomize=False, **FUZZ)
-@given(kwargs=st.fixed_dictionaries({}, optional=SIMULATE_ARGS))
-def test_simulate_fuzz_thousands(book: cd.Scene, kwargs: dict[str, Any]) -> None:
-    _check_simulate(book, {"t_final": 0.01, **kwargs})
-
-
 # --- the viewer's server --------------------------------------------------------------------------
 
 
@@ -689,3 +682,63 @@ def test_package_meshes_resolve_only_against_the_given_package_dirs(tmp_path: Pa
         load_arm(cd.Arm("a", urdf, tip_frame="tip"), meshes="visual")
     loaded = load_arm(cd.Arm("a", urdf, tip_frame="tip", package_dirs=[tmp_path / "pkgs"]), meshes="visual")
     assert loaded.visual is not None and loaded.visual.ngeoms == 1
+
+
+# --- the 10 000-case fuzz run (slow) ----------------------------------------------------------------
+# With `-m slow`, not derandomized (a new sample every run): 3 000 simulate calls, 2 000 object
+# impedance runs, 1 000 joint-controller runs here, and tests/test_robustness.py's scene builder
+# (2 000) and scene files (2 000).
+
+
+@pytest.mark.slow
+@settings(max_examples=3000, derandomize=False, **FUZZ)
+@given(kwargs=st.fixed_dictionaries({}, optional=SIMULATE_ARGS))
+def test_simulate_fuzz_thousands(book: cd.Scene, kwargs: dict[str, Any]) -> None:
+    _check_simulate(book, {"t_final": 0.01, **kwargs})
+
+
+@pytest.mark.slow
+@settings(max_examples=2000, derandomize=False, **FUZZ)
+@given(task=st.fixed_dictionaries({}, optional=TASK_ARGS), ctrl=st.fixed_dictionaries({}, optional=CONTROLLER_ARGS))
+def test_object_impedance_fuzz_thousands(pandas: cd.Scene, task: dict[str, Any], ctrl: dict[str, Any]) -> None:
+    test_object_impedance_and_its_task_give_a_result_or_a_coopdyn_error.hypothesis.inner_test(pandas, task, ctrl)
+
+
+@pytest.mark.slow
+@settings(max_examples=1000, derandomize=False, **FUZZ)
+@given(kp=junk | st.floats(0, 100), kd=junk | st.floats(0, 10), which=st.sampled_from([GravityCompensationPD, ComputedTorque]))
+def test_joint_controllers_fuzz_thousands(pandas: cd.Scene, kp: Any, kd: Any, which: type) -> None:
+    test_joint_controllers_give_a_result_or_a_coopdyn_error.hypothesis.inner_test(pandas, kp, kd, which)
+
+
+def test_sigint_at_random_moments_of_a_cli_run_saves_what_it_had(tmp_path: Path) -> None:
+    """`coopdyn simulate` in a subprocess, SIGINT at random moments once coopdyn is imported
+    (loading the scene, stepping, writing): exit code 130 (or 0 if it had finished), never a
+    traceback, and the output folder holds one whole run — the partial trajectory with its
+    diagnosis, or the finished one."""
+    scene = _scene_file(tmp_path, 200.0)
+    scene.write_text(
+        scene.read_text().replace('integrator = "exponential"', 'integrator = "rk4"').replace("dt = 1e-3", "dt = 1e-4")
+    )
+    rng = np.random.default_rng(11)
+    starter = "import sys, coopdyn.__main__ as m; print('READY', flush=True); sys.exit(m.main(sys.argv[1:]))"
+    for k, delay in enumerate(rng.uniform(0.0, 4.0, 4)):
+        out = tmp_path / f"out{k}"
+        proc = subprocess.Popen(
+            [sys.executable, "-c", starter, "simulate", str(scene), "--out", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
+        time.sleep(float(delay))
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode in (0, 130), err
+        assert "Traceback" not in err
+        if out.exists():
+            names = {p.name for p in out.iterdir()}
+            assert "trajectory.npz" in names and ("diagnosis.txt" in names or "scene.toml" in names)
+            with np.load(out / "trajectory.npz") as z:
+                assert z["q"].shape[0] == z["t"].shape[0] >= 1
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(f".out{k}.")]  # no staging left

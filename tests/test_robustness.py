@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
@@ -56,8 +57,7 @@ def _assert_finite_or_error(scene: cd.Scene) -> None:
     assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.v))
 
 
-@settings(max_examples=200, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
+BUILDER_ARGS = dict(
     arm_name=mostly(st.just("a")),
     tip=mostly(st.just("tip"), st.one_of(st.just("tpi"), junk)),
     q0=mostly(st.lists(st.floats(min_value=-1.0, max_value=1.0), min_size=1, max_size=1), st.one_of(vector3, junk)),
@@ -74,6 +74,10 @@ def _assert_finite_or_error(scene: cd.Scene) -> None:
     grasp=mostly(st.one_of(st.none(), st.lists(st.floats(min_value=-0.5, max_value=0.5), min_size=3, max_size=3)), vector3),
     gravity=mostly(st.lists(st.floats(min_value=-20, max_value=20), min_size=3, max_size=3), vector3),
 )
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(**BUILDER_ARGS)
 def test_scene_builder_gives_a_scene_or_a_coopdyn_error(**kw: Any) -> None:
     try:
         arm = cd.Arm(
@@ -178,3 +182,24 @@ def test_scene_file_loader_gives_a_run_or_a_coopdyn_error(tmp_path: Path, text: 
         except cd.CoopdynError:
             return
         assert np.all(np.isfinite(res.q))
+
+
+# The same at thousands of examples, not derandomized (part of the 10 000-case fuzz run, with
+# tests/test_reliability.py's slow tests).
+@pytest.mark.slow
+@settings(max_examples=2000, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(**BUILDER_ARGS)
+def test_scene_builder_fuzz_thousands(**kw: Any) -> None:
+    test_scene_builder_gives_a_scene_or_a_coopdyn_error.hypothesis.inner_test(**kw)
+
+
+@pytest.mark.slow
+@settings(
+    max_examples=2000,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+@given(text=scene_files())
+def test_scene_file_fuzz_thousands(tmp_path: Path, text: str) -> None:
+    test_scene_file_loader_gives_a_run_or_a_coopdyn_error.hypothesis.inner_test(tmp_path, text)

@@ -202,6 +202,8 @@ class Dynamics:
         """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
         if np.shape(q) != (self.scene.nq,) or np.shape(v) != (self.scene.nv,):
             raise SceneError(f"energy: q must have shape ({self.scene.nq},) and v ({self.scene.nv},)")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+            raise SceneError("energy: q and v must be finite")
         model, data = self.model, self.data
         kinetic = float(pin.computeKineticEnergy(model, data, q, v))  # runs forward kinematics (q, v)
         potential = float(pin.computePotentialEnergy(model, data))
@@ -275,6 +277,8 @@ class PythonDynamics(Dynamics):
             R = pin.updateFramePlacement(model, data, fo).rotation
             local = np.concatenate([R.T @ object_wrench[:3], R.T @ object_wrench[3:]])
             Q += pin.getFrameJacobian(model, data, fo, LOCAL).reshape(6, model.nv).T @ local
+        if np.shape(tau) != (self.scene.n_actuated,):
+            raise KernelError(f"tau must have shape ({self.scene.n_actuated},), got {np.shape(tau)}")
         Q[self.actuated_index] += tau
         if self._has_damping:
             Q -= self._damping * v

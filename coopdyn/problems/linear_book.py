@@ -241,6 +241,10 @@ def linear_book_exact(
         if np.isfinite(t1):
             x = (scipy.linalg.expm(Z * (t1 - t0)) @ z0)[:6]
     Fc1, Fc2 = p.contact_forces(X)
+    if not np.all(np.isfinite(X)):
+        raise SceneError(
+            f"the exact solution overflows by t = {t.max():.3g} s (the drives grow without bound); ask for shorter times"
+        )
     return BookSolution(t=t, Y=X[:, :3], Ydot=X[:, 3:], Fc1=Fc1, Fc2=Fc2, tau1=np.asarray(drive1(t)), tau2=np.asarray(drive2(t)))
 
 
