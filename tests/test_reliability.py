@@ -218,20 +218,30 @@ def test_adaptive_methods_have_a_step_budget() -> None:
 
 def test_a_trajectory_too_large_for_memory_is_refused_with_a_save_every(pandas: cd.Scene) -> None:
     with pytest.raises(
-        cd.SimulationError, match=r"about 1.34 GB, more than max_memory = 1 GB. Save fewer samples \(save_every = 2"
+        cd.SimulationError, match=r"about 1.82 GB, more than max_memory = 1 GB. Save fewer samples \(save_every = 2"
     ):
         cd.simulate(pandas, 1000.0, dt=1e-3, max_memory=1e9)
     with pytest.raises(cd.SimulationError, match=r"more than max_steps"):
         cd.simulate(pandas, 1e5, dt=1e-3, max_memory=None)
 
 
-def test_the_memory_estimate_bounds_what_a_run_keeps(book: cd.Scene) -> None:
-    """BYTES_PER_VALUE is an upper bound of the result's own arrays and the lists behind them."""
-    from coopdyn.simulate import BYTES_PER_VALUE
+@pytest.mark.parametrize("loop", ["python", "compiled"])
+def test_the_memory_estimate_bounds_a_runs_peak(book: cd.Scene, pandas: cd.Scene, loop: str) -> None:
+    """simulate's memory estimate is an upper bound of what a run allocates (tracemalloc peak)."""
+    import tracemalloc
 
-    res = cd.simulate(book, 1.0, integrator="rk4", dt=1e-4, loop="python")
-    values = res.t.size + res.q.size + res.v.size + res.tau.size
-    assert res.t.nbytes + res.q.nbytes + res.v.nbytes + res.tau.nbytes <= values * BYTES_PER_VALUE / 2
+    from coopdyn.simulate import BYTES_PER_SAMPLE, BYTES_PER_VALUE
+
+    for scene in (book, pandas):
+        cd.simulate(scene, 0.01, loop=loop)  # imports and caches outside the measurement
+        tracemalloc.start()
+        try:
+            res = cd.simulate(scene, 2.0, dt=1e-3, loop=loop, energy_check="off")
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        values = 1 + scene.nq + scene.nv + scene.n_actuated
+        assert peak <= len(res.t) * (values * BYTES_PER_VALUE + BYTES_PER_SAMPLE)
 
 
 # --- accuracy honesty ------------------------------------------------------------------------
@@ -337,6 +347,21 @@ def test_outputs_replace_the_folder_whole_and_keep_the_trajectory_when_a_plot_fa
     assert sorted(p.name for p in out.iterdir()) == ["trajectory.npz"]  # the old plot went with the old run
     assert done.problems == ("plot: RuntimeError: no display",)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging or .tmp left
+
+
+def test_a_ctrl_c_while_writing_outputs_waits_for_them(book: cd.Scene, tmp_path: Path) -> None:
+    """A (second) Ctrl-C during the writing cannot cut it: the folder is finished and put in
+    place, then the interrupt is raised."""
+    res = _result(book)
+
+    def trajectory(folder: Path) -> Path:
+        os.kill(os.getpid(), signal.SIGINT)  # arrives in the middle of the writing
+        time.sleep(0.05)
+        return res.save(folder / "trajectory.npz")
+
+    with pytest.raises(KeyboardInterrupt, match="the writing was finished first"):
+        write_outputs(tmp_path / "run", [("trajectory", trajectory)], [("csv", lambda f: res.save(f / "trajectory.csv"))])
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["trajectory.csv", "trajectory.npz"]
 
 
 def test_a_folder_with_foreign_files_is_not_replaced(book: cd.Scene, tmp_path: Path) -> None:
