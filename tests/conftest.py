@@ -17,3 +17,13 @@ def pandas() -> cd.Scene:
 def book() -> cd.Scene:
     """The book's linear system with the book's parameters."""
     return cd.scenes.linear_book()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C tests send SIGINT to this process. A shell that starts a job in the background
+    without job control (CI runners may) makes it ignore SIGINT, and Python then installs no
+    KeyboardInterrupt handler: give it back, as an interactive run has it."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)

@@ -32,6 +32,12 @@ from coopdyn.problems.facing_arms import object_start
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
 
 
+def default_sigint() -> None:
+    """``preexec_fn`` for subprocesses that receive SIGINT: the default disposition, even when
+    this process was started ignoring it (see conftest.py)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _zero(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.zeros(2)
 
@@ -446,7 +452,9 @@ def _scene_file(tmp_path: Path, duration: float) -> Path:
 def _cli(tmp_path: Path, *args: str) -> subprocess.Popen[str]:
     script = tmp_path / "writer.py"
     script.write_text(CLI_WRITER)
-    return subprocess.Popen([sys.executable, str(script), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, str(script), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint
+    )
 
 
 def test_kill_9_while_the_cli_writes_leaves_the_old_run_or_the_new_never_a_mix(tmp_path: Path) -> None:
@@ -606,7 +614,9 @@ def test_the_viewer_serves_on_loopback_only_and_stops_with_sigterm(tmp_path: Pat
     pytest.importorskip("meshcat")
     script = tmp_path / "viewer.py"
     script.write_text(VIEWER)
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint
+    )
     try:
         deadline = time.monotonic() + 60
         url = None
@@ -754,6 +764,7 @@ def test_sigint_at_random_moments_of_a_cli_run_saves_what_it_had(tmp_path: Path)
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
+            preexec_fn=default_sigint,
         )
         assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
         time.sleep(float(delay))
