@@ -17,6 +17,7 @@ from .errors import (
     SimulationError,
     SimulationInterrupted,
     StepBudgetError,
+    ViewerError,
 )
 from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal
 from .result import Result
@@ -45,6 +46,7 @@ __all__ = [
     "SimulationError",
     "SimulationInterrupted",
     "StepBudgetError",
+    "ViewerError",
     "advise",
     "axial",
     "backend",

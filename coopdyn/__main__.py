@@ -52,7 +52,7 @@ def _demo(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     from .io.scenefile import load, run
 
-    print(run(load(args.scene_file), folder=args.out))
+    print(run(load(args.scene_file), folder=args.out, max_steps=args.max_steps or None))
     return 0
 
 
@@ -97,6 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     simulate = sub.add_parser("simulate", help="run a scene file (see examples/scenes/*.toml)")
     simulate.add_argument("scene_file", help="a .toml scene file")
     simulate.add_argument("--out", default=None, help="output folder (default: the file's [output] folder)")
+    simulate.add_argument("--max-steps", type=int, default=2 * 10**6, help="refuse longer runs (default: 2000000; 0: no limit)")
     simulate.set_defaults(func=_simulate)
     view = sub.add_parser("view", help="play a scene file's saved result in a live meshcat viewer")
     view.add_argument("scene_file", help="the .toml scene file the result came from")

@@ -16,8 +16,8 @@ def interrupts_deferred(reraise: bool = True) -> Iterator[None]:
     raised as ``KeyboardInterrupt`` when the block ends; without, it is dropped (the caller is
     already stopping because of one). Only the main thread receives signals; elsewhere this does
     nothing."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        yield  # elsewhere signals do not arrive; an ignored SIGINT stays ignored
         return
     pending: list[int] = []
 

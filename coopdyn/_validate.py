@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import decimal
+import numbers
 from typing import Any
 
 import numpy as np
@@ -31,8 +33,10 @@ def finite_array(
     if raw.dtype.kind == "c":
         raise error(f"{name} must be real, got a complex value {_short(value)}")
     if raw.dtype.kind not in "iuf":
-        if raw.dtype.kind == "O" and all(isinstance(x, int | float) and not isinstance(x, bool) for x in raw.flat):
-            pass  # Python integers beyond int64: converted (and checked against the float range) below
+        if raw.dtype.kind == "O" and all(
+            isinstance(x, numbers.Real | decimal.Decimal) and not isinstance(x, bool) for x in raw.flat
+        ):
+            pass  # Python integers beyond int64, Fractions, Decimals: converted (and range-checked) below
         else:
             raise error(f"{name} must be numeric, got {_short(value)}")
     try:

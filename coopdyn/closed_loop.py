@@ -70,7 +70,15 @@ class System:
         self._last: _Record | None = None
         self._previous_last: _Record | None = None
         gains = getattr(controller, "gains", None)
-        self._gains = _checked_gains(gains(), self.n_actuated) if callable(gains) else None
+        self._gains = None
+        if callable(gains):
+            try:
+                raw = gains()
+            except (CoopdynError, KeyboardInterrupt):
+                raise
+            except Exception as exc:
+                raise ControllerError(f"the controller's gains() raised {type(exc).__name__}: {exc}") from exc
+            self._gains = _checked_gains(raw, self.n_actuated)
 
     @property
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
@@ -272,7 +280,7 @@ class System:
 def _checked_gains(gains: object, n: int) -> tuple[np.ndarray, np.ndarray]:
     """A controller's ``gains()``: two finite real arrays (Kp, Kd), each a scalar or (n,). A negative
     gain is accepted here; the implicit methods' step matrix then says what it does."""
-    if not isinstance(gains, tuple | list) or len(gains) != 2:
+    if not isinstance(gains, tuple | list | np.ndarray) or len(gains) != 2:
         raise ControllerError(
             f"the controller's gains() must return (Kp, Kd), two arrays of shape ({n},), got {_validate._short(gains)}"
         )

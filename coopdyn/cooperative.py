@@ -127,11 +127,15 @@ class GripLiftOscillate:
     axis: Any = (0.0, 1.0, 0.0)
 
     def __post_init__(self) -> None:
+        checked = {}  # stored as floats: exact inputs (Fraction, Decimal) do not reach the arithmetic
         for name in ("t_grip", "lift_duration", "frequency"):
-            _validate.positive(getattr(self, name), f"GripLiftOscillate: {name}", "s" if name != "frequency" else "Hz")
+            unit = "s" if name != "frequency" else "Hz"
+            checked[name] = _validate.positive(getattr(self, name), f"GripLiftOscillate: {name}", unit)
         for name, unit in (("squeeze", "N"), ("lift", "m"), ("t_lift", "s"), ("amplitude", "m"), ("t_osc", "s")):
-            _validate.number(getattr(self, name), f"GripLiftOscillate: {name}", unit)
-        _validate.non_negative(self.cycles, "GripLiftOscillate: cycles", "periods")
+            checked[name] = _validate.number(getattr(self, name), f"GripLiftOscillate: {name}", unit)
+        checked["cycles"] = _validate.non_negative(self.cycles, "GripLiftOscillate: cycles", "periods")
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
         _validate.finite_array(self.start, "GripLiftOscillate: start", (3,))
         if self.rotation is not None:
             R = _validate.finite_array(self.rotation, "GripLiftOscillate: rotation", (3, 3))

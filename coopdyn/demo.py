@@ -11,7 +11,7 @@ import numpy as np
 
 from .cooperative import GripLiftOscillate, ObjectImpedance
 from .errors import DivergenceError, SimulationInterrupted, StepBudgetError
-from .outputs import save_partial, write_outputs
+from .outputs import check_folder, save_partial, write_outputs
 from .problems.facing_arms import facing_arms, object_start
 from .simulate import simulate
 from .viz.plotting import cooperative_figure
@@ -33,7 +33,7 @@ def run_demo(
     """Simulate, write plot / HTML / trajectory to ``out``; return the summary (figures and the
     files written; :func:`format_summary` makes it text). On a divergence or Ctrl-C the
     trajectory so far is written and the error re-raised with those paths in ``saved``."""
-    out_dir = Path(out)
+    out_dir = check_folder(out)  # before the run: a refusal costs nothing yet
     scene = facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
     controller = ObjectImpedance(scene, task)

@@ -10,7 +10,9 @@ rescue folder in the system's temporary directory and the error says where.
 
 from __future__ import annotations
 
+import glob
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -59,10 +61,11 @@ def write_outputs(
         OutputError: the folder holds files coopdyn did not write, or it cannot be written; the
             message says where the essential outputs went instead, if anywhere.
     """
-    if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
-        raise OutputError(f"the output folder must be a path, got {folder!r}")
-    target = Path(folder).absolute()
-    _refuse_foreign(target)
+    target = check_folder(folder)
+    try:
+        _refuse_foreign(target)
+    except OutputError as exc:
+        raise OutputError(f"{exc}. {_rescue(essential)}") from None
     with interrupts_deferred():  # a Ctrl-C now would lose a finished run: it waits for the folder
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -75,6 +78,9 @@ def write_outputs(
         except OSError as exc:
             shutil.rmtree(staging, ignore_errors=True)
             raise OutputError(f"cannot write the outputs to {target}: {_reason(exc)}. {_rescue(essential)}") from exc
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)  # no staging folder left behind, whatever failed
+            raise
         problems = []
         for name, writer in optional:
             try:
@@ -87,6 +93,22 @@ def write_outputs(
             shutil.rmtree(staging, ignore_errors=True)
             raise OutputError(f"cannot move the outputs into {target}: {_reason(exc)}. {_rescue(essential)}") from exc
     return Written(target, tuple(target / f.relative_to(staging) for f in files), tuple(problems))
+
+
+def check_folder(folder: Any) -> Path:
+    """The absolute output folder (a symbolic link: its target), checked before a run starts: a
+    path, not a file, not the working folder or one of its parents (a run replaces its folder
+    whole), and holding only what coopdyn writes."""
+    if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
+        raise OutputError(f"the output folder must be a path, got {folder!r}")
+    target = Path(folder).absolute()
+    if target.is_symlink():
+        target = target.resolve()
+    cwd = Path.cwd().resolve()
+    if target.resolve() == cwd or target.resolve() in cwd.parents:
+        raise OutputError(f"the output folder {target} is the working folder or holds it; a run replaces its folder whole")
+    _refuse_foreign(target)
+    return target
 
 
 def _run(writers: Sequence[tuple[str, Writer]], folder: Path) -> list[Path]:
@@ -112,12 +134,11 @@ def _refuse_foreign(target: Path) -> None:
 
 def _remove_stale(target: Path) -> None:
     """Staging folders of earlier runs that were killed (their process is gone)."""
-    for p in target.parent.glob(f".{target.name}.writing-*"):
-        parts = p.name.rsplit(".writing-", 1)[1].split("-")
-        if parts[0].isdigit() and not _alive(int(parts[0])):
+    mine = re.compile(rf"\.{re.escape(target.name)}\.(writing|old)-(\d+)-[\w]+")
+    for p in target.parent.glob(f".{glob.escape(target.name)}.*-*"):
+        m = mine.fullmatch(p.name)
+        if m and p.is_dir() and not p.is_symlink() and not _alive(int(m.group(2))):
             shutil.rmtree(p, ignore_errors=True)
-    for p in target.parent.glob(f".{target.name}.old-*"):
-        shutil.rmtree(p, ignore_errors=True)
 
 
 def _alive(pid: int) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
@@ -181,10 +182,16 @@ def simulate(
             run.cpu_time = time.process_time() - cpu0
             done = bool(run.t) and run.t[-1] >= t_final and len(run.t) == len(run.q) == len(run.v) == len(run.tau)
             partial = run.result("completed" if done else "interrupted")
+        reached = f"at t = {partial.t[-1]:.6g} s" if len(partial.t) else "before the first sample"
         raise SimulationInterrupted(
-            f"interrupted at t = {partial.t[-1]:.6g} s of {t_final:g} s; the trajectory so far is in this exception's .result",
+            f"interrupted {reached} of {t_final:g} s; the trajectory so far is in this exception's .result",
             result=partial,
         ) from None
+    except BaseException:
+        if run.stream is not None:  # any other stop: the files are cut to the samples made
+            with contextlib.suppress(Exception):
+                run.result("stopped")
+        raise
     finally:
         if bar is not None:
             bar.close()
@@ -226,8 +233,9 @@ class _Run:
         m = len(self.t) - (1 if keep_last else 0)
         if m <= 0:
             return
-        self.stream.append(np.array(self.t[:m]), np.array(self.q[:m]), np.array(self.v[:m]), np.array(self.tau[:m]))
-        del self.t[:m], self.q[:m], self.v[:m], self.tau[:m]
+        with _signals.interrupts_deferred():  # written and dropped together: no sample lost or doubled
+            self.stream.append(np.array(self.t[:m]), np.array(self.q[:m]), np.array(self.v[:m]), np.array(self.tau[:m]))
+            del self.t[:m], self.q[:m], self.v[:m], self.tau[:m]
 
     def over_budget(self, t: float) -> StepBudgetError | None:
         """The error to raise when an adaptive run has used up its step budget, else None."""
@@ -402,6 +410,8 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
     try:
         while status == compiled.RUNNING:
             wall = time.perf_counter()
+            if run.budget is not None and run.method.adaptive:  # no chunk past the step budget
+                chunk = max(1, min(chunk, run.budget - run.n_accepted - run.n_rejected))
             status = native.advance(chunk)
             chunk = compiled.next_chunk(chunk, time.perf_counter() - wall)
             for kind, a, b, c, d, e in native.take_events():
@@ -458,15 +468,16 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
 def _stream_chunk(run: _Run, native: Any) -> None:
     """Move a compiled run's finished samples (all but the last) to its stream."""
     assert run.stream is not None
-    t, Q, V, TAU = native.take_samples()
-    m, scene = len(np.atleast_1d(t)), run.scene
-    if m:
-        run.stream.append(
-            np.asarray(t, dtype=float).reshape(m),
-            np.asarray(Q, dtype=float).reshape(m, scene.nq),
-            np.asarray(V, dtype=float).reshape(m, scene.nv),
-            np.asarray(TAU, dtype=float).reshape(m, scene.n_actuated),
-        )
+    with _signals.interrupts_deferred():  # taken from the loop and written together
+        t, Q, V, TAU = native.take_samples()
+        m, scene = len(np.atleast_1d(t)), run.scene
+        if m:
+            run.stream.append(
+                np.asarray(t, dtype=float).reshape(m),
+                np.asarray(Q, dtype=float).reshape(m, scene.nq),
+                np.asarray(V, dtype=float).reshape(m, scene.nv),
+                np.asarray(TAU, dtype=float).reshape(m, scene.n_actuated),
+            )
 
 
 def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:
@@ -491,12 +502,12 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 raise run.step_failed(exc, t, h_try) from None
             run.settle_torque()
             h = method.next_step(h_try, out.error)
-            if run.budget is not None and (run.n_accepted + run.n_rejected) % 1024 == 1023:
+            if run.budget is not None and run.n_accepted + run.n_rejected + 1 >= run.budget:
                 error = run.over_budget(t)
                 if error is not None:
                     raise error
-                if bar is not None:
-                    bar.update(t - bar.n)
+            if bar is not None and (run.n_accepted + run.n_rejected) % 1024 == 1023:
+                bar.update(t - bar.n)  # small steps: the bar moves between output times too
             if not (out.error <= 1.0):  # also rejects NaN
                 system.dynamics.clear_rotation_alarm()  # a rejected attempt's stages may go anywhere
                 run.n_rejected += 1
@@ -531,7 +542,12 @@ def _warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.nda
         n = scene.nv
         A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
         message = unresolved_mode_message(scene, A, method, dt)
-    except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # e.g. a destabilising gain: the run says more
+    except (
+        ArithmeticError,
+        ValueError,
+        NotImplementedError,
+        np.linalg.LinAlgError,
+    ):  # e.g. a destabilising gain: the run says more
         return
     if message is not None:
         warnings.warn(message, AccuracyWarning, stacklevel=3)

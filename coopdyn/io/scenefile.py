@@ -285,19 +285,21 @@ class RunReport:
         return "\n".join([*self.summary, *(f"  wrote {w}" for w in self.written)])
 
 
-def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True) -> RunReport:
+def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True, max_steps: int | None = 2 * 10**6) -> RunReport:
     """Simulate a loaded scene file and write its outputs; returns what it did (print it to show it).
+    ``max_steps`` is :func:`coopdyn.simulate`'s (``None``: no limit).
 
     On a divergence or Ctrl-C the trajectory so far is written (``trajectory.npz``/``.csv`` and
     ``diagnosis.txt``) and the error is re-raised with those paths in its ``saved`` attribute."""
     import numpy as np
 
     from ..errors import DivergenceError, SimulationInterrupted, StepBudgetError
-    from ..outputs import save_partial, write_outputs
+    from ..outputs import check_folder, save_partial, write_outputs
     from ..simulate import simulate
     from ..viz.plotting import book_figure, cooperative_figure
 
-    out = Path(folder or loaded.output["folder"]).absolute()
+    out = check_folder(folder or loaded.output["folder"])  # before the run: a refusal costs nothing yet
+    source = _read_text(loaded.path).encode("utf-8")  # the copy written beside the results
     try:
         res = simulate(
             loaded.scene,
@@ -307,11 +309,11 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True)
             dt=loaded.dt,
             save_every=loaded.save_every,
             progress=progress,
+            max_steps=max_steps,
         )
     except (DivergenceError, SimulationInterrupted, StepBudgetError) as exc:
         exc.saved = save_partial(exc, out)  # type: ignore[union-attr]
         raise
-    source = loaded.path.read_bytes()
 
     def trajectory(folder: Path) -> list[Path]:
         (folder / "scene.toml").write_bytes(source)

@@ -34,6 +34,15 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def check_host(host: object) -> str:
+    """``host`` as an address meshcat's server can bind: an IPv4 address or a host name."""
+    if not isinstance(host, str) or not host or any(c.isspace() for c in host):
+        raise ViewerError(f"host must be an address such as '127.0.0.1', got {host!r}")
+    if ":" in host:
+        raise ViewerError(f"host {host!r}: meshcat's server binds IPv4 addresses or host names only; use 127.0.0.1")
+    return host
+
+
 @dataclass
 class Server:
     """A running server: its process and the URLs to reach it."""
@@ -55,11 +64,21 @@ class Server:
 
 def start(host: str = LOOPBACK) -> Server:
     """Start a server bound to ``host`` in a child process; returns once it listens."""
+    host = check_host(host)
     proc = subprocess.Popen(
         [sys.executable, "-u", "-m", "coopdyn.viz.meshcat_server", "--host", host, "--parent", str(os.getpid())],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
+    try:
+        return _started(proc)
+    except BaseException:  # Ctrl-C or a failure while it starts: no server left behind
+        proc.kill()
+        proc.wait()
+        raise
+
+
+def _started(proc: subprocess.Popen[bytes]) -> Server:
     urls: dict[str, str] = {}
     assert proc.stdout is not None
     while len(urls) < 2:
@@ -90,7 +109,12 @@ def main(argv: list[str] | None = None) -> None:
 
     bridge = Bridge(host=args.host)
     print(f"zmq_url={bridge.zmq_url}")
-    print(f"web_url={bridge.web_url}")
+    print(f"web_url={bridge.web_url}", flush=True)
+    # Nobody reads our output from here on (meshcat logs every connection): a full pipe would
+    # block the server, so it goes nowhere.
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.dup2(devnull, 2)
     if args.parent is not None:
 
         def orphaned() -> None:

@@ -23,11 +23,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ..errors import SceneError
 from ..model.arm import load_arm
 from ..model.scene import Scene
 from ..result import Result
-from .meshcat_server import LOOPBACK, is_loopback
+from .meshcat_server import LOOPBACK, check_host, is_loopback
 from .meshcat_server import start as start_server
 
 FORCE_SCALE = 0.01  #: arrow length per newton [m/N]
@@ -260,20 +259,19 @@ def view(
     scene) and stops it however the viewing ends (Ctrl-C, SIGTERM, an error, or this process
     dying)."""
     meshcat = _meshcat()
-    if not isinstance(host, str) or not host:
-        raise SceneError(f"host must be an address string such as '127.0.0.1', got {host!r}")
+    host = check_host(host)
     server = None
-    if zmq_url is None:
-        if not is_loopback(host):
-            warnings.warn(
-                f"serving the viewer on {host}: anyone who can reach this address can watch it; "
-                "use the default host 127.0.0.1 to keep it on this machine",
-                UserWarning,
-                stacklevel=2,
-            )
-        server = start_server(host)
-        zmq_url = server.zmq_url
     try:
+        if zmq_url is None:
+            if not is_loopback(host):
+                warnings.warn(
+                    f"serving the viewer on {host}: anyone who can reach this address can watch it; "
+                    "use the default host 127.0.0.1 to keep it on this machine",
+                    UserWarning,
+                    stacklevel=2,
+                )
+            server = start_server(host)
+            zmq_url = server.zmq_url
         with _sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
             animator = _Animator(result.scene, vis, meshes)
