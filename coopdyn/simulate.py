@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from . import _signals, _validate, compiled
+from .budget import check_budget, step_count, warn_unresolved
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import (
-    AccuracyWarning,
     ControllerError,
     DivergenceError,
     EnergyBalanceError,
@@ -34,7 +34,7 @@ from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
-from .stability import advise, unresolved_mode_message
+from .stability import advise
 
 
 def simulate(
@@ -132,7 +132,7 @@ def simulate(
         raise SimulationError(f"progress must be True or False, got {_validate._short(progress)}")
     method = get_integrator(integrator)
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
-    budget = _budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
+    budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
 
     system = System(Dynamics(scene, backend), controller, object_wrench)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
@@ -141,7 +141,7 @@ def simulate(
         n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
     if method.a_stable and not method.adaptive and not method.exact_discretisation and t_final > 0:
-        _warn_unresolved(scene, system, method, q, v, dt)
+        warn_unresolved(scene, system, method, q, v, dt)
     cpu0 = time.process_time()  # the compiled loop's preparation (e.g. the exponential's expm) counts too
     config, why = None, "loop='python'"
     if loop != "python":
@@ -212,7 +212,7 @@ class _Run:
         self.scene, self.system, self.method, self.dt, self.t_final = scene, system, method, dt, t_final
         self.max_speed = max_speed
         self._max_speed_sq = max_speed * max_speed
-        self.n_steps = _step_count(t_final, dt)
+        self.n_steps = step_count(t_final, dt)
         self.save_every = save_every
         self.t: list[float] = []
         self.q: list[np.ndarray] = []
@@ -530,82 +530,6 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             bar.update(t - bar.n)
     if monitor is not None:
         monitor.finish(t, q, v)
-
-
-def _warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float) -> None:
-    """Warn once when a stable method's step does not resolve the fastest oscillatory mode at the
-    initial state (:func:`coopdyn.stability.unresolved_mode_message`)."""
-    try:
-        M, K, D = system.dynamics.stiffness(q, v)  # not system.stiffness: the run's counters stay the run's
-        kp, kd = system.gains
-        system.dynamics.add_joint_gains(K, D, kp, kd)
-        n = scene.nv
-        A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
-        message = unresolved_mode_message(scene, A, method, dt)
-    except (
-        ArithmeticError,
-        ValueError,
-        NotImplementedError,
-        np.linalg.LinAlgError,
-    ):  # e.g. a destabilising gain: the run says more
-        return
-    if message is not None:
-        warnings.warn(message, AccuracyWarning, stacklevel=3)
-
-
-def _step_count(t_final: float, dt: float) -> int:
-    """Steps on the grid k·dt up to ``t_final`` (the last one shortened)."""
-    return max(0, math.ceil(t_final / dt - 1e-9))
-
-
-#: Memory a saved sample takes at the run's peak: BYTES_PER_VALUE per float it holds (t, q, v, τ)
-#: plus BYTES_PER_SAMPLE — the samples, the lists they are collected in and the result's arrays.
-#: Measured with tracemalloc (two Pandas: 1 475 / 1 313 B per sample, Python / compiled loop;
-#: the book's system: 435 / 561 B); ``tests/test_reliability.py`` checks the bound.
-BYTES_PER_VALUE = 24.0
-BYTES_PER_SAMPLE = 480.0
-
-
-def _budget(scene: Scene, t_final: float, dt: float, save_every: int, max_steps: Any, max_memory: Any) -> int | None:
-    """Refuse a run that would not finish in reasonable time or memory, before it starts; returns the
-    step budget (``None``: unlimited). An adaptive method's budget counts its attempts."""
-    if max_steps is not None:
-        if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-            raise SimulationError(f"max_steps must be a positive integer or None (no limit), got {_validate._short(max_steps)}")
-    if max_memory is not None:
-        max_memory = _validate.number(max_memory, "max_memory", "bytes", SimulationError)
-        if max_memory <= 0:
-            raise SimulationError(f"max_memory must be > 0 [bytes] or None (no limit), got {max_memory:g}")
-    ratio = t_final / dt
-    if not ratio < 1e15 or (max_steps is not None and ratio > max_steps):
-        limit = " (beyond what a run can count)" if max_steps is None else f", more than max_steps = {max_steps:,}"
-        raise SimulationError(
-            f"t_final / dt = {t_final:g} s / {dt:g} s asks for {ratio:.3g} steps{limit}. At ~10 µs per step (the "
-            f"compiled loop on two Pandas; Python controllers cost ~10× more) that is {_duration(ratio * 1e-5)} of CPU. "
-            "Enlarge dt or shorten t_final, or pass max_steps=None (or a larger number) to run it anyway"
-        )
-    n_saved = _step_count(t_final, dt) // save_every + 2
-    values = 1 + scene.nq + scene.nv + scene.n_actuated
-    memory = n_saved * (values * BYTES_PER_VALUE + BYTES_PER_SAMPLE)
-    if max_memory is not None and memory > max_memory:
-        suggest = math.ceil(save_every * memory / max_memory)
-        raise SimulationError(
-            f"saving {n_saved:,} samples of {values} values (t, q, v, τ) takes about {memory / 1e9:.3g} GB, more than "
-            f"max_memory = {max_memory / 1e9:.3g} GB. Save fewer samples (save_every = {suggest} or more), shorten the run, "
-            "or pass max_memory=None (or a larger number of bytes) to run it anyway"
-        )
-    return None if max_steps is None else int(max_steps)
-
-
-def _duration(seconds: float) -> str:
-    """A rough duration for messages: ``"3.2 min"``, ``"5.1 h"``, ``"12 days"``."""
-    if seconds < 120:
-        return f"{seconds:.3g} s"
-    if seconds < 7200:
-        return f"{seconds / 60:.3g} min"
-    if seconds < 172800:
-        return f"{seconds / 3600:.3g} h"
-    return f"{seconds / 86400:.3g} days"
 
 
 def _progress_bar(t_final: float, desc: str) -> Any:

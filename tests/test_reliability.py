@@ -236,7 +236,7 @@ def test_the_memory_estimate_bounds_a_runs_peak(book: cd.Scene, pandas: cd.Scene
     """simulate's memory estimate is an upper bound of what a run allocates (tracemalloc peak)."""
     import tracemalloc
 
-    from coopdyn.simulate import BYTES_PER_SAMPLE, BYTES_PER_VALUE
+    from coopdyn.budget import BYTES_PER_SAMPLE, BYTES_PER_VALUE
 
     for scene in (book, pandas):
         cd.simulate(scene, 0.01, loop=loop)  # imports and caches outside the measurement
