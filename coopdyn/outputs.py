@@ -71,6 +71,7 @@ def write_outputs(
             target.parent.mkdir(parents=True, exist_ok=True)
             _remove_stale(target)
             staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.writing-{os.getpid()}-", dir=target.parent))
+            staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the folder gets the usual mode
         except OSError as exc:
             raise OutputError(f"cannot write to {target.parent}: {_reason(exc)}. {_rescue(essential)}") from exc
         try:
@@ -139,6 +140,12 @@ def _remove_stale(target: Path) -> None:
         m = mine.fullmatch(p.name)
         if m and p.is_dir() and not p.is_symlink() and not _alive(int(m.group(2))):
             shutil.rmtree(p, ignore_errors=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _alive(pid: int) -> bool:

@@ -353,6 +353,9 @@ def test_outputs_replace_the_folder_whole_and_keep_the_trajectory_when_a_plot_fa
 
     done = write_outputs(out, [("trajectory", lambda f: res.save(f / "trajectory.npz"))], [("plot", bad_plot)])
     assert sorted(p.name for p in out.iterdir()) == ["trajectory.npz"]  # the old plot went with the old run
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o777 & ~mask  # a folder like mkdir makes, not a private one
     assert done.problems == ("plot: RuntimeError: no display",)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging or .tmp left
 
