@@ -1,4 +1,4 @@
-"""Ctrl-C deferred while something must not be cut in half (internal)."""
+"""Signals (internal): Ctrl-C held while something must not be cut in half; SIGTERM as an interrupt."""
 
 from __future__ import annotations
 
@@ -31,3 +31,21 @@ def interrupts_deferred(reraise: bool = True) -> Iterator[None]:
         signal.signal(signal.SIGINT, previous if previous is not None else signal.default_int_handler)
     if pending and reraise:
         raise KeyboardInterrupt("Ctrl-C arrived while writing; the writing was finished first")
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a closed terminal, a killed job) raises ``KeyboardInterrupt`` inside the block,
+    like Ctrl-C, so that its ``finally`` clauses run (the viewer stops its server)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

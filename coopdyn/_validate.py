@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import decimal
 import numbers
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,14 +57,38 @@ def number(value: Any, name: str, unit: str, error: type[CoopdynError] = SceneEr
     return float(finite_array(value, f"{name} [{unit}]", (), error))
 
 
-def gain(value: Any, name: str, n: int, unit: str, error: type[CoopdynError] = SceneError) -> np.ndarray:
-    """A non-negative scalar or (n,) vector, returned as (n,)."""
-    arr = finite_array(value, name, None, error)
+def gain(
+    value: Any,
+    name: str,
+    n: int,
+    unit: str,
+    error: type[CoopdynError] = SceneError,
+    *,
+    per: str = "actuated joint",
+    signed: bool = False,
+) -> np.ndarray:
+    """A scalar or one value per ``per`` (n of them), returned as (n,); non-negative unless ``signed``."""
+    arr = finite_array(value, f"{name} [{unit}]", None, error)
     if arr.shape not in ((), (1,), (n,)):
-        raise error(f"{name} must be a scalar or one value per actuated joint ({n}) [{unit}], got shape {arr.shape}")
-    if np.any(arr < 0.0):
+        raise error(f"{name} must be a scalar or one value per {per} ({n}) [{unit}], got shape {arr.shape}")
+    if not signed and np.any(arr < 0.0):
         raise error(f"{name} must be >= 0 [{unit}], got {_short(arr.tolist())}")
     return np.broadcast_to(arr.reshape(-1) if arr.shape == (1,) else arr, (n,)).copy()
+
+
+def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none: str | None = None) -> int:
+    """An integer >= 1 (not a bool, not a float); ``none`` names what ``None`` means, if allowed."""
+    if not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1):
+        also = f" or None ({none})" if none else ""
+        raise error(f"{name} must be an integer >= 1{also}, got {_short(value)}")
+    return int(value)
+
+
+def path(value: Any, name: str, error: type[CoopdynError] = SceneError) -> Path:
+    """A file-system path from a non-empty ``str`` or ``os.PathLike`` without NUL bytes."""
+    if not isinstance(value, str | os.PathLike) or not str(value) or "\0" in str(value):
+        raise error(f"{name} must be a path, got {_short(value)}")
+    return Path(value)
 
 
 def _short(value: Any, limit: int = 120) -> str:

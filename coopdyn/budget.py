@@ -14,7 +14,7 @@ from .closed_loop import System
 from .errors import AccuracyWarning, SimulationError
 from .integrators import Integrator
 from .model.scene import Scene
-from .stability import unresolved_mode_message
+from .stability import state_matrix, unresolved_mode_message
 
 
 def warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float) -> None:
@@ -24,9 +24,7 @@ def warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.ndar
         M, K, D = system.dynamics.stiffness(q, v)  # not system.stiffness: the run's counters stay the run's
         kp, kd = system.gains
         system.dynamics.add_joint_gains(K, D, kp, kd)
-        n = scene.nv
-        A = np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
-        message = unresolved_mode_message(scene, A, method, dt)
+        message = unresolved_mode_message(scene, state_matrix(M, K, D), method, dt)
     except (
         ArithmeticError,
         ValueError,
@@ -55,8 +53,7 @@ def check_budget(scene: Scene, t_final: float, dt: float, save_every: int, max_s
     """Refuse a run that would not finish in reasonable time or memory, before it starts; returns the
     step budget (``None``: unlimited). An adaptive method's budget counts its attempts."""
     if max_steps is not None:
-        if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-            raise SimulationError(f"max_steps must be a positive integer or None (no limit), got {_validate._short(max_steps)}")
+        max_steps = _validate.count(max_steps, "max_steps", SimulationError, none="no limit")
     if max_memory is not None:
         max_memory = _validate.number(max_memory, "max_memory", "bytes", SimulationError)
         if max_memory <= 0:

@@ -181,6 +181,8 @@ class System:
             raise
         except Exception as exc:
             raise ControllerError(f"object_wrench raised {type(exc).__name__} at t = {t:.6g} s: {exc}") from exc
+        if type(out) is np.ndarray and out.dtype == np.float64 and out.shape == (6,) and math.isfinite(out.sum()):
+            return out  # the common case, checked in one pass
         try:
             return _validate.finite_array(out, "object_wrench(t)", (6,), error=ControllerError)
         except ControllerError as exc:
@@ -284,10 +286,6 @@ def _checked_gains(gains: object, n: int) -> tuple[np.ndarray, np.ndarray]:
         raise ControllerError(
             f"the controller's gains() must return (Kp, Kd), two arrays of shape ({n},), got {_validate._short(gains)}"
         )
-    out = []
-    for value, name in zip(gains, ("Kp", "Kd"), strict=True):
-        arr = _validate.finite_array(value, f"the controller's gains() {name}", error=ControllerError)
-        if arr.shape not in ((), (n,)):
-            raise ControllerError(f"the controller's gains() {name} must have shape ({n},), got {arr.shape}")
-        out.append(np.broadcast_to(arr, (n,)).copy())
-    return out[0], out[1]
+    kp = _validate.gain(gains[0], "the controller's gains() Kp", n, "N·m/rad", ControllerError, signed=True)
+    kd = _validate.gain(gains[1], "the controller's gains() Kd", n, "N·m·s/rad", ControllerError, signed=True)
+    return kp, kd

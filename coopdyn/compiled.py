@@ -138,13 +138,9 @@ class Samples:
 def samples(loop: Any, scene: Scene) -> Samples:
     """The samples and counters of a compiled run so far."""
     t, Q, V, TAU, pending = loop.samples()
-    n = len(t)
     n_rhs, n_jac, n_factor, n_accepted, n_rejected = (int(c) for c in loop.counters())
     return Samples(
-        np.asarray(t, dtype=float).reshape(n),
-        np.asarray(Q, dtype=float).reshape(n, scene.nq),
-        np.asarray(V, dtype=float).reshape(n, scene.nv),
-        np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated),
+        *_rows(t, Q, V, TAU, scene),
         bool(pending),
         n_rhs,
         n_jac,
@@ -154,4 +150,23 @@ def samples(loop: Any, scene: Scene) -> Samples:
     )
 
 
-__all__ = ["Plan", "Samples", "next_chunk", "plan", "samples"]
+def take_samples(loop: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t, Q, V, TAU) of the samples a compiled run finished since the last take, all but the
+    last (whose torque may be pending); the loop forgets them."""
+    t, Q, V, TAU = loop.take_samples()
+    return _rows(t, Q, V, TAU, scene)
+
+
+def _rows(t: Any, Q: Any, V: Any, TAU: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's sample arrays as (n,), (n, nq), (n, nv), (n, n_actuated) floats (eigenpy
+    returns one-row or one-column matrices as vectors)."""
+    n = len(np.atleast_1d(t))
+    return (
+        np.asarray(t, dtype=float).reshape(n),
+        np.asarray(Q, dtype=float).reshape(n, scene.nq),
+        np.asarray(V, dtype=float).reshape(n, scene.nv),
+        np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated),
+    )
+
+
+__all__ = ["Plan", "Samples", "next_chunk", "plan", "samples", "take_samples"]

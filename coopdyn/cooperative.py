@@ -191,15 +191,11 @@ def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np
             f"ObjectImpedance: {name} must be a pair (linear [{units[0]}], angular [{units[1]}]), each a scalar or "
             f"3-vector, e.g. {name}=(2000.0, 100.0); got {_validate._short(value)}"
         )
-    out = []
-    for part, unit, label in zip(value, units, ("linear", "angular"), strict=True):
-        arr = _validate.finite_array(part, f"ObjectImpedance: {name} ({label}) [{unit}]")
-        if arr.shape not in ((), (3,)):
-            raise SceneError(f"ObjectImpedance: {name} ({label}) must be a scalar or a 3-vector [{unit}], got shape {arr.shape}")
-        if np.any(arr < 0.0):
-            raise SceneError(f"ObjectImpedance: {name} ({label}) must be >= 0 [{unit}], got {arr.tolist()}")
-        out.append(np.broadcast_to(arr, (3,)).copy())
-    return out[0], out[1]
+    linear, angular = (
+        _validate.gain(part, f"ObjectImpedance: {name} ({label})", 3, unit, per="axis x, y, z")
+        for part, unit, label in zip(value, units, ("linear", "angular"), strict=True)
+    )
+    return linear, angular
 
 
 class ObjectImpedance:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from . import _validate
 from ._signals import interrupts_deferred
 from .errors import OutputError
 from .result import Result
@@ -61,10 +62,9 @@ def write_outputs(
         OutputError: the folder holds files coopdyn did not write, or it cannot be written; the
             message says where the essential outputs went instead, if anywhere.
     """
-    target = check_folder(folder)
     try:
-        _refuse_foreign(target)
-    except OutputError as exc:
+        target = check_folder(folder)
+    except OutputError as exc:  # the run is done: keep what it made somewhere
         raise OutputError(f"{exc}. {_rescue(essential)}") from None
     with interrupts_deferred():  # a Ctrl-C now would lose a finished run: it waits for the folder
         try:
@@ -100,9 +100,7 @@ def check_folder(folder: Any) -> Path:
     """The absolute output folder (a symbolic link: its target), checked before a run starts: a
     path, not a file, not the working folder or one of its parents (a run replaces its folder
     whole), and holding only what coopdyn writes."""
-    if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
-        raise OutputError(f"the output folder must be a path, got {folder!r}")
-    target = Path(folder).absolute()
+    target = _validate.path(folder, "the output folder", OutputError).absolute()
     if target.is_symlink():
         target = target.resolve()
     cwd = Path.cwd().resolve()

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from ._validate import finite_array
+from ._validate import path as as_path
 from .dynamics import Dynamics, Energy
 from .dynamics.dynamics import Readouts
 from .errors import OutputError, SimulationError
@@ -142,9 +143,7 @@ class Result:
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the trajectory atomically (temporary file, then rename): ``.npz`` (t, q, v, tau
         and the interconnection wrenches) or ``.csv`` (one row per sample). Returns the path."""
-        if not isinstance(path, str | os.PathLike) or not str(path) or "\0" in str(path):
-            raise SimulationError(f"path must be a file name ending in .npz or .csv, got {path!r}")
-        path = Path(path)
+        path = as_path(path, "path (a file name ending in .npz or .csv)", SimulationError)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except (OSError, ValueError) as exc:
@@ -214,9 +213,7 @@ class SampleFiles:
     NAMES = ("t", "q", "v", "tau")
 
     def __init__(self, folder: str | os.PathLike[str], n: int, nq: int, nv: int, na: int) -> None:
-        if not isinstance(folder, str | os.PathLike) or not str(folder) or "\0" in str(folder):
-            raise SimulationError(f"stream_to must be a folder path, got {folder!r}")
-        self.folder = Path(folder).absolute()
+        self.folder = as_path(folder, "stream_to (a folder)", SimulationError).absolute()
         if self.folder.exists() and (not self.folder.is_dir() or any(self.folder.iterdir())):
             raise SimulationError(f"stream_to: {self.folder} must be a new or empty folder")
         need = n * (1 + nq + nv + na) * 8

@@ -120,8 +120,7 @@ def simulate(
         raise SimulationError(
             f"dt must be >= {MIN_DT:g} [s] (a step shorter than this is below the clock's resolution), got {dt}"
         )
-    if not isinstance(save_every, int | np.integer) or isinstance(save_every, bool) or save_every < 1:
-        raise SimulationError(f"save_every must be an integer >= 1, got {_validate._short(save_every)}")
+    save_every = _validate.count(save_every, "save_every", SimulationError)
     max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
     if max_speed <= 0.0:
         raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {max_speed}")
@@ -469,15 +468,9 @@ def _stream_chunk(run: _Run, native: Any) -> None:
     """Move a compiled run's finished samples (all but the last) to its stream."""
     assert run.stream is not None
     with _signals.interrupts_deferred():  # taken from the loop and written together
-        t, Q, V, TAU = native.take_samples()
-        m, scene = len(np.atleast_1d(t)), run.scene
-        if m:
-            run.stream.append(
-                np.asarray(t, dtype=float).reshape(m),
-                np.asarray(Q, dtype=float).reshape(m, scene.nq),
-                np.asarray(V, dtype=float).reshape(m, scene.nv),
-                np.asarray(TAU, dtype=float).reshape(m, scene.n_actuated),
-            )
+        rows = compiled.take_samples(native, run.scene)
+        if len(rows[0]):
+            run.stream.append(*rows)
 
 
 def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:

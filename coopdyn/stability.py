@@ -67,10 +67,9 @@ class Oscillation:
 OSCILLATORY_DAMPING = 0.5
 
 
-def fastest_oscillation(A: np.ndarray) -> Oscillation | None:
-    """The oscillatory eigenvalue pair (damping ratio below :data:`OSCILLATORY_DAMPING`) of the
-    state matrix ``A`` with the largest |λ|, if any."""
-    lam = np.linalg.eigvals(A)
+def fastest_oscillation(lam: np.ndarray) -> Oscillation | None:
+    """Among the eigenvalues ``lam`` of a state matrix, the oscillatory pair (damping ratio below
+    :data:`OSCILLATORY_DAMPING`) with the largest |λ|, if any."""
     mag = np.abs(lam)
     osc = (np.abs(lam.imag) > 1e-6 * np.maximum(mag, 1e-300)) & (-lam.real < OSCILLATORY_DAMPING * mag)
     if not np.any(osc):
@@ -132,8 +131,12 @@ class Advice:
 def linearize(scene: Scene, q: Any = None, v: Any = None, controller: Controller | None = None) -> np.ndarray:
     """State matrix A (2nv, 2nv) of the linearised stiff dynamics at (q, v)."""
     q, v = scene.check_state(scene.q0 if q is None else q, scene.v0 if v is None else v)
-    M, K, D = System(Dynamics(scene), controller).stiffness(q, v)
-    n = scene.nv
+    return state_matrix(*System(Dynamics(scene), controller).stiffness(q, v))
+
+
+def state_matrix(M: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """``A = [[0, I], [−M⁻¹K, −M⁻¹D]]`` (2n, 2n) of ``M ẍ + D ẋ + K x = 0``."""
+    n = M.shape[0]
     return np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
 
 
@@ -211,7 +214,7 @@ def advise(
             if fastest is not None
             else "use 'implicit_euler' or 'ros2'"
         )
-    oscillation = fastest_oscillation(A)
+    oscillation = fastest_oscillation(lam)
     if dt is not None:
         ok = [a.name for a in advice if a.applicable and dt <= a.max_stable_dt]
         rec += f". At dt = {dt * 1e3:.4g} ms these are stable: {ok}"
@@ -225,7 +228,7 @@ def advise(
 def unresolved_mode_message(scene: Scene, A: np.ndarray, method: Integrator, dt: float) -> str | None:
     """The accuracy warning for a stable method whose step ``dt`` [s] does not resolve the
     scene's fastest oscillatory mode (|λ|·dt > :data:`RESOLVE_LIMIT`), or None when it does."""
-    o = fastest_oscillation(A)
+    o = fastest_oscillation(np.linalg.eigvals(A))
     if o is None or o.rate * dt <= RESOLVE_LIMIT:
         return None
     z = complex(-o.damping_ratio, math.sqrt(max(1.0 - o.damping_ratio**2, 0.0))) * o.rate * dt
@@ -259,5 +262,6 @@ __all__ = [
     "fastest_oscillation",
     "linearize",
     "predicted_stable_dt",
+    "state_matrix",
     "unresolved_mode_message",
 ]

@@ -49,8 +49,7 @@ def equilibrium(
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
     tol = _validate.positive(tol, "tol", "N or N·m", SimulationError)
-    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
-        raise SimulationError(f"max_iter must be a positive integer, got {max_iter!r}")
+    max_iter = _validate.count(max_iter, "max_iter", SimulationError)
     q, v = scene.check_state(scene.q0 if q is None else q, np.zeros(scene.nv))
     dynamics = Dynamics(scene, backend)
     obj, tau = scene.object_v, np.zeros(scene.n_actuated)

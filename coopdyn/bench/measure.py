@@ -102,7 +102,7 @@ def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeat
             res, warned = run_point(case, _make(method, rtol), dt)
             flagged = flagged or warned
         except DivergenceError:
-            return Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, True)
+            return diverged_row(case, method, label, dt, rtol, energy_flag=True)
         cpu.append(res.cpu_time)
         if res.cpu_time > 2.0:  # slow points: fewer repeats (the median of what ran)
             break
@@ -111,20 +111,21 @@ def _measure(case: Case, method: str, label: str, dt: float, rtol: float, repeat
     pos_err, force_err = errors_against(res, pos, forces)
     if case.name == "linear":  # the object's position along the book's axis
         pos_err = float(np.max(np.abs(book_positions(res.q, res.scene)[:, 1] - pos[:, 2])))
-    return Row(
-        case.name,
-        method,
-        label,
-        dt,
-        rtol,
-        pos_err,
-        force_err,
-        statistics.median(cpu) / case.t_final,
-        res.n_rhs,
-        res.n_factor,
-        True,
-        flagged,
-    )
+    return measured_row(case, method, label, dt, rtol, res, pos_err, force_err, cpu, flagged)
+
+
+def measured_row(
+    case: Case, method: str, label: str, dt: float, rtol: float, res: Any, pos_err: float, force_err: float,
+    cpu: list[float], energy_flag: bool,
+) -> Row:  # fmt: skip
+    """The chart point of a run that finished: its errors, median CPU per simulated second, counters."""
+    cost = statistics.median(cpu) / case.t_final
+    return Row(case.name, method, label, dt, rtol, pos_err, force_err, cost, res.n_rhs, res.n_factor, True, energy_flag)
+
+
+def diverged_row(case: Case, method: str, label: str, dt: float, rtol: float, energy_flag: bool) -> Row:
+    """The chart point of a run that diverged (infinite errors, no cost)."""
+    return Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, energy_flag)
 
 
 def peer_rows(case: Case, *, quick: bool = False, repeats: int = 5, progress: bool = True) -> list[Row]:

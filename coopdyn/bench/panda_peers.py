@@ -14,7 +14,6 @@ forces are evaluated by the same law).
 from __future__ import annotations
 
 import math
-import statistics
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -25,7 +24,7 @@ from ..errors import CoopdynError, SimulationError
 from ..integrators import INTEGRATORS, Integrator, Trapezoid
 from ..result import Result
 from .cases import OUTPUT_INTERVAL, Case, Row, _forces, panda_case
-from .measure import _bar, _make, errors_against, run_point
+from .measure import _bar, _make, diverged_row, errors_against, measured_row, run_point
 
 PEERS = ("mujoco", "exudyn")
 
@@ -196,26 +195,12 @@ def compare(
     for i, (case, method, label, dt, rtol, _) in enumerate(plan):
         res = results[i]
         if res is None:
-            rows.append(Row(case.name, method, label, dt, rtol, math.inf, math.inf, math.nan, 0, 0, False, False))
+            rows.append(diverged_row(case, method, label, dt, rtol, energy_flag=False))
             continue
         reference = references[case.name] if method.startswith("exudyn") else case.reference(res)  # Exudyn: its own
         pos_err, force_err = errors_against(res, *reference)
-        rows.append(
-            Row(
-                case.name,
-                method,
-                label,
-                dt,
-                rtol,
-                pos_err,
-                force_err,
-                statistics.median(cpu[i]) / case.t_final,
-                res.n_rhs,
-                res.n_factor,
-                True,
-                i in flags,  # an energy-flagged run is not counted as reaching a level (_best_to_reach)
-            )
-        )
+        # an energy-flagged run is not counted as reaching a level (_best_to_reach)
+        rows.append(measured_row(case, method, label, dt, rtol, res, pos_err, force_err, cpu[i], i in flags))
     return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final}
 
 

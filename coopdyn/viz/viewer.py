@@ -11,18 +11,16 @@ from __future__ import annotations
 import base64
 import logging
 import os
-import signal
-import threading
 import time
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from .._signals import sigterm_as_interrupt
 from ..model.arm import load_arm
 from ..model.scene import Scene
 from ..result import Result
@@ -272,7 +270,7 @@ def view(
                 )
             server = start_server(host)
             zmq_url = server.zmq_url
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
             animator = _Animator(result.scene, vis, meshes)
             idx = _frames(result, fps)
@@ -294,21 +292,3 @@ def view(
         if server is not None:
             server.stop()
     return str(url)
-
-
-@contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM (a closed terminal, a killed job) ends the viewing like Ctrl-C, so that the
-    ``finally`` clauses stop the server."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
