@@ -173,6 +173,8 @@ def _reason(exc: OSError) -> str:
 
 def _rescue(essential: Sequence[tuple[str, Writer]]) -> str:
     """Write the essential outputs to a fresh folder in the temporary directory; say where."""
+    if not essential:
+        return "Nothing was written"
     try:
         rescue = Path(tempfile.mkdtemp(prefix="coopdyn-rescue-"))
         files = _run(essential, rescue)
