@@ -19,7 +19,7 @@ from .errors import (
     StepBudgetError,
     ViewerError,
 )
-from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal
+from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal, rigid_limit
 from .result import Result
 from .simulate import simulate
 from .stability import Advice, advise
@@ -56,6 +56,7 @@ __all__ = [
     "integrators",
     "measure_stable_dt",
     "reference",
+    "rigid_limit",
     "scenes",
     "simulate",
 ]

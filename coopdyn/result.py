@@ -62,7 +62,7 @@ class Result:
     def readouts(self) -> Readouts:
         """Every interconnection's readouts along the trajectory, from one pass through the
         elements on the run's backend (computed on first use, then kept)."""
-        return self._dynamics.readouts(self.q, self.v)
+        return self._dynamics.readouts(self.q, self.v, self.tau)
 
     def _link(self, i: int) -> int:
         n = len(self.scene.links)
@@ -72,7 +72,7 @@ class Result:
 
     def wrench(self, i: int) -> np.ndarray:
         """Wrench of interconnection i on the object (n, 6) [N, N·m]: force, then moment about the
-        grasp point, in world-aligned axes."""
+        grasp point, in world-aligned axes (for a rigid grasp: the constraint wrench)."""
         return self.readouts.object_wrench[:, self._link(i)]
 
     def arm_wrench(self, i: int) -> np.ndarray:
@@ -82,9 +82,18 @@ class Result:
 
     def deformation(self, i: int) -> np.ndarray:
         """Deformation of interconnection i (n, size) in tip-frame axes: ``log6(T_M_G)`` (n, 6)
-        [m, rad] for an SE(3) spring, the grasp point's offset (n, 3) [m] for a ball spring."""
+        [m, rad] for an SE(3) spring, the grasp point's offset (n, 3) [m] for a ball spring; for
+        a rigid grasp the same measures are its drift from the constraint."""
         i = self._link(i)
         return self.readouts.deformation[:, i, : self.scene.links[i].element.deformation_size]
+
+    def constraint_drift(self) -> tuple[np.ndarray, np.ndarray]:
+        """How far the rigid grasps (:func:`coopdyn.rigid_limit`) drifted from their constraints:
+        the norms of the drift's translation (n, R) [m] and rotation (n, R) [rad], one column per
+        rigid interconnection in scene order (R = 0 for an elastic scene)."""
+        rigid = [i for i, lk in enumerate(self.scene.links) if lk.element.constraint is not None]
+        d = self.readouts.deformation[:, rigid]
+        return np.linalg.norm(d[..., :3], axis=-1), np.linalg.norm(d[..., 3:], axis=-1)
 
     def elastic_energy(self, i: int) -> np.ndarray:
         """Elastic energy of interconnection i (n,) [J]."""

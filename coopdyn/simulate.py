@@ -17,6 +17,7 @@ from . import _signals, _validate, compiled
 from .budget import check_budget, step_count, warn_unresolved
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
+from .dynamics.constrained import check_integrator, has_constraints
 from .errors import (
     ControllerError,
     DivergenceError,
@@ -130,6 +131,12 @@ def simulate(
     if not isinstance(progress, bool | np.bool_):
         raise SimulationError(f"progress must be True or False, got {_validate._short(progress)}")
     method = get_integrator(integrator)
+    check_integrator(scene, method)
+    if object_wrench is not None and has_constraints(scene):
+        raise SimulationError(
+            "object_wrench cannot be combined with rigid grasps yet: their constraint wrenches are read out after the run "
+            "from (q, v, tau), without the external wrench; model the load as a fixture or a controller term"
+        )
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
     budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
 

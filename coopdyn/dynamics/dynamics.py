@@ -86,6 +86,10 @@ class Dynamics:
         if cls is not Dynamics:
             return super().__new__(cls)
         name = _backend.resolve(backend, scene)
+        if any(lk.element.constraint is not None for lk in scene.links):  # the rigid limit
+            from .constrained import ConstrainedDynamics
+
+            return super().__new__(ConstrainedDynamics)
         if name == "native":
             from .native import NativeDynamics
 
@@ -153,8 +157,9 @@ class Dynamics:
         """Every interconnection element's evaluation at (q, v), with its S_K, S_D, in scene order."""
         raise NotImplementedError
 
-    def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
-        """The interconnections' readouts along a trajectory Q (n, nq), V (n, nv) (one pass)."""
+    def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:
+        """The interconnections' readouts along a trajectory Q (n, nq), V (n, nv) (one pass);
+        the torques TAU (n, n_actuated) only matter for rigid grasps, whose wrench depends on them."""
         raise NotImplementedError
 
     def elastic_energy(self, q: np.ndarray) -> np.ndarray:
@@ -347,7 +352,7 @@ class PythonDynamics(Dynamics):
             out.append(element.evaluate(T_M_G, zero).energy)
         return np.array(out)
 
-    def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
+    def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:
         model, data = self.model, self.data
         n, L = len(Q), len(self._frames)
         E, U, P = np.zeros((n, L, 6)), np.zeros((n, L)), np.zeros((n, L))

@@ -110,7 +110,7 @@ class NativeDynamics(Dynamics):
     def _elastic(self) -> np.ndarray:
         return self._kernel.elastic_energies()
 
-    def readouts(self, Q: np.ndarray, V: np.ndarray) -> Readouts:
+    def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:
         Q, V = np.asarray(Q, dtype=float), np.asarray(V, dtype=float)
         n = len(Q)
         if n == 1:  # eigenpy maps a writeable (1, nq) array with the row stride as the column stride

@@ -13,6 +13,7 @@ from typing import NamedTuple
 from ...errors import SceneError, did_you_mean
 from .ball_spring import BallSpring
 from .base import Element, ElementEval, SpringDamper
+from .rigid import RigidGrasp, RigidPoint
 from .se3_spring import SE3Spring
 
 
@@ -27,6 +28,8 @@ class ElementType(NamedTuple):
 ELEMENTS: dict[str, ElementType] = {
     "se3": ElementType(SE3Spring, "se3"),
     "ball": ElementType(BallSpring, "ball"),
+    "rigid": ElementType(RigidGrasp, None),
+    "rigid_point": ElementType(RigidPoint, None),
 }
 
 
@@ -53,4 +56,16 @@ def lookup(kind: str | type[Element]) -> ElementType:
     return ELEMENTS[kind]
 
 
-__all__ = ["ELEMENTS", "BallSpring", "Element", "ElementEval", "ElementType", "SE3Spring", "SpringDamper", "lookup", "register"]
+__all__ = [
+    "ELEMENTS",
+    "BallSpring",
+    "Element",
+    "ElementEval",
+    "ElementType",
+    "RigidGrasp",
+    "RigidPoint",
+    "SE3Spring",
+    "SpringDamper",
+    "lookup",
+    "register",
+]

@@ -63,6 +63,9 @@ class Element(ABC):
     #: True when, with translations only (prismatic joints), the law is linear in the relative
     #: translation and velocity (the exponential integrator needs it).
     linear: ClassVar[bool] = False
+    #: ``None`` for a force law; ``"6D"`` or ``"3D"`` for a kinematic constraint whose wrench the
+    #: constrained dynamics solve for (:mod:`.rigid`).
+    constraint: ClassVar[str | None] = None
 
     @abstractmethod
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
