@@ -1,6 +1,7 @@
 """coopdyn: dynamics and control of multi-arm cooperating robots with elastic interconnections."""
 
 from . import control, cooperative, integrators, reference, scenes
+from .advisor import ModelAdvice, advise_model
 from .bench.stability import measure_stable_dt
 from .dynamics import Dynamics, Energy, backend
 from .errors import (
@@ -19,7 +20,19 @@ from .errors import (
     StepBudgetError,
     ViewerError,
 )
-from .model import Arm, Interconnection, RigidObject, Scene, axial, diagonal, rigid_limit
+from .model import (
+    Arm,
+    Beam,
+    BeamSegment,
+    Interconnection,
+    RigidObject,
+    Scene,
+    Section,
+    axial,
+    diagonal,
+    quasi_static,
+    rigid_limit,
+)
 from .result import Result
 from .simulate import simulate
 from .stability import Advice, advise
@@ -28,6 +41,8 @@ __all__ = [
     "AccuracyWarning",
     "Advice",
     "Arm",
+    "Beam",
+    "BeamSegment",
     "ControllerError",
     "CoopdynError",
     "DivergenceError",
@@ -36,6 +51,7 @@ __all__ = [
     "EnergyBalanceError",
     "EnergyBalanceWarning",
     "Interconnection",
+    "ModelAdvice",
     "ModelLoadError",
     "OutputError",
     "Result",
@@ -43,11 +59,13 @@ __all__ = [
     "Scene",
     "SceneError",
     "SceneFileError",
+    "Section",
     "SimulationError",
     "SimulationInterrupted",
     "StepBudgetError",
     "ViewerError",
     "advise",
+    "advise_model",
     "axial",
     "backend",
     "control",
@@ -55,6 +73,7 @@ __all__ = [
     "diagonal",
     "integrators",
     "measure_stable_dt",
+    "quasi_static",
     "reference",
     "rigid_limit",
     "scenes",

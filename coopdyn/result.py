@@ -128,11 +128,11 @@ class Result:
 
     def grasp_points(self) -> np.ndarray:
         """World positions of the grasp frames (n, N, 3) [m]."""
-        return self.readouts.grasp_position
+        return self.readouts.grasp_position[:, : len(self.scene.links)]
 
     def wrenches(self) -> np.ndarray:
         """Every interconnection's wrench on the object (n, N, 6) [N, N·m] (see :meth:`wrench`)."""
-        return self.readouts.object_wrench
+        return self.readouts.object_wrench[:, : len(self.scene.links)]
 
     def wrench_split(self) -> tuple[np.ndarray, np.ndarray]:
         """The interconnection wrenches on the object split into the part that moves the object

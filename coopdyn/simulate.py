@@ -320,7 +320,7 @@ class _Run:
 
     def warn_rotation(self, link: int, theta: float, t: float, stacklevel: int = 5) -> None:
         """The log-map warning of :meth:`after_step`, attributed to the caller of ``simulate``."""
-        name = self.scene.links[link].name
+        name = self.scene.elements[link].name
         warnings.warn(
             f"interconnection {name!r} (index {link}): its rotation deformation reached {theta:.3f} rad "
             f"({theta / math.pi:.2f}π) at t ≈ {t:.6g} s. At π the SE(3) logarithm jumps: the wrench flips and, "

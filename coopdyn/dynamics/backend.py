@@ -80,7 +80,7 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
         return "python"
     if scene is not None:
         known = set(getattr(module, "ELEMENTS", ()))
-        missing = sorted({lk.element.kind for lk in scene.links if lk.native is None or lk.native not in known})
+        missing = sorted({lk.element.kind for lk in scene.elements if lk.native is None or lk.native not in known})
         if missing:
             why = f"the interconnection element(s) {missing} have no C++ twin in the kernel"
             if name == "native":

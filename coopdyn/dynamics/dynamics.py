@@ -105,7 +105,7 @@ class Dynamics:
             self._damping[arm.v_index] = arm.damping
         self._has_damping = bool(np.any(self._damping))
         self.actuated_index = scene.actuated_index
-        self._frames = [(lk.tip_frame, lk.grasp_frame, lk.element) for lk in scene.links]
+        self._frames = [(lk.tip_frame, lk.grasp_frame, lk.element) for lk in scene.elements]
 
     # -- the interface (implemented by both backends) --------------------------------------------
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:

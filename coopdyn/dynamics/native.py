@@ -29,7 +29,7 @@ class NativeDynamics(Dynamics):
 
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         super().__init__(scene, backend)
-        links = [(lk.native, lk.tip_frame, lk.grasp_frame, tuple(lk.element.native_parameters())) for lk in scene.links]
+        links = [(lk.native, lk.tip_frame, lk.grasp_frame, tuple(lk.element.native_parameters())) for lk in scene.elements]
         actuated = np.asarray(scene.actuated, dtype=np.int32)
         kernel = _backend.kernel_module().Kernel
         self._kernel = self._call("the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame)
@@ -103,7 +103,7 @@ class NativeDynamics(Dynamics):
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
         raw = self._call("element_states(q, v)", self._kernel.element_states, q, v)
         out = []
-        for (energy, e, f, power, S_K, S_D, theta), lk in zip(raw, self.scene.links, strict=True):
+        for (energy, e, f, power, S_K, S_D, theta), lk in zip(raw, self.scene.elements, strict=True):
             out.append(ElementEval(energy, e[: lk.element.deformation_size], f, power, S_K, S_D, theta))
         return out
 
@@ -116,7 +116,7 @@ class NativeDynamics(Dynamics):
         if n == 1:  # eigenpy maps a writeable (1, nq) array with the row stride as the column stride
             Q, V = np.repeat(Q, 2, axis=0), np.repeat(V, 2, axis=0)  # (reading past its end): send two rows
         E, U, P, WG, WT, PG, PT, PO, KP = self._call("readouts(Q, V)", self._kernel.readouts, Q, V)
-        m, L = len(Q), len(self.scene.links)  # reshape all: eigenpy returns an (n, 1) matrix as a vector
+        m, L = len(Q), len(self.scene.elements)  # reshape all: eigenpy returns an (n, 1) matrix as a vector
         return Readouts(
             E.reshape(m, L, 6)[:n],
             U.reshape(m, L)[:n],

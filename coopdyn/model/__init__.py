@@ -1,9 +1,23 @@
 """The immutable scene description: arms, the object, interconnections, one Pinocchio model."""
 
 from .arm import Arm
+from .beam import Beam
 from .body import RigidObject
+from .elements import BeamSegment, Section
 from .interconnection import Interconnection, axial, diagonal
-from .limits import rigid_limit
+from .limits import quasi_static, rigid_limit
 from .scene import Scene
 
-__all__ = ["Arm", "Interconnection", "RigidObject", "Scene", "axial", "diagonal", "rigid_limit"]
+__all__ = [
+    "Arm",
+    "Beam",
+    "BeamSegment",
+    "Interconnection",
+    "RigidObject",
+    "Scene",
+    "Section",
+    "axial",
+    "diagonal",
+    "quasi_static",
+    "rigid_limit",
+]

@@ -17,6 +17,7 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
+from .beam import Beam
 from .body import OBJECT_JOINTS, RigidObject
 from .elements import Element
 from .interconnection import Interconnection
@@ -59,7 +60,7 @@ class Scene:
 
     Args:
         arms: the arms (possibly none: an object held by fixtures only); names must be unique.
-        obj: the held object.
+        obj: the held object: a :class:`RigidObject`, or an elastic :class:`~coopdyn.model.beam.Beam`.
         interconnections: at least one; each names an arm (an arm may have several) or
             ``None`` for a world fixture.
         gravity: gravity acceleration in the world, (3,) [m/s²].
@@ -67,6 +68,8 @@ class Scene:
     Attributes:
         model: the merged ``pin.Model`` (arms in order, then the object's root joint).
         arms: one :class:`ArmInfo` per arm. ``links``: one :class:`Link` per interconnection.
+        elements: the links, then the object's own elements (a :class:`~coopdyn.model.beam.Beam`'s
+            beam elements; none for a rigid object): everything the dynamics evaluate.
         arm_specs, interconnection_specs, object: the descriptions the scene was built from.
         loaded_arms: the arms as loaded (:class:`coopdyn.model.arm.LoadedArm`), for display.
         q0, v0: the initial state, (nq,) and (nv,).
@@ -74,16 +77,18 @@ class Scene:
             torque/force per entry [N·m or N].
         actuated_index: the same as a slice when the indices are contiguous (cheaper to index
             with on hot paths), else ``actuated``.
-        object_joint: joint id of the object; ``object_q``/``object_v`` its coordinates.
+        object_joint: joint id of the object (a beam's reference node); ``object_q``/``object_v``
+            its coordinates (all of a beam's nodes).
     """
 
     model: pin.Model
     arms: tuple[ArmInfo, ...]
     links: tuple[Link, ...]
+    elements: tuple[Link, ...]
     arm_specs: tuple[Arm, ...]
     interconnection_specs: tuple[Interconnection, ...]
     loaded_arms: tuple[LoadedArm, ...]
-    object: RigidObject
+    object: RigidObject | Beam
     object_joint: int
     object_frame: int
     object_q: np.ndarray
@@ -97,7 +102,7 @@ class Scene:
     def __init__(
         self,
         arms: Sequence[Arm],
-        obj: RigidObject,
+        obj: RigidObject | Beam,
         interconnections: Sequence[Interconnection],
         gravity: Any = (0.0, 0.0, -9.81),
     ) -> None:
@@ -116,11 +121,11 @@ class Scene:
             raise SceneError(f"arm names must be non-empty strings, got {names!r}")
         if len(set(names)) != len(names):
             raise SceneError(f"arm names must be unique, got {names}")
-        if not isinstance(obj, RigidObject):
-            raise SceneError(f"obj must be a coopdyn.RigidObject, got {type(obj).__name__}")
+        if not isinstance(obj, RigidObject | Beam):
+            raise SceneError(f"obj must be a coopdyn.RigidObject or a coopdyn.Beam, got {type(obj).__name__}")
         if not isinstance(obj.name, str) or not obj.name:
             raise SceneError(f"the object's name must be a non-empty string, got {obj.name!r}")
-        if not isinstance(obj.joint, str) or obj.joint not in OBJECT_JOINTS:
+        if isinstance(obj, RigidObject) and (not isinstance(obj.joint, str) or obj.joint not in OBJECT_JOINTS):
             raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {obj.joint!r}")
         if len(interconnections) == 0:
             raise SceneError("a scene needs at least one interconnection (arm tip or world fixture ↔ object)")
@@ -132,17 +137,20 @@ class Scene:
             model = pin.appendModel(model, la.model, 0, la.base)
         model.gravity = pin.Motion(np.concatenate([_validate.finite_array(gravity, "gravity", (3,)), np.zeros(3)]))
 
-        # The object on its own root joint.
-        inertia = obj.spatial_inertia()
-        oMo = pin.SE3.Identity() if obj.pose is None else _validate.se3(obj.pose, "object pose")
-        jmodel = obj.joint_model()
-        if obj.joint == "freeflyer":
-            placement, q_obj = pin.SE3.Identity(), pin.SE3ToXYZQUAT(oMo)
-        else:
-            placement, q_obj = oMo, _neutral(jmodel)
-        obj_joint = model.addJoint(0, jmodel, placement, obj.name)
-        model.appendBodyToJoint(obj_joint, inertia, pin.SE3.Identity())
-        model.addBodyFrame(obj.name, obj_joint, pin.SE3.Identity(), 0)
+        if isinstance(obj, Beam):
+            obj_joint, node_joints, q_obj = _add_beam(model, obj)
+        else:  # the object on its own root joint
+            inertia = obj.spatial_inertia()
+            oMo = pin.SE3.Identity() if obj.pose is None else _validate.se3(obj.pose, "object pose")
+            jmodel = obj.joint_model()
+            if obj.joint == "freeflyer":
+                placement, q_obj = pin.SE3.Identity(), pin.SE3ToXYZQUAT(oMo)
+            else:
+                placement, q_obj = oMo, _neutral(jmodel)
+            obj_joint = model.addJoint(0, jmodel, placement, obj.name)
+            model.appendBodyToJoint(obj_joint, inertia, pin.SE3.Identity())
+            model.addBodyFrame(obj.name, obj_joint, pin.SE3.Identity(), 0)
+            node_joints = [obj_joint]
 
         arm_infos = tuple(_arm_info(model, la) for la in loaded)
         q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
@@ -185,13 +193,16 @@ class Scene:
                     world_M_object * o_M_G if ic.fixture is None else _validate.se3(ic.fixture, f"interconnections[{k}].fixture")
                 )
                 tip = model.addFrame(pin.Frame(f"world/fixture{k}", 0, w_M_T, pin.FrameType.OP_FRAME))
-            g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", obj_joint, o_M_G, pin.FrameType.OP_FRAME))
+            g_joint, o_M_G = _grasp_node(obj, node_joints, o_M_G)
+            g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", g_joint, o_M_G, pin.FrameType.OP_FRAME))
             links.append(Link(name, i_arm, int(tip), int(g_id), law, element_type.native))
         link_names = [lk.name for lk in links]
         if len(set(link_names)) != len(link_names):  # an arm with several links: number them
             links = [dataclasses.replace(lk, name=f"{lk.name}{k}") for k, lk in enumerate(links)]
 
-        jo = model.joints[obj_joint]
+        internal = _beam_elements(model, obj, node_joints) if isinstance(obj, Beam) else []
+        first_q = model.joints[node_joints[0]]
+        last = model.joints[node_joints[-1]]
         actuated = np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
         first, n = int(actuated[0]) if actuated.size else 0, actuated.size
         contiguous = n > 0 and np.array_equal(actuated, np.arange(first, first + n))
@@ -205,8 +216,9 @@ class Scene:
         set_(self, "object", obj)
         set_(self, "object_joint", int(obj_joint))
         set_(self, "object_frame", int(o_frame))
-        set_(self, "object_q", _frozen(np.arange(jo.idx_q, jo.idx_q + jo.nq)))
-        set_(self, "object_v", _frozen(np.arange(jo.idx_v, jo.idx_v + jo.nv)))
+        set_(self, "elements", tuple(links) + tuple(internal))
+        set_(self, "object_q", _frozen(np.arange(first_q.idx_q, last.idx_q + last.nq)))
+        set_(self, "object_v", _frozen(np.arange(model.joints[node_joints[0]].idx_v, last.idx_v + last.nv)))
         set_(self, "actuated", _frozen(actuated))
         set_(self, "actuated_index", slice(first, first + n) if contiguous else self.actuated)
         set_(self, "q0", _frozen(q0))
@@ -321,3 +333,41 @@ def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
         tip_frame=int(model.getFrameId(la.tip_frame)),
         damping=_frozen(np.array(la.damping, dtype=float)),
     )
+
+
+def _add_beam(model: pin.Model, beam: Beam) -> tuple[int, list[int], np.ndarray]:
+    """A beam's nodes as free bodies: (the reference node's joint, every node's joint, their q)."""
+    oMb = pin.SE3.Identity() if beam.pose is None else _validate.se3(beam.pose, "beam pose")
+    joints, q = [], []
+    for k, (x, inertia) in enumerate(zip(beam.node_x(), beam.node_inertias(), strict=True)):
+        j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), f"{beam.name}/node{k}")
+        model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
+        model.addBodyFrame(f"{beam.name}/node{k}", j, pin.SE3.Identity(), 0)
+        joints.append(j)
+        q.append(pin.SE3ToXYZQUAT(oMb * pin.SE3(np.eye(3), np.array([x, 0.0, 0.0]))))
+    ref = joints[beam.reference_node]
+    model.addFrame(pin.Frame(beam.name, ref, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+    return ref, joints, np.concatenate(q)
+
+
+def _grasp_node(obj: RigidObject | Beam, joints: list[int], o_M_G: pin.SE3) -> tuple[int, pin.SE3]:
+    """The joint a grasp frame rides on and its placement there: a beam's node nearest the grasp point."""
+    if not isinstance(obj, Beam):
+        return joints[0], o_M_G
+    offsets = obj.node_offsets()
+    k = int(np.argmin(np.linalg.norm(offsets - o_M_G.translation, axis=1)))
+    return joints[k], pin.SE3(np.eye(3), -offsets[k]) * o_M_G
+
+
+def _beam_elements(model: pin.Model, beam: Beam, joints: list[int]) -> list[Link]:
+    """The beam elements as links: T on node k where node k + 1 rests, G on node k + 1."""
+    h = beam.element_length
+    out = []
+    for k in range(beam.n_elements):
+        name = f"{beam.name}/element{k}"
+        t_id = model.addFrame(
+            pin.Frame(f"{name}/T", joints[k], pin.SE3(np.eye(3), np.array([h, 0.0, 0.0])), pin.FrameType.OP_FRAME)
+        )
+        g_id = model.addFrame(pin.Frame(f"{name}/G", joints[k + 1], pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        out.append(Link(name, None, int(t_id), int(g_id), beam.element(k), "se3"))
+    return out

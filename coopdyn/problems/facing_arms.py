@@ -11,6 +11,7 @@ from .. import _validate
 from ..errors import SceneError
 from ..model.arm import Arm
 from ..model.body import RigidObject
+from ..model.elements.beam import Section
 from ..model.interconnection import Interconnection, diagonal
 from ..model.scene import Scene
 
@@ -98,3 +99,46 @@ def object_start(scene: Scene) -> np.ndarray:
     data = scene.model.createData()
     pin.framesForwardKinematics(scene.model, data, scene.q0)
     return data.oMf[scene.object_frame].translation.copy()
+
+
+def held_beam(
+    robot: str = "panda",
+    *,
+    length: float = 0.8,
+    section: Section | None = None,
+    n_elements: int = 8,
+    beam_damping: float = 1e-4,
+    stiffness: float = 1e4,
+    rotational_ratio: float = 0.01,
+    damping: float = 0.0,
+    gravity: Any = (0.0, 0.0, -9.81),
+) -> Scene:
+    """Two arms facing each other holding a flexible beam by its ends (:func:`facing_arms` with
+    the box replaced by a :class:`~coopdyn.model.beam.Beam` along world y).
+
+    Args:
+        robot: as in :func:`facing_arms`; the bases stand ``length + 0.8`` m apart.
+        length: beam length [m]. section: default a 30 × 3 mm aluminium strip (E = 70 GPa,
+            2700 kg/m³), flat: it bends in the vertical plane (first free–free mode ≈ 24 Hz).
+        n_elements: beam elements. beam_damping: stiffness-proportional β [s].
+        stiffness, rotational_ratio, damping, gravity: the grasps, as in :func:`facing_arms`.
+    """
+    from ..model.beam import Beam
+
+    section = Section.rectangle(0.03, 0.003, E=70e9, rho=2700.0) if section is None else section
+    length = _validate.positive(length, "length", "m")
+    base = facing_arms(
+        robot,
+        box_mass=1.0,
+        box_size=(0.03, length, 0.003),
+        separation=length + 0.8,
+        stiffness=stiffness,
+        rotational_ratio=rotational_ratio,
+        damping=damping,
+        gravity=gravity,
+    )
+    h = float(object_start(base)[2])
+    beam = Beam(
+        length, section, n_elements, pose=pin.SE3(pin.utils.rotate("z", np.pi / 2), np.array([0.0, 0.0, h])), damping=beam_damping
+    )
+    return Scene(base.arm_specs, beam, base.interconnection_specs, gravity=gravity)

@@ -13,6 +13,7 @@ from typing import NamedTuple
 from ...errors import SceneError, did_you_mean
 from .ball_spring import BallSpring
 from .base import Element, ElementEval, SpringDamper
+from .beam import BeamElement, BeamSegment, Section
 from .rigid import RigidGrasp, RigidPoint
 from .se3_spring import SE3Spring
 
@@ -28,6 +29,7 @@ class ElementType(NamedTuple):
 ELEMENTS: dict[str, ElementType] = {
     "se3": ElementType(SE3Spring, "se3"),
     "ball": ElementType(BallSpring, "ball"),
+    "beam": ElementType(BeamElement, "se3"),  # the SE(3) law with the beam's stiffness
     "rigid": ElementType(RigidGrasp, None),
     "rigid_point": ElementType(RigidPoint, None),
 }
@@ -59,12 +61,15 @@ def lookup(kind: str | type[Element]) -> ElementType:
 __all__ = [
     "ELEMENTS",
     "BallSpring",
+    "BeamElement",
+    "BeamSegment",
     "Element",
     "ElementEval",
     "ElementType",
     "RigidGrasp",
     "RigidPoint",
     "SE3Spring",
+    "Section",
     "SpringDamper",
     "lookup",
     "register",

@@ -1,0 +1,156 @@
+"""``coopdyn.advise_model``: which model of the elastic system a scene needs (docs/physics.md).
+
+The book's bandwidth argument: the drives excite the elastic system only up to the control
+bandwidth (parts of a hertz to ~15 Hz), so an elastic mode far above it follows quasi-statically.
+:func:`advise_model` computes the lowest modes of the object itself (a beam's internal modes;
+none for a rigid object) and of the grasps (the quasi-static system: the object as one rigid
+body on its condensed interconnections), compares them with the bandwidth, and measures on the
+spot what each of the three models costs:
+
+* ``"rigid"`` — :func:`coopdyn.rigid_limit`: grasps as constraints; the internal force is the
+  solver's least-norm choice, not the physical one;
+* ``"quasi-static"`` — :func:`coopdyn.quasi_static`: one rigid body on elastic grasps (the
+  object's own flexibility condensed into them);
+* ``"elastic"`` — the full scene: every node of an elastic object a body.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from . import _validate
+from .dynamics import Dynamics
+from .errors import SimulationError
+from .model.beam import Beam
+from .model.limits import quasi_static, rigid_limit
+from .model.scene import Scene
+from .simulate import simulate
+
+MODE_SEPARATION = 5.0  #: a mode this many times above the bandwidth is taken as not excited
+MODELS = ("rigid", "quasi-static", "elastic")
+EXPLICIT_LIMIT = 2.785  #: rk4's stability limit on |λ|·dt (imaginary axis)
+
+
+@dataclass(frozen=True)
+class ModelCost:
+    """What one model of the scene costs."""
+
+    model: str  #: "rigid", "quasi-static" or "elastic"
+    states: int  #: nq + nv
+    lowest_mode_hz: float | None  #: its lowest elastic natural frequency [Hz] (None: rigid)
+    fastest_mode_hz: float | None  #: its highest [Hz]
+    max_dt_rk4: float | None  #: rk4's stability limit 2.785/ω_max [s]
+    integrator: str  #: what the measurement ran
+    cpu_per_second: float  #: CPU time per simulated second at the chosen dt [s/s], no controller
+
+
+@dataclass(frozen=True)
+class ModelAdvice:
+    """The result of :func:`advise_model`."""
+
+    recommendation: str  #: "rigid", "quasi-static" or "elastic"
+    bandwidth: float  #: the control bandwidth [Hz]
+    dt: float  #: the step the costs were measured at [s]
+    object_mode_hz: float | None  #: the object's lowest internal mode [Hz] (None: rigid object)
+    grasp_mode_hz: float  #: the grasps' lowest mode in the quasi-static system [Hz]
+    reason: str
+    costs: tuple[ModelCost, ...]
+
+    def __str__(self) -> str:
+        rows = [
+            f"model advice at a control bandwidth of {self.bandwidth:g} Hz: {self.recommendation}",
+            f"  {self.reason}",
+            f"  {'model':<13}{'states':>7}{'lowest mode':>14}{'fastest mode':>15}{'rk4 dt limit':>14}"
+            f"{'CPU / sim. s':>14}  (measured with, dt = {self.dt:g} s)",
+        ]
+        for c in self.costs:
+            lo = "—" if c.lowest_mode_hz is None else f"{c.lowest_mode_hz:.4g} Hz"
+            hi = "—" if c.fastest_mode_hz is None else f"{c.fastest_mode_hz:.4g} Hz"
+            lim = "—" if c.max_dt_rk4 is None else f"{c.max_dt_rk4 * 1e3:.3g} ms"
+            rows.append(f"  {c.model:<13}{c.states:>7}{lo:>14}{hi:>15}{lim:>14}{c.cpu_per_second:>12.3g} s  ({c.integrator})")
+        return "\n".join(rows)
+
+
+def _modes(scene: Scene) -> np.ndarray:
+    """Natural frequencies [rad/s] of the scene linearised at q0 (interconnections and object
+    elements only, no controller), the zero (mechanism and rigid-body) modes left out."""
+    M, K, _ = Dynamics(scene).stiffness(scene.q0, scene.v0)
+    w = scipy.linalg.eigh(K, M, eigvals_only=True)
+    w = np.sqrt(np.clip(w, 0.0, None))
+    return w[w > 1e-6 * max(w.max(), 1.0)]
+
+
+def _object_modes(beam: Beam) -> np.ndarray:
+    w = scipy.linalg.eigh(beam.stiffness_matrix(), beam.mass_matrix(), eigvals_only=True)
+    w = np.sqrt(np.clip(w, 0.0, None))
+    return w[6:]  # the six rigid-body modes first
+
+
+def _cost(name: str, scene: Scene, dt: float, t_measure: float) -> ModelCost:
+    integrator = "rk4" if name == "rigid" else "implicit_euler"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a measurement, not a run to trust
+        start = time.process_time()
+        simulate(scene, t_measure, integrator=integrator, dt=dt, save_every=max(1, round(t_measure / dt)), energy_check="off")
+        cpu = (time.process_time() - start) / t_measure
+    omega = np.zeros(0) if name == "rigid" else _modes(scene)
+    return ModelCost(
+        name,
+        scene.nq + scene.nv,
+        float(omega.min() / (2 * np.pi)) if omega.size else None,
+        float(omega.max() / (2 * np.pi)) if omega.size else None,
+        float(EXPLICIT_LIMIT / omega.max()) if omega.size else None,
+        integrator,
+        cpu,
+    )
+
+
+def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measure: float = 0.05) -> ModelAdvice:
+    """Which model the scene needs at a control ``bandwidth`` [Hz], and what each one costs.
+
+    The object's lowest internal mode below ``MODE_SEPARATION × bandwidth``: the drives excite
+    it — ``"elastic"``. Else the grasps' lowest mode (the quasi-static system) below it: the
+    grasp compliance matters — ``"quasi-static"``. Else ``"rigid"`` is enough for the motion.
+    The costs are measured by simulating each model for ``measure`` seconds at ``dt`` [s]
+    without a controller (rk4 for the rigid limit, implicit Euler for the others).
+    """
+    if not isinstance(scene, Scene):
+        raise SimulationError(f"advise_model takes a coopdyn.Scene, got {type(scene).__name__}")
+    bandwidth = _validate.positive(bandwidth, "bandwidth", "Hz", SimulationError)
+    dt = _validate.positive(dt, "dt", "s", SimulationError)
+    measure = _validate.positive(measure, "measure", "s", SimulationError)
+    qs = quasi_static(scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the preloads it drops are reported by rigid_limit itself elsewhere
+        rigid = rigid_limit(qs)
+    object_hz = float(_object_modes(scene.object).min() / (2 * np.pi)) if isinstance(scene.object, Beam) else None
+    grasp = _modes(qs)
+    grasp_hz = float(grasp.min() / (2 * np.pi)) if grasp.size else float("inf")
+    limit = MODE_SEPARATION * bandwidth
+    if object_hz is not None and object_hz < limit:
+        choice = "elastic"
+        reason = f"the object's own lowest mode, {object_hz:.3g} Hz, is within {MODE_SEPARATION:g}× the bandwidth ({limit:g} Hz)"
+    elif grasp_hz < limit:
+        choice = "quasi-static"
+        what = f"the object's modes ({object_hz:.3g} Hz and up) follow quasi-statically; " if object_hz is not None else ""
+        reason = f"{what}the grasps' lowest mode, {grasp_hz:.3g} Hz, is within {MODE_SEPARATION:g}× the bandwidth ({limit:g} Hz)"
+    else:
+        choice = "rigid"
+        reason = (
+            f"every elastic mode is above {MODE_SEPARATION:g}× the bandwidth ({limit:g} Hz; grasps from {grasp_hz:.3g} Hz): the "
+            "rigid model gives the motion, but its internal force is the solver's least-norm choice — use the quasi-static "
+            "model when the squeeze matters"
+        )
+    models = {"rigid": rigid, "quasi-static": qs, "elastic": scene}
+    if not isinstance(scene.object, Beam):
+        models.pop("elastic")  # a rigid object's elastic system is its massless grasps: quasi-static already
+    costs = tuple(_cost(name, s, dt, measure) for name, s in models.items())
+    return ModelAdvice(choice, bandwidth, dt, object_hz, grasp_hz, reason, costs)
+
+
+__all__ = ["MODELS", "MODE_SEPARATION", "ModelAdvice", "ModelCost", "advise_model"]
