@@ -7,6 +7,7 @@ from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+import pytest
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -49,3 +50,18 @@ def test_cli_reports_coopdyn_errors(capsys: object) -> None:
     from coopdyn.__main__ import main
 
     assert main(["book", "--out", "unused", "--dt", "-1"]) == 2
+
+
+def test_force_uncertainty_example(tmp_path: Path) -> None:
+    """The squeeze follows the series-spring law within the gravity coupling (1 mm, K1 = K2: 5 N)."""
+    module = _load("force_uncertainty")
+    ERRORS, RATIOS = module.ERRORS, module.RATIOS
+    elastic = module.main(str(tmp_path / "fu.png"))
+    assert (tmp_path / "fu.png").stat().st_size > 10_000
+    k = int(np.argmin(np.abs(RATIOS - 1.0)))
+    assert -elastic[ERRORS[1]][k, 0, 0] == pytest.approx(5.0, rel=1e-3)
+
+
+def test_flexible_beam_example(tmp_path: Path) -> None:
+    res = _load("flexible_beam").main(0.5, str(tmp_path / "beam"), html=False)
+    assert res.status == "completed" and (tmp_path / "beam.png").exists()
