@@ -76,19 +76,17 @@ class ModelAdvice:
         return "\n".join(rows)
 
 
-def _modes(scene: Scene) -> np.ndarray:
-    """Natural frequencies [rad/s] of the scene linearised at q0 (interconnections and object
-    elements only, no controller), the zero (mechanism and rigid-body) modes left out."""
-    M, K, _ = Dynamics(scene).stiffness(scene.q0, scene.v0)
-    w = scipy.linalg.eigh(K, M, eigvals_only=True)
-    w = np.sqrt(np.clip(w, 0.0, None))
+def _frequencies(K: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Natural frequencies [rad/s] of (M, K), the zero (mechanism and rigid-body) modes left out."""
+    w = np.sqrt(np.clip(scipy.linalg.eigh(K, M, eigvals_only=True), 0.0, None))
     return w[w > 1e-6 * max(w.max(), 1.0)]
 
 
-def _object_modes(beam: Beam) -> np.ndarray:
-    w = scipy.linalg.eigh(beam.stiffness_matrix(), beam.mass_matrix(), eigvals_only=True)
-    w = np.sqrt(np.clip(w, 0.0, None))
-    return w[6:]  # the six rigid-body modes first
+def _modes(scene: Scene) -> np.ndarray:
+    """The scene's natural frequencies [rad/s], linearised at q0 (interconnections and object
+    elements only, no controller)."""
+    M, K, _ = Dynamics(scene).stiffness(scene.q0, scene.v0)
+    return _frequencies(K, M)
 
 
 def _cost(name: str, scene: Scene, dt: float, t_measure: float) -> ModelCost:
@@ -128,7 +126,10 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the preloads it drops are reported by rigid_limit itself elsewhere
         rigid = rigid_limit(qs)
-    object_hz = float(_object_modes(scene.object).min() / (2 * np.pi)) if isinstance(scene.object, Beam) else None
+    beam = scene.object
+    object_hz = (
+        float(_frequencies(beam.stiffness_matrix(), beam.mass_matrix()).min() / (2 * np.pi)) if isinstance(beam, Beam) else None
+    )
     grasp = _modes(qs)
     grasp_hz = float(grasp.min() / (2 * np.pi)) if grasp.size else float("inf")
     limit = MODE_SEPARATION * bandwidth

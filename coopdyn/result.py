@@ -91,8 +91,7 @@ class Result:
         """How far the rigid grasps (:func:`coopdyn.rigid_limit`) drifted from their constraints:
         the norms of the drift's translation (n, R) [m] and rotation (n, R) [rad], one column per
         rigid interconnection in scene order (R = 0 for an elastic scene)."""
-        rigid = [i for i, lk in enumerate(self.scene.links) if lk.element.constraint is not None]
-        d = self.readouts.deformation[:, rigid]
+        d = self.readouts.deformation[:, list(self.scene.constraints)]
         return np.linalg.norm(d[..., :3], axis=-1), np.linalg.norm(d[..., 3:], axis=-1)
 
     def elastic_energy(self, i: int) -> np.ndarray:

@@ -146,3 +146,11 @@ def test_beam_element_refuses_what_is_not_a_beam() -> None:
     with pytest.raises(cd.SceneError, match="E"):
         cd.Section.circle(0.01, E=-1.0, rho=1.0)
     assert tip_stiffness(cd.Section.circle(0.01, **STEEL), 1.0).shape == (6, 6)
+    with pytest.raises(cd.SceneError, match="n_elements must be an integer"):
+        cd.Beam(1.0, cd.Section.circle(0.01, **STEEL), 0)
+    with pytest.raises(cd.SceneError, match="more than 500"):
+        cd.Beam(1.0, cd.Section.circle(0.01, **STEEL), 10**7)
+    with pytest.raises(cd.SceneError, match="E must be finite"):
+        cd.Section(np.inf, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    with pytest.raises(cd.SceneError, match="Poisson"):
+        cd.Section.rectangle(0.01, 0.01, E=1e9, rho=1.0, nu=0.7)

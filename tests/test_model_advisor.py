@@ -64,3 +64,5 @@ def test_stiff_grasps_on_a_rigid_box_need_only_the_rigid_model() -> None:
     assert advice.object_mode_hz is None
     with pytest.raises(cd.SimulationError, match="bandwidth"):
         cd.advise_model(cd.Scene([], box, links), bandwidth=-1.0)
+    with pytest.raises(cd.SimulationError, match="bandwidth must be finite"):
+        cd.advise_model(cd.Scene([], box, links), bandwidth=float("nan"))

@@ -141,5 +141,7 @@ def test_rigid_limit_refusals() -> None:
         cd.Dynamics(rigid, backend="native")
     with pytest.raises(cd.SceneError, match="baumgarte"):
         cd.rigid_limit(linear_book(), baumgarte=(-1.0, 2.0))
+    with pytest.raises(cd.SceneError, match="numeric"):
+        cd.rigid_limit(linear_book(), baumgarte="stiff")
     with pytest.raises(cd.SceneError, match="rigid_limit takes"):
         cd.rigid_limit("scene")  # type: ignore[arg-type]

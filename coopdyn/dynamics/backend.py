@@ -72,7 +72,7 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
             raise BackendError(f"the native backend was requested but {why}")
         _warn_once(why)
         return "python"
-    if scene is not None and any(lk.element.constraint is not None for lk in scene.links):
+    if scene is not None and scene.constraints:
         if name == "native":  # the rigid limit: Pinocchio's constraintDynamics, called from Python
             raise BackendError(
                 "a scene with rigid grasps runs on the Python dynamics (constraints); use backend='python' or 'auto'"

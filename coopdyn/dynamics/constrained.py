@@ -39,7 +39,7 @@ _TYPES = {"6D": pin.ContactType.CONTACT_6D, "3D": pin.ContactType.CONTACT_3D}
 
 def has_constraints(scene: Scene) -> bool:
     """Whether a scene has rigid (constraint) interconnections."""
-    return any(lk.element.constraint is not None for lk in scene.links)
+    return bool(scene.constraints)
 
 
 def check_integrator(scene: Scene, method: Any) -> None:
@@ -60,7 +60,7 @@ class ConstrainedDynamics(PythonDynamics):
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         super().__init__(scene, backend)
         model = self.model
-        self._constrained = [i for i, lk in enumerate(scene.links) if lk.element.constraint is not None]
+        self._constrained = scene.constraints
         self._cmodels = pin.StdVec_RigidConstraintModel()
         self._cdatas = pin.StdVec_RigidConstraintData()
         for i in self._constrained:
@@ -107,12 +107,11 @@ class ConstrainedDynamics(PythonDynamics):
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
     ) -> np.ndarray:
         """Every rigid grasp's wrench on the object at G, in G axes (n_rigid, 6) [N, N·m], at
-        (q, v) under the arm torques ``tau`` (zero-padded for a point grasp)."""
+        (q, v) under the arm torques ``tau`` (a point grasp's moment is zero)."""
         self.acceleration(q, v, tau, object_wrench)
         out = np.zeros((len(self._constrained), 6))
         for k, cd in enumerate(self._cdatas):
-            f = np.asarray(cd.contact_force.vector if hasattr(cd.contact_force, "vector") else cd.contact_force)
-            out[k, : f.size] = f
+            out[k] = cd.contact_force.vector  # a point grasp's has no moment
         return out
 
     def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:

@@ -86,7 +86,7 @@ class Dynamics:
         if cls is not Dynamics:
             return super().__new__(cls)
         name = _backend.resolve(backend, scene)
-        if any(lk.element.constraint is not None for lk in scene.links):  # the rigid limit
+        if scene.constraints:  # the rigid limit
             from .constrained import ConstrainedDynamics
 
             return super().__new__(ConstrainedDynamics)

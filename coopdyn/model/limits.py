@@ -117,12 +117,11 @@ def quasi_static(scene: Scene) -> Scene:
     nodes = [node_of[model.frames[lk.grasp_frame].parentJoint] for lk in scene.links]
     ref = beam.reference_node
     free = [k for k in range(beam.n_nodes) if k != ref]
-    dof = lambda ks: np.concatenate([np.arange(6 * k, 6 * k + 6) for k in ks])  # noqa: E731
     K = beam.stiffness_matrix()
     held = sorted(set(nodes) - {ref})
-    inner = [k for k in free if k not in held]
-    a, b = dof(held) if held else np.zeros(0, int), dof(inner) if inner else np.zeros(0, int)
-    K_held = K[np.ix_(a, a)] - (K[np.ix_(a, b)] @ np.linalg.solve(K[np.ix_(b, b)], K[np.ix_(b, a)]) if b.size else 0.0)
+    a = (6 * np.array(held, dtype=int)[:, None] + np.arange(6)).ravel()  # their coordinates
+    b = (6 * np.array([k for k in free if k not in held], dtype=int)[:, None] + np.arange(6)).ravel()
+    K_held = K[np.ix_(a, a)] - K[np.ix_(a, b)] @ np.linalg.solve(K[np.ix_(b, b)], K[np.ix_(b, a)])
     for i, j in ((i, j) for i in range(len(held)) for j in range(len(held)) if i != j):
         if np.abs(K_held[6 * i : 6 * i + 6, 6 * j : 6 * j + 6]).max() > 1e-9 * np.abs(K_held).max():
             raise SceneError(

@@ -70,6 +70,7 @@ class Scene:
         arms: one :class:`ArmInfo` per arm. ``links``: one :class:`Link` per interconnection.
         elements: the links, then the object's own elements (a :class:`~coopdyn.model.beam.Beam`'s
             beam elements; none for a rigid object): everything the dynamics evaluate.
+        constraints: indices of the links that are rigid grasps (:func:`coopdyn.rigid_limit`).
         arm_specs, interconnection_specs, object: the descriptions the scene was built from.
         loaded_arms: the arms as loaded (:class:`coopdyn.model.arm.LoadedArm`), for display.
         q0, v0: the initial state, (nq,) and (nv,).
@@ -85,6 +86,7 @@ class Scene:
     arms: tuple[ArmInfo, ...]
     links: tuple[Link, ...]
     elements: tuple[Link, ...]
+    constraints: tuple[int, ...]
     arm_specs: tuple[Arm, ...]
     interconnection_specs: tuple[Interconnection, ...]
     loaded_arms: tuple[LoadedArm, ...]
@@ -201,8 +203,7 @@ class Scene:
             links = [dataclasses.replace(lk, name=f"{lk.name}{k}") for k, lk in enumerate(links)]
 
         internal = _beam_elements(model, obj, node_joints) if isinstance(obj, Beam) else []
-        first_q = model.joints[node_joints[0]]
-        last = model.joints[node_joints[-1]]
+        j_first, j_last = model.joints[node_joints[0]], model.joints[node_joints[-1]]
         actuated = np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
         first, n = int(actuated[0]) if actuated.size else 0, actuated.size
         contiguous = n > 0 and np.array_equal(actuated, np.arange(first, first + n))
@@ -217,8 +218,9 @@ class Scene:
         set_(self, "object_joint", int(obj_joint))
         set_(self, "object_frame", int(o_frame))
         set_(self, "elements", tuple(links) + tuple(internal))
-        set_(self, "object_q", _frozen(np.arange(first_q.idx_q, last.idx_q + last.nq)))
-        set_(self, "object_v", _frozen(np.arange(model.joints[node_joints[0]].idx_v, last.idx_v + last.nv)))
+        set_(self, "constraints", tuple(i for i, lk in enumerate(links) if lk.element.constraint is not None))
+        set_(self, "object_q", _frozen(np.arange(j_first.idx_q, j_last.idx_q + j_last.nq)))
+        set_(self, "object_v", _frozen(np.arange(j_first.idx_v, j_last.idx_v + j_last.nv)))
         set_(self, "actuated", _frozen(actuated))
         set_(self, "actuated_index", slice(first, first + n) if contiguous else self.actuated)
         set_(self, "q0", _frozen(q0))
