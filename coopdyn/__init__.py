@@ -1,6 +1,7 @@
 """coopdyn: dynamics and control of multi-arm cooperating robots with elastic interconnections."""
 
 from . import control, cooperative, integrators, reference, scenes
+from ._version import __version__
 from .advisor import ModelAdvice, advise_model
 from .bench.stability import measure_stable_dt
 from .dynamics import Dynamics, Energy, backend
@@ -64,6 +65,7 @@ __all__ = [
     "SimulationInterrupted",
     "StepBudgetError",
     "ViewerError",
+    "__version__",
     "advise",
     "advise_model",
     "axial",
@@ -79,4 +81,3 @@ __all__ = [
     "scenes",
     "simulate",
 ]
-__version__ = "0.1.0"

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -57,15 +59,29 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _view(args: argparse.Namespace) -> int:
-    from .io.scenefile import load, load_result
+    from .io.scenefile import load, load_result, open_result
     from .viz.viewer import export_html, view
 
-    loaded = load(args.scene_file)
-    result = load_result(loaded, args.result)
+    if args.result is not None:  # a scene file and a trajectory of its scene, named apart
+        result = load_result(load(args.path), args.result)
+    else:
+        result = open_result(args.path).result
     if args.html:
-        print(f"wrote {export_html(result, args.html)}")
+        path = export_html(result, args.html, fps=args.fps, meshes=args.meshes or "collision")
+        print(f"wrote {path} ({path.stat().st_size / 1e6:.3g} MB)")
         return 0
-    view(result, loops=args.loops, host=args.host)
+    view(result, fps=args.fps, loops=args.loops, host=args.host, meshes=args.meshes or "visual")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from .io.scenefile import open_result
+    from .viz.plotting import result_figure
+
+    saved = open_result(args.path)
+    out = Path(args.out) if args.out else saved.path.with_name("plot.png")
+    result_figure(saved.result, saved.task, out)
+    print(f"wrote {out}")
     return 0
 
 
@@ -77,46 +93,135 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_saved(exc: BaseException) -> None:
-    """The files a failed run saved (set as ``saved`` by the demo and scene-file runs)."""
-    for path in getattr(exc, "saved", ()):
-        print(f"  wrote {path} (what the run had)")
+#: what an error says to a Python caller, and what the command line says instead
+_CLI_WORDS = (
+    (re.compile(r"[.;]? *[Tt]he trajectory (so far|up to t = \S+ s) is in (this error's|this exception's)? ?\.result\.?"), "."),
+    (
+        re.compile(r"pass max_steps=None( \(or a larger number\))?", re.IGNORECASE),
+        "give --max-steps 0 (no limit) or a larger number",
+    ),
+)
+
+
+def _cli_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int, line: str | None = None) -> str:
+    """A warning as the command line prints it: what happened, without a line of coopdyn's source."""
+    del filename, lineno, line
+    return f"coopdyn: warning ({category.__name__}): {message}\n"
+
+
+def _cli_message(exc: BaseException) -> str:
+    """The error's message in command-line terms: where the trajectory was saved (not a Python
+    attribute), command-line options instead of keyword arguments."""
+    text = str(exc)
+    for pattern, words in _CLI_WORDS:
+        text = pattern.sub(words, text)
+    text = text.replace("..", ".")
+    saved = [Path(p) for p in getattr(exc, "saved", ())]
+    if saved:
+        folder = saved[0].parent
+        text += f"\nThe run so far was saved to {folder}/ ({', '.join(p.name for p in saved)}); `coopdyn view {folder}` plays it."
+    return text
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
-    parser = argparse.ArgumentParser(prog="coopdyn", description="Multi-arm cooperating robots with elastic interconnections.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="two Pandas grip, lift and oscillate a box (the main job)")
+    from . import __version__
+    from .integrators import INTEGRATORS
+
+    methods = sorted(INTEGRATORS)
+    parser = argparse.ArgumentParser(
+        prog="coopdyn",
+        description="Multi-arm cooperating robots holding one object through elastic interconnections.",
+        epilog="`coopdyn COMMAND --help` describes a command. Exit codes: 0 done, 2 an error, 130 interrupted (Ctrl-C).",
+    )
+    parser.add_argument("--version", action="version", version=f"coopdyn {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, summary: str, description: str) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=summary, description=description)
+
+    def integrator_option(p: argparse.ArgumentParser, default: str) -> None:
+        p.add_argument(
+            "--integrator",
+            default=default,
+            choices=methods,
+            metavar="NAME",
+            help=f"one of {', '.join(methods)} (default: {default})",
+        )
+
+    demo = command(
+        "demo",
+        "two Pandas grip, lift and oscillate a box (the main job)",
+        "Two Franka Pandas grip a 2 kg box through 1e4 N/m interconnections, lift it 10 cm, oscillate it sideways and "
+        "hold it. Prints the tracking error, internal force and real-time factor; writes trajectory.npz/.csv, demo.png "
+        "and demo.html (an animation that plays offline in a browser) to the output folder.",
+    )
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     demo.add_argument("--t-final", type=float, default=5.0, help="duration [s] (default: 5)")
     demo.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default: 1e-3)")
-    demo.add_argument("--integrator", default="implicit_euler", help="integrator name (default: implicit_euler)")
+    integrator_option(demo, "implicit_euler")
     demo.add_argument("--no-html", action="store_true", help="skip the HTML animation")
     demo.set_defaults(func=_demo)
-    simulate = sub.add_parser("simulate", help="run a scene file (see examples/scenes/*.toml)")
+    simulate = command(
+        "simulate",
+        "run a scene file (see examples/scenes/*.toml)",
+        "Run the scene, controller, task and integrator a TOML scene file describes (format: docs/scene-files.md) and "
+        "write its outputs (trajectory, plot, animation, a copy of the file) to its [output] folder.",
+    )
     simulate.add_argument("scene_file", help="a .toml scene file")
     simulate.add_argument("--out", default=None, help="output folder (default: the file's [output] folder)")
     simulate.add_argument("--max-steps", type=int, default=2 * 10**6, help="refuse longer runs (default: 2000000; 0: no limit)")
     simulate.set_defaults(func=_simulate)
-    view = sub.add_parser("view", help="play a scene file's saved result in a live meshcat viewer")
-    view.add_argument("scene_file", help="the .toml scene file the result came from")
-    view.add_argument("--result", default=None, help="trajectory .npz (default: <output folder>/trajectory.npz)")
+    view = command(
+        "view",
+        "play a saved result in meshcat (live, or as an HTML file)",
+        "Play a saved result in a live meshcat viewer in the browser, or write it as a standalone HTML animation. "
+        "PATH is a result file (trajectory.npz), an output folder holding one (from `coopdyn simulate` or "
+        "`coopdyn demo`), or a scene file (the result in its [output] folder).",
+    )
+    view.add_argument("path", metavar="PATH", help="trajectory.npz, an output folder, or a .toml scene file")
+    view.add_argument("--result", default=None, help="with a scene file: the trajectory .npz to play (default: its output's)")
     view.add_argument("--loops", type=int, default=None, help="play this many times (default: until Ctrl-C)")
     view.add_argument("--html", default=None, help="write a standalone HTML animation to this path instead")
+    view.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation (default: 30)")
+    view.add_argument(
+        "--meshes",
+        choices=("visual", "collision"),
+        default=None,
+        help="the URDF geometry to draw (default: visual live, collision in --html: smaller files)",
+    )
     view.add_argument(
         "--host",
         default="127.0.0.1",
         help="address the viewer serves on (default 127.0.0.1: this machine only; others are warned about)",
     )
     view.set_defaults(func=_view)
-    book = sub.add_parser("book", help="the book's linear cooperative system vs its exact solution (Figure 11)")
+    plot = command(
+        "plot",
+        "plot a saved result (PNG)",
+        "Draw the motion and the forces of a saved result: PATH as for `coopdyn view`. With a scene file (or the copy "
+        "beside the result) the task's reference is drawn too.",
+    )
+    plot.add_argument("path", metavar="PATH", help="trajectory.npz, an output folder, or a .toml scene file")
+    plot.add_argument("--out", default=None, help="the PNG to write (default: plot.png beside the result)")
+    plot.set_defaults(func=_plot)
+    book = command(
+        "book",
+        "the book's linear cooperative system vs its exact solution (Figure 11)",
+        "Simulate the book's linear 1-DOF cooperative system (two drives, two springs, one object) and compare it with "
+        "its exact solution; writes the book's Figure 11 with the deviation.",
+    )
     book.add_argument("--out", default="out", help="output folder (default: out)")
     book.add_argument("--dt", type=float, default=5e-4, help="time step [s] (default: 5e-4)")
     book.add_argument("--t-final", type=float, default=3.0, help="duration [s] (default: 3)")
-    book.add_argument("--integrator", default="rk4", help="integrator name (default: rk4)")
+    integrator_option(book, "rk4")
     book.set_defaults(func=_book)
-    bench = sub.add_parser("bench", help="work–precision and stability benchmarks (tables, CSV, PNG)")
+    bench = command(
+        "bench",
+        "work–precision and stability benchmarks (tables, CSV, PNG)",
+        "CPU time against accuracy for every integrator on the book system and the Panda scene, and where each method "
+        "loses stability; --peers compares with MuJoCo (and Exudyn when installed) in the same run.",
+    )
     bench.add_argument("--out", default="out/bench", help="output folder (default: out/bench)")
     bench.add_argument("--quick", action="store_true", help="few points, short runs, one repetition (CI)")
     bench.add_argument(
@@ -126,19 +231,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     t0 = time.perf_counter()
+    formatwarning = warnings.formatwarning
+    warnings.formatwarning = _cli_warning  # printed warnings speak CLI (restored below: main() is also called in-process)
     try:
         code = int(args.func(args))
     except CoopdynError as exc:
-        _print_saved(exc)
-        print(f"coopdyn: error: {exc}", file=sys.stderr)
+        print(f"coopdyn: error: {_cli_message(exc)}\n(exit code 2)", file=sys.stderr)
         return 2
     except SimulationInterrupted as exc:
-        _print_saved(exc)
-        print(f"coopdyn: {exc}", file=sys.stderr)
+        print(f"coopdyn: {_cli_message(exc)}\n(exit code 130)", file=sys.stderr)
         return 130
     except KeyboardInterrupt as exc:
         print(f"coopdyn: interrupted{f' ({exc})' if str(exc) else ''}", file=sys.stderr)
         return 130
+    finally:
+        warnings.formatwarning = formatwarning
     print(f"done in {time.perf_counter() - t0:.1f} s")
     return code
 

@@ -141,13 +141,16 @@ def se3(value: Any, name: str) -> pin.SE3:
 
 
 def spd6(value: Any, name: str, unit: str) -> np.ndarray:
-    """A symmetric positive semi-definite 6x6 matrix from a 6x6 array or a 6-vector diagonal."""
+    """A symmetric positive semi-definite 6x6 matrix from a 6x6 array, a 6-vector diagonal or a
+    scalar (the same value on all six axes)."""
     arr = finite_array(value, name)
+    if arr.shape == ():
+        arr = float(arr) * np.eye(6)
     if arr.shape == (6,):
         arr = np.diag(arr)
     if arr.shape != (6, 6):
         raise SceneError(
-            f"{name} must be a 6x6 matrix or a 6-vector diagonal [{unit}] "
+            f"{name} must be a 6x6 matrix, a 6-vector diagonal or a scalar [{unit}] "
             f"(order: linear x, y, z, then angular x, y, z), got shape {arr.shape}"
         )
     return symmetric_psd(arr, name)
@@ -161,7 +164,7 @@ def symmetric_psd(arr: np.ndarray, name: str) -> np.ndarray:
     unit = arr / scale
     asym = float(np.max(np.abs(unit - unit.T)))
     if asym > 1e-9:
-        raise SceneError(f"{name} must be symmetric; max |{name} − {name}ᵀ| = {asym * scale:.3g}")
+        raise SceneError(f"{name} must be symmetric; its largest asymmetry max |M − Mᵀ| is {asym * scale:.3g}")
     unit = 0.5 * (unit + unit.T)
     smallest = float(np.linalg.eigvalsh(unit)[0])
     if smallest < -1e-9:

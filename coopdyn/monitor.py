@@ -5,10 +5,9 @@ integrator is unstable or too coarse for the scene — even when the trajectory 
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
+from . import _progress
 from .closed_loop import System
 from .errors import EnergyBalanceError, EnergyBalanceWarning
 
@@ -90,7 +89,9 @@ class EnergyMonitor:
             msg = violation_message(t, e.total - self.E0, self.work, excess, self.rtol, self.scale)
             if self.mode == "raise":
                 raise EnergyBalanceError(msg)
-            warnings.warn(msg, EnergyBalanceWarning, stacklevel=5)  # _check, after_step or finish, the loop, simulate, its caller
+            _progress.warn(
+                msg, EnergyBalanceWarning, stacklevel=5
+            )  # _check, after_step or finish, the loop, simulate, its caller
 
 
 def violation_message(t: float, growth: float, work: float, excess: float, rtol: float, scale: float) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 from collections.abc import Callable
@@ -16,10 +17,14 @@ import pinocchio as pin
 
 from ._validate import finite_array
 from ._validate import path as as_path
+from ._version import __version__
 from .dynamics import Dynamics, Energy
 from .dynamics.dynamics import Readouts
-from .errors import OutputError, SimulationError
+from .errors import CoopdynError, OutputError, SimulationError
+from .model.description import build, describe
 from .model.scene import Scene
+
+RESULT_FORMAT = "coopdyn.result/1"  #: what a saved result's ``meta`` says it is
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,32 +153,53 @@ class Result:
 
         return np.array([squeeze_force(p, w) for p, w in zip(self.grasp_points(), self.wrenches(), strict=True)])
 
+    def __repr__(self) -> str:
+        duration = float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+        return (
+            f"Result({self.status}, {len(self.t)} samples over {duration:g} s, {self.integrator} at dt = {self.dt:g} s, "
+            f"CPU {self.cpu_time:.3g} s, scene: {len(self.scene.arms)} arms, {len(self.scene.links)} interconnections)"
+        )
+
+    def columns(self) -> dict[str, list[str]]:
+        """Names of the saved columns, with units: ``"t"``, ``"q"``, ``"v"``, ``"tau"`` (arm
+        joints) and ``"wrench"`` (per interconnection: fx, fy, fz [N], mx, my, mz [N·m]); a CSV column is
+        named by both, e.g. ``"q left/panda_joint1 [rad]"``, ``"wrench left.fz [N]"``."""
+        q_names, v_names = self.scene.coordinates()
+        tau = [v_names[i].replace("[rad/s]", "[N·m]").replace("[m/s]", "[N]") for i in self.scene.actuated]
+        wrench = [
+            f"{lk.name}.{c} [{'N' if c[0] == 'f' else 'N·m'}]"
+            for lk in self.scene.links
+            for c in ("fx", "fy", "fz", "mx", "my", "mz")
+        ]
+        return {"t": ["t [s]"], "q": q_names, "v": v_names, "tau": tau, "wrench": wrench}
+
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the trajectory atomically (temporary file, then rename): ``.npz`` (t, q, v, tau
-        and the interconnection wrenches) or ``.csv`` (one row per sample). Returns the path."""
+        """Write the result atomically (temporary file, then rename) and return the path.
+
+        ``.npz``: everything the result holds — arrays, counters, status and the scene's
+        description — so that :meth:`load` gives it back with its readouts. ``.csv``: a table,
+        one row per sample: time, q, v, tau and the interconnection wrenches on the object,
+        columns named after joints and interconnections, with units (:meth:`columns`)."""
         path = as_path(path, "path (a file name ending in .npz or .csv)", SimulationError)
+        if path.suffix not in (".npz", ".csv"):
+            raise SimulationError(f"unknown result format {path.suffix!r}: use .npz (reloads) or .csv (a table)")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except (OSError, ValueError) as exc:
             reason = getattr(exc, "strerror", None) or exc
             raise OutputError(getattr(exc, "errno", None), f"cannot write {path}: {reason}", str(path)) from exc
         tmp = path.with_name(f".{path.name}.tmp")
-        if path.suffix not in (".npz", ".csv"):
-            raise SimulationError(f"unknown result format {path.suffix!r}: use .npz or .csv")
         W = self.wrenches().reshape(len(self.t), -1)
         try:
             if path.suffix == ".npz":
+                meta = json.dumps(self._meta(), allow_nan=False)
                 with open(tmp, "wb") as f:
-                    np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, integrator=self.integrator, dt=self.dt)
+                    np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, meta=np.array(meta))
             else:
-                qn = [f"q[{i}]" for i in range(self.scene.nq)]
-                vn = [f"v[{i}]" for i in range(self.scene.nv)]
-                joints = [name for a in self.scene.arms for name in a.joint_names]
-                taun = [f"tau[{joints[i] if len(joints) == self.scene.n_actuated else i}]" for i in range(self.scene.n_actuated)]
-                wn = [f"link{i}_{c}" for i in range(len(self.scene.links)) for c in ("fx", "fy", "fz", "mx", "my", "mz")]
-                header = ",".join(["t", *qn, *vn, *taun, *wn])
+                names = self.columns()
+                header = ",".join(f"{k} {n}" if k != "t" else n for k, ns in names.items() for n in ns)
                 data = np.column_stack([self.t, self.q, self.v, self.tau, W])
-                np.savetxt(tmp, data, delimiter=",", header=header, comments="")
+                np.savetxt(tmp, data, delimiter=",", header=header, comments="", encoding="utf-8")
             os.replace(tmp, path)
         except BaseException as exc:
             with contextlib.suppress(OSError):
@@ -182,6 +208,68 @@ class Result:
                 raise OutputError(exc.errno, f"cannot write {path}: {exc.strerror or exc}", str(path)) from exc
             raise
         return path
+
+    def _meta(self) -> dict[str, Any]:
+        fields = (
+            "integrator",
+            "dt",
+            "n_rhs",
+            "cpu_time",
+            "n_jac",
+            "n_factor",
+            "n_steps",
+            "n_rejected",
+            "status",
+            "backend",
+            "loop",
+        )
+        return {
+            "format": RESULT_FORMAT,
+            "coopdyn": __version__,
+            **{k: getattr(self, k) for k in fields},
+            "scene": describe(self.scene),
+            "columns": self.columns(),
+        }
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Result:
+        """A result saved by :meth:`save` as ``.npz``: the arrays, counters and status, and its
+        scene rebuilt from the saved description (its URDFs are read again from where they were
+        — an example-robot-data name, or the absolute path saved)."""
+        path = as_path(path, "path (a .npz file Result.save wrote)", SimulationError)
+        if path.suffix != ".npz":
+            raise SimulationError(f"{path}: Result.load reads the .npz files Result.save writes (a .csv is a table only)")
+        if not path.is_file():
+            raise SimulationError(f"no saved result at {path}")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: np.asarray(z[k]) for k in z.files}
+        except Exception as exc:
+            raise SimulationError(f"{path} is not a result coopdyn wrote ({type(exc).__name__}: {exc})") from exc
+        if "meta" not in arrays:
+            raise SimulationError(
+                f"{path} has no description of its scene (saved by an older coopdyn, or not by coopdyn); "
+                "run the simulation again to save a result that reloads"
+            )
+        try:
+            meta = json.loads(str(arrays["meta"]))
+            if meta.pop("format") != RESULT_FORMAT:
+                raise ValueError("an unknown format")
+            meta.pop("coopdyn")
+            meta.pop("columns")
+            scene = build(meta.pop("scene"))
+        except CoopdynError as exc:
+            raise SimulationError(f"{path}: its scene cannot be rebuilt: {exc}") from exc
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise SimulationError(f"{path}: not a result coopdyn wrote, or damaged ({type(exc).__name__}: {exc})") from exc
+        n = len(arrays["t"]) if arrays["t"].ndim == 1 else -1
+        for key, shape in {"q": (n, scene.nq), "v": (n, scene.nv), "tau": (n, scene.n_actuated)}.items():
+            if arrays[key].shape != shape or arrays[key].dtype.kind != "f":
+                raise SimulationError(f"{path}: {key} has shape {arrays[key].shape}, its scene needs {shape} (a damaged file?)")
+        try:
+            return cls(scene=scene, t=arrays["t"], q=arrays["q"], v=arrays["v"], tau=arrays["tau"], **meta)
+        except TypeError as exc:
+            raise SimulationError(f"{path}: not a result coopdyn wrote, or damaged ({exc})") from exc
 
     def tracking_error(self, reference: Callable[[float], Any]) -> np.ndarray:
         """Object position error ‖p − p_d‖ (n,) [m] against ``reference(t).position`` (e.g. a

@@ -7,13 +7,12 @@ import itertools
 import math
 import os
 import time
-import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from . import _signals, _validate, compiled
+from . import _progress, _signals, _validate, compiled
 from .budget import check_budget, step_count, warn_unresolved
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
@@ -35,7 +34,7 @@ from .integrators import AdaptiveIntegrator, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
-from .stability import advise
+from .stability import ADVISED, advise
 
 
 def simulate(
@@ -172,7 +171,7 @@ def simulate(
         monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check)
     bar = _progress_bar(t_final, method.name) if progress else None
     try:
-        with np.errstate(over="ignore", invalid="ignore"):  # a blow-up is reported as a DivergenceError
+        with np.errstate(over="ignore", invalid="ignore"), _progress.showing(bar):  # a blow-up: a DivergenceError
             if config is not None:
                 _compiled_loop(run, config, bar)
             elif method.adaptive:
@@ -285,21 +284,19 @@ class _Run:
         what = (
             "non-finite"
             if not np.all(np.isfinite(v)) or not np.all(np.isfinite(q))
-            else f"faster than max_speed = {self.max_speed:g}"
+            else f"faster than max_speed = {self.max_speed:g} rad/s or m/s"
         )
         try:
             last_q, last_v = self.q[-1], self.v[-1]
-            advice = advise(self.scene, last_q, last_v, self.system.controller, dt=h)
-            diagnosis = (
-                f"ω_max = {advice.omega_max:.4g} rad/s, ω_max·dt = {advice.omega_max * h:.3g}; "
-                f"methods predicted stable at dt = {h:g} s: {advice.stable_at(h)}"
-            )
+            names = ADVISED if self.method.name in ADVISED else (*ADVISED, self.method.name)
+            advice = advise(self.scene, last_q, last_v, self.system.controller, names, dt=h)
+            diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
         partial = self.result("diverged")
         raise DivergenceError(
             f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
-            f"{diagnosis}. The trajectory up to t = {partial.t[-1]:.6g} s is in this error's .result",
+            f"At the last saved state, {diagnosis}. The trajectory up to t = {partial.t[-1]:.6g} s is in this error's .result",
             result=partial,
             advice=advice,
         )
@@ -321,7 +318,7 @@ class _Run:
     def warn_rotation(self, link: int, theta: float, t: float, stacklevel: int = 5) -> None:
         """The log-map warning of :meth:`after_step`, attributed to the caller of ``simulate``."""
         name = self.scene.elements[link].name
-        warnings.warn(
+        _progress.warn(
             f"interconnection {name!r} (index {link}): its rotation deformation reached {theta:.3f} rad "
             f"({theta / math.pi:.2f}π) at t ≈ {t:.6g} s. At π the SE(3) logarithm jumps: the wrench flips and, "
             "with an anisotropic or coupled K, the elastic energy jumps too. A real grasp twisted this far has "
@@ -427,7 +424,7 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
                     message = violation_message(a, b, c, d, ENERGY_RTOL, e)
                     if status == compiled.ENERGY:
                         raise EnergyBalanceError(message)
-                    warnings.warn(message, EnergyBalanceWarning, stacklevel=3)
+                    _progress.warn(message, EnergyBalanceWarning, stacklevel=3)
             if bar is not None:
                 bar.update(native.t - bar.n)
             if run.stream is not None:

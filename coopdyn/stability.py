@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -89,6 +89,7 @@ class Advice:
     methods: tuple[MethodAdvice, ...]
     recommendation: str
     oscillation: Oscillation | None = None  #: the fastest oscillatory mode (accuracy: see ``max_resolved_dt``)
+    eigenvalues: np.ndarray | None = field(default=None, repr=False)  #: of the linearised system [1/s]
 
     @property
     def max_resolved_dt(self) -> float:
@@ -103,6 +104,53 @@ class Advice:
             if m.name == name:
                 return m.max_stable_dt
         raise SimulationError(f"no advice for {name!r}; advised: {[m.name for m in self.methods]}")
+
+    def limiting_mode(self, name: str) -> complex | None:
+        """The eigenvalue λ [1/s] that sets the method ``name``'s largest stable step (the first
+        to leave its stability region as dt grows); ``None`` when the method is stable at any step.
+        For a method without a scalar stability function (symplectic Euler): the largest |λ|."""
+        h = self.max_stable_dt(name)
+        lam = self.eigenvalues
+        if math.isinf(h) or lam is None or not lam.size:
+            return None
+        try:
+            with np.errstate(all="ignore"):
+                r = np.abs(get_integrator(name).stability_function(1.01 * h * lam))
+            k = int(np.nanargmax(r))
+        except (NotImplementedError, ValueError):
+            k = int(np.argmax(np.abs(lam)))
+        return complex(lam[k])
+
+    def diagnosis(self, name: str, dt: float) -> str:
+        """Why the method ``name`` at step ``dt`` [s] is or is not stable here: the mode that limits
+        its step (|λ|, damping ratio, frequency), its limit on |λ|·dt, the largest stable dt of every
+        advised method and which are stable at ``dt`` — the figures :meth:`__str__` tables."""
+
+        def ms(h: float) -> str:
+            return "any" if math.isinf(h) else f"{h * 1e3:.4g} ms"
+
+        parts = []
+        names = [m.name for m in self.methods if m.applicable]
+        if name in names:
+            h = self.max_stable_dt(name)
+            lam = self.limiting_mode(name)
+            if lam is not None:
+                rate = abs(lam)
+                zeta = -lam.real / rate if rate > 0 else 1.0
+                freq = abs(lam.imag) / (2 * math.pi)
+                kind = f"{freq:.4g} Hz, damping ratio {zeta:.3g}" if abs(lam.imag) > 0 else "non-oscillatory"
+                parts.append(
+                    f"the mode that limits {name}'s step has |λ| = {rate:.4g} 1/s ({kind}); {name} is stable while "
+                    f"|λ|·dt ≤ {rate * h:.3g}, i.e. dt ≤ {ms(h)}, and dt = {dt * 1e3:.4g} ms gives |λ|·dt = {rate * dt:.3g}"
+                )
+            else:
+                parts.append(
+                    f"{name} is predicted stable at any dt here (the blow-up is nonlinear: a larger motion, or the controller)"
+                )
+        parts.append("largest stable dt: " + ", ".join(f"{m.name} {ms(m.max_stable_dt)}" for m in self.methods if m.applicable))
+        stable = self.stable_at(dt)
+        parts.append(f"stable at dt = {dt * 1e3:.4g} ms: {', '.join(stable) if stable else 'none of them'}")
+        return "; ".join(parts)
 
     def stable_at(self, dt: float) -> list[str]:
         """Names of the applicable methods predicted stable at ``dt`` [s]."""
@@ -222,7 +270,7 @@ def advise(
             rec += (
                 f"; but dt > {oscillation.max_resolved_dt * 1e3:.4g} ms does not resolve the {oscillation.frequency:.4g} Hz mode"
             )
-    return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec, oscillation)
+    return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec, oscillation, lam)
 
 
 def unresolved_mode_message(scene: Scene, A: np.ndarray, method: Integrator, dt: float) -> str | None:

@@ -88,6 +88,6 @@ def test_saving_is_atomic(tmp_path: Path, book: cd.Scene, monkeypatch: pytest.Mo
     with pytest.raises(OSError, match="disk full"):
         res.save(path)
     assert path.read_bytes() == before
-    with pytest.raises(cd.SimulationError, match=r"unknown result format '.txt': use .npz or .csv"):
+    with pytest.raises(cd.SimulationError, match=r"unknown result format '.txt': use .npz \(reloads\) or .csv"):
         res.save(tmp_path / "run.txt")
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["run.npz"]

@@ -159,9 +159,7 @@ def test_implicit_methods_survive_stiffness_that_breaks_explicit_ones() -> None:
     """k = 1e7 N/m at dt = 1 ms: RK4 diverges with a diagnosis, implicit Euler and ROS2 hold."""
     scene = cd.scenes.facing_arms("panda", stiffness=1e7, damping=1e-3)
     ctrl = GravityCompensationPD(scene, 50.0, 5.0)
-    with pytest.raises(
-        cd.DivergenceError, match=r"with rk4 at dt = 0.001 s.*stable at dt = 0.001 s: \['implicit_euler', 'ros2'\]"
-    ):
+    with pytest.raises(cd.DivergenceError, match=r"with rk4 at dt = 0.001 s.*stable at dt = 1 ms: implicit_euler, ros2\."):
         cd.simulate(scene, 0.5, controller=ctrl, integrator="rk4", dt=1e-3)
     for name in ("implicit_euler", "ros2"):
         res = cd.simulate(scene, 0.5, controller=ctrl, integrator=name, dt=1e-3, energy_check="raise")

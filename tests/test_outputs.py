@@ -29,7 +29,8 @@ def test_demo_writes_everything(tmp_path: Path, capsys: pytest.CaptureFixture[st
     with np.load(tmp_path / "trajectory.npz") as z:
         assert z["q"].shape == (31, 21) and z["wrenches"].shape == (31, 12)
     header = (tmp_path / "trajectory.csv").read_text().splitlines()[0]
-    assert header.startswith("t,q[0],") and "tau[left/panda_joint1]" in header and header.endswith("link1_mz")
+    assert header.startswith("t [s],q left/panda_joint1 [rad],") and "v object.wz [rad/s]" in header
+    assert "tau left/panda_joint1 [N·m]" in header and header.endswith("wrench right.mz [N·m]")
 
 
 def _chromium() -> str | None:
@@ -110,7 +111,7 @@ dt = 1e-3
             GOOD.replace("dt = 1e-3", "dt = 1e-3\nstep = 2"),
             r"line 9: \[simulation\] step: unknown key; valid keys: \['dt', 'duration'",
         ),
-        (GOOD + "\n[physics]\ng = 9.81\n", r"line 10: \[physics\]: unknown table; valid tables: \['scene', 'controller'"),
+        (GOOD + "\n[physics]\ng = 9.81\n", r"line 10: \[physics\]: unknown table; valid tables: \['scene', 'arms', 'object'"),
         (
             GOOD.replace('builder = "linear_book"', 'builder = "book"'),
             r"\[scene\] builder: must be one of \['facing_arms', 'linear_book'\]",

@@ -53,7 +53,7 @@ def _one_slider(**ic: object) -> cd.Scene:
     [
         ({"stiffness": np.diag([1.0, 2, 3, 4, 5, -6])}, r"stiffness must be positive semi-definite.*smallest eigenvalue is -6"),
         ({"stiffness": np.triu(np.ones((6, 6)))}, r"stiffness must be symmetric"),
-        ({"stiffness": np.ones(5)}, r"stiffness must be a 6x6 matrix or a 6-vector diagonal"),
+        ({"stiffness": np.ones(5)}, r"stiffness must be a 6x6 matrix, a 6-vector diagonal or a scalar"),
         ({"stiffness": [np.nan] * 6}, r"stiffness must be finite"),
         ({"stiffness": np.zeros(6)}, r"stiffness and damping are both zero"),
     ],

@@ -80,10 +80,8 @@ def test_divergence_raises_instead_of_returning_nan() -> None:
     with pytest.raises(cd.DivergenceError, match=r"diverged at t = .* with symplectic_euler at dt = 0.001 s") as info:
         cd.simulate(stiff, 5.0, integrator="symplectic_euler", dt=1e-3)
     message = str(info.value)
-    assert (
-        "ω_max·dt = " in message
-        and "methods predicted stable at dt = 0.001 s: ['implicit_euler', 'ros2', 'exponential']" in message
-    )
+    assert "the mode that limits symplectic_euler's step has |λ| = " in message
+    assert "stable at dt = 1 ms: implicit_euler, ros2, exponential" in message
     partial = info.value.result
     assert isinstance(partial, cd.Result) and 0 < partial.t[-1] < 5.0 and np.all(np.isfinite(partial.q))
 

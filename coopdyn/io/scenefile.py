@@ -1,8 +1,14 @@
 """Scene files: a whole run (scene, controller, task, integrator, duration, outputs) in TOML.
 
-Every table maps onto a coopdyn function or class, and every key onto one of its parameters;
-an unknown key, a value of the wrong type or a missing field raises :class:`SceneFileError`
-naming the file, the key, its line and what is valid. See ``examples/scenes/*.toml``.
+The scene is either described table by table — ``[[arms]]``, ``[object]``,
+``[[interconnections]]`` and ``[scene] gravity``, the tables of
+:mod:`coopdyn.model.description`, so any scene the Python API builds can be written — or
+given by a builder's shorthand (``[scene] builder = "facing_arms"`` or ``"linear_book"`` with
+the builder's parameters). Every other table maps onto a coopdyn function or class and every
+key onto one of its parameters; an unknown key, a value of the wrong type or a missing field
+raises :class:`SceneFileError` naming the file, the key, its line and what is valid. The format's
+JSON Schema is ``docs/scene-file.schema.json`` (:mod:`coopdyn.io.schema`); examples are in
+``examples/scenes/``.
 """
 
 from __future__ import annotations
@@ -10,6 +16,7 @@ from __future__ import annotations
 import inspect
 import re
 import sys
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +28,7 @@ from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
 from ..errors import CoopdynError, SceneFileError
 from ..integrators import INTEGRATORS
+from ..model.description import DescriptionError, build
 from ..model.scene import Scene
 from ..problems.facing_arms import object_start
 from ..problems.linear_book import BookParameters
@@ -43,7 +51,8 @@ CONTROLLERS: dict[str, Any] = {
     "book_drives": "book_drives",
 }
 TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
-TABLES = ("scene", "controller", "task", "simulation", "output")
+TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output")
+DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe a scene without a builder
 SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int}
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
 
@@ -69,15 +78,17 @@ class _File:
     def __init__(self, path: Path, text: str) -> None:
         self.path, self.lines = path, text.splitlines()
 
-    def line(self, table: str | None, key: str | None = None) -> int | None:
-        """1-based line of ``key`` inside ``[table]`` (or of the table header)."""
+    def line(self, table: str | None, key: str | None = None, index: int | None = None) -> int | None:
+        """1-based line of ``key`` inside ``[table]`` (or of the table header); ``index``: inside
+        the index-th ``[[table]]``."""
         start = 0
         if table is not None:
-            header = re.compile(rf"^\s*\[\s*{re.escape(table)}\s*\]")
+            brackets = (r"\[\[", r"\]\]") if index is not None else (r"\[", r"\]")
+            header = re.compile(rf"^\s*{brackets[0]}\s*{re.escape(table)}\s*{brackets[1]}")
             hits = [i for i, s in enumerate(self.lines) if header.match(s)]
-            if not hits:
+            if len(hits) <= (index or 0):
                 return None
-            start = hits[0]
+            start = hits[index or 0]
             if key is None:
                 return start + 1
         pattern = re.compile(rf"^\s*{re.escape(key or '')}\s*=")
@@ -88,10 +99,11 @@ class _File:
                 return i + 1
         return None
 
-    def error(self, message: str, table: str | None, key: str | None = None) -> SceneFileError:
-        line = self.line(table, key)
+    def error(self, message: str, table: str | None, key: str | None = None, index: int | None = None) -> SceneFileError:
+        line = self.line(table, key, index)
         where = f"{self.path}" + (f", line {line}" if line else "")
-        what = f"[{table}] {key}" if table and key else (f"[{table}]" if table else (key or ""))
+        name = f"[[{table}]] #{index + 1}" if index is not None else f"[{table}]"
+        what = f"{name} {key}" if table and key else (name if table else (key or ""))
         return SceneFileError(f"{where}: {what}: {message}")
 
 
@@ -125,7 +137,10 @@ def _params(
         if key not in valid and not var_kw:
             raise f.error(f"unknown key; valid keys: {sorted(valid)}", table, key)
         default = valid[key].default if key in valid else inspect.Parameter.empty
-        if isinstance(default, bool):
+        annotation = str(valid[key].annotation) if key in valid else ""
+        if isinstance(value, list) and ("Sequence" in annotation or "Any" in annotation):
+            pass  # a list where the parameter takes one (e.g. facing_arms' stiffness per axis): the callee checks it
+        elif isinstance(default, bool):
             value = _check_type(f, table, key, value, bool)
         elif isinstance(default, int | float) and default is not None:
             value = _check_type(f, table, key, value, float if isinstance(default, float) else int)
@@ -176,25 +191,16 @@ def load(path: str | Path) -> Run:
     except RecursionError:
         raise SceneFileError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
     for table, value in doc.items():
+        if table in ("arms", "interconnections") and isinstance(value, list):
+            continue
         if not isinstance(value, dict):
-            raise f.error(f"a top-level key; everything goes in one of the tables {list(TABLES)}", None, table)
+            hint = f" (write [[{table}]], one per entry)" if table in ("arms", "interconnections") else ""
+            raise f.error(f"a top-level key; everything goes in one of the tables {list(TABLES)}{hint}", None, table)
         if table not in TABLES:
             raise f.error(f"unknown table; valid tables: {list(TABLES)}", table)
-    for table in ("scene", "simulation"):
-        if table not in doc:
-            raise SceneFileError(f"{path}: missing table [{table}]")
-
-    scene_doc = dict(doc["scene"])
-    builder_name = scene_doc.pop("builder", None)
-    if not isinstance(builder_name, str) or builder_name not in BUILDERS:
-        raise f.error(f"must be one of {sorted(BUILDERS)}, got {builder_name!r}", "scene", "builder")
-    builder = BUILDERS[builder_name]
-    kwargs = _params(f, "scene", SIGNATURES.get(builder_name, builder), scene_doc)
-    try:
-        scene = builder(**kwargs)
-    except CoopdynError as exc:
-        raise f.error(str(exc), "scene") from exc
-
+    if "simulation" not in doc:
+        raise SceneFileError(f"{path}: missing table [simulation]")
+    scene, builder_name, kwargs = _scene(f, doc)
     sim = doc["simulation"]
     for key in sim:
         if key not in SIMULATION_KEYS:
@@ -226,6 +232,50 @@ def load(path: str | Path) -> Run:
     return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
 
 
+def _scene(f: _File, doc: dict[str, Any]) -> tuple[Scene, str | None, dict[str, Any]]:
+    """The scene, the builder that made it (``None``: described table by table) and its keywords."""
+    scene_doc = dict(doc.get("scene", {}))
+    described = [t for t in DESCRIBED if t in doc]
+    if "builder" in scene_doc:
+        if described:
+            raise f.error(
+                f"a scene is either a builder's shorthand or described by [[arms]], [object] and [[interconnections]]; "
+                f"this file has both (builder and {described})",
+                "scene",
+                "builder",
+            )
+        builder_name = scene_doc.pop("builder")
+        if not isinstance(builder_name, str) or builder_name not in BUILDERS:
+            raise f.error(f"must be one of {sorted(BUILDERS)}, got {builder_name!r}", "scene", "builder")
+        builder = BUILDERS[builder_name]
+        kwargs = _params(f, "scene", SIGNATURES.get(builder_name, builder), scene_doc)
+        try:
+            return builder(**kwargs), builder_name, kwargs
+        except CoopdynError as exc:
+            raise f.error(str(exc), "scene") from exc
+    if not described:
+        raise SceneFileError(
+            f"{f.path}: no scene: describe it with [[arms]], [object] and [[interconnections]] tables, "
+            f"or use a builder ([scene] builder = one of {sorted(BUILDERS)})"
+        )
+    for key in scene_doc:
+        if key != "gravity":
+            raise f.error(
+                f"unknown key; without a builder, [scene] holds only gravity (or give builder = one of {sorted(BUILDERS)})",
+                "scene",
+                key,
+            )
+    try:
+        return build({**{t: doc[t] for t in described}, **scene_doc}, base=f.path.parent), None, {}
+    except DescriptionError as exc:
+        where = exc.location
+        if where.table == "gravity":
+            raise f.error(exc.reason, "scene", "gravity") from None
+        raise f.error(exc.reason, where.table, where.key, where.entry) from None
+    except CoopdynError as exc:
+        raise SceneFileError(f"{f.path}: {exc}") from None
+
+
 def _pick(f: _File, doc: dict[str, Any], table: str, registry: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
     """The registry entry named by the table's ``type`` key, and the table's other keys."""
     rest = dict(doc)
@@ -248,7 +298,7 @@ def _task(f: _File, doc: dict[str, Any] | None, scene: Scene) -> Any:
         raise f.error(str(exc), "task") from exc
 
 
-def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str, scene_kwargs: dict[str, Any]) -> Any:
+def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder: str | None, scene_kwargs: dict[str, Any]) -> Any:
     target, doc = _pick(f, doc, "controller", CONTROLLERS)
     if target is None:
         if doc:
@@ -271,6 +321,23 @@ def _controller(f: _File, doc: dict[str, Any], scene: Scene, task: Any, builder:
         return target(scene, **kwargs)
     except CoopdynError as exc:
         raise f.error(str(exc), "controller") from exc
+
+
+def relocated(text: str) -> str:
+    """A scene file's text for the copy written into its output folder: ``[output] folder`` set to
+    ``"."``, so that the copy names the folder it sits in (``coopdyn view OUT/scene.toml``)."""
+    lines = text.splitlines()
+    f = _File(Path("scene.toml"), text)
+    header = f.line("output")
+    setting = 'folder = "."  # this folder: the copy coopdyn simulate wrote beside its results'
+    if header is None:
+        return text + ("" if text.endswith("\n") or not text else "\n") + f"\n[output]\n{setting}\n"
+    key = f.line("output", "folder")
+    if key is not None:
+        lines[key - 1] = setting
+    else:
+        lines.insert(header, setting)
+    return "\n".join(lines) + "\n"
 
 
 @dataclass(frozen=True)
@@ -296,10 +363,11 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     from ..errors import DivergenceError, SimulationInterrupted, StepBudgetError
     from ..outputs import check_folder, save_partial, write_outputs
     from ..simulate import simulate
-    from ..viz.plotting import book_figure, cooperative_figure
+    from ..viz.plotting import result_figure
 
     out = check_folder(folder or loaded.output["folder"])  # before the run: a refusal costs nothing yet
-    source = _read_text(loaded.path).encode("utf-8")  # the copy written beside the results
+    source = relocated(_read_text(loaded.path)).encode("utf-8")  # the copy written beside the results
+    wall0 = time.perf_counter()
     try:
         res = simulate(
             loaded.scene,
@@ -314,6 +382,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     except (DivergenceError, SimulationInterrupted, StepBudgetError) as exc:
         exc.saved = save_partial(exc, out)  # type: ignore[union-attr]
         raise
+    wall = time.perf_counter() - wall0
 
     def trajectory(folder: Path) -> list[Path]:
         (folder / "scene.toml").write_bytes(source)
@@ -325,12 +394,8 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
         return files
 
     def plot(folder: Path) -> Path:
-        png = folder / "plot.png"
-        if loaded.scene.object.joint == "prismatic" and len(loaded.scene.links) == 2 and loaded.scene.nv == 3:
-            book_figure(res, None, png)
-        else:
-            cooperative_figure(res, loaded.task, png)
-        return png
+        result_figure(res, loaded.task, folder / "plot.png")
+        return folder / "plot.png"
 
     def animation(folder: Path) -> Path:
         from ..viz.viewer import export_html
@@ -343,7 +408,8 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     written = list(done.files)
     summary = [
         f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s",
-        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS",
+        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS; "
+        f"wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}",
     ]
     if loaded.task is not None:
         desired = np.array([loaded.task(t).position for t in res.t])
@@ -356,7 +422,9 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
 
 
 def load_result(loaded: Run, path: str | Path | None = None) -> Any:
-    """The Result saved by :func:`run` for this scene file (``trajectory.npz``)."""
+    """The Result saved by :func:`run` for this scene file (``trajectory.npz`` in its output
+    folder, or ``path``). A result that carries its scene (every one this version writes) is
+    loaded by :meth:`coopdyn.Result.load`; an older one gets the scene file's scene."""
     import numpy as np
 
     from ..result import Result
@@ -364,12 +432,16 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
     path = Path(path) if path is not None else Path(loaded.output["folder"]) / "trajectory.npz"
     if not path.is_file():
         raise SceneFileError(f"no saved trajectory at {path}: run `coopdyn simulate {loaded.path}` first (with npz = true)")
-    scene = loaded.scene
     try:
         with np.load(path, allow_pickle=False) as z:
+            if "meta" in z.files:
+                return Result.load(path)
             arrays = {k: np.asarray(z[k]) for k in ("t", "q", "v", "tau", "integrator", "dt")}
+    except CoopdynError:
+        raise
     except Exception as exc:
         raise SceneFileError(f"{path} is not a trajectory coopdyn wrote ({type(exc).__name__}: {exc})") from exc
+    scene = loaded.scene
     n = arrays["t"].shape[0] if arrays["t"].ndim == 1 else -1
     shapes = {"q": (n, scene.nq), "v": (n, scene.nv), "tau": (n, scene.n_actuated)}
     for key, shape in shapes.items():
@@ -394,3 +466,48 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
         n_rhs=0,
         cpu_time=0.0,
     )
+
+
+@dataclass(frozen=True)
+class Saved:
+    """A saved result found by :func:`open_result`, with the scene file's task when there is one."""
+
+    result: Any  #: the :class:`coopdyn.Result`
+    path: Path  #: the ``.npz`` it came from
+    run: Run | None  #: the scene file it belongs to, if known
+    task: Any  #: that file's task (a reference for plots), or None
+
+
+def open_result(path: str | Path) -> Saved:
+    """The saved result at ``path``: a ``.npz`` :meth:`coopdyn.Result.save` wrote, an output
+    folder holding ``trajectory.npz`` (from ``coopdyn simulate`` or ``coopdyn demo``), or a scene
+    file (the result in its ``[output] folder``)."""
+    if not isinstance(path, str | Path) or not str(path):
+        raise SceneFileError(f"a result is given by a path, got {path!r}")
+    path = Path(path)
+    loaded = None
+    if path.suffix == ".toml":
+        loaded = load(path)
+        npz = Path(loaded.output["folder"]) / "trajectory.npz"
+        if not npz.is_file() and (path.parent / "trajectory.npz").is_file():
+            npz = path.parent / "trajectory.npz"  # a copy beside its results, written by an older coopdyn
+    else:
+        npz = path / "trajectory.npz" if path.is_dir() else path
+        if npz.suffix != ".npz":
+            raise SceneFileError(
+                f"{path}: give a result (.npz), an output folder holding trajectory.npz, or a scene file (.toml)"
+            )
+        if not npz.is_file():
+            where = "holds no trajectory.npz" if path.is_dir() else "does not exist"
+            raise SceneFileError(f"{npz if path.is_dir() else path} {where}: run `coopdyn simulate` or `coopdyn demo` first")
+        beside = npz.parent / "scene.toml"
+        if beside.is_file():
+            try:
+                loaded = load(beside)
+            except CoopdynError:
+                loaded = None  # the result carries its own scene; the file only adds the task
+    if loaded is not None:
+        return Saved(load_result(loaded, npz), npz, loaded, loaded.task)
+    from ..result import Result
+
+    return Saved(Result.load(npz), npz, None, None)

@@ -264,6 +264,23 @@ class Scene:
             raise SceneError(f"arm index {arm} out of range: the scene has {len(self.arms)} arms")
         return int(arm)
 
+    def coordinates(self) -> tuple[list[str], list[str]]:
+        """Names of the entries of ``q`` and ``v``, each with its unit: a revolute joint's
+        ``"left/panda_joint1 [rad]"`` and ``"… [rad/s]"``, a free flyer's ``"object.x [m]"`` …
+        ``"object.qw [1]"`` (quaternion) and ``"object.vx [m/s]"`` … ``"object.wz [rad/s]"``
+        (velocities in the body's own axes, as Pinocchio's)."""
+        q_names: list[str] = []
+        v_names: list[str] = []
+        for i in range(1, self.model.njoints):
+            name, joint = self.model.names[i], self.model.joints[i]
+            qs, vs = _JOINT_COORDINATES.get(joint.shortname(), (None, None))
+            if qs is None or vs is None or len(qs) != joint.nq or len(vs) != joint.nv:
+                qs = [(f"[{k}]", "") for k in range(joint.nq)]
+                vs = [(f"[{k}]", "") for k in range(joint.nv)]
+            q_names += [f"{name}{s} [{u}]" if u else f"{name}{s}" for s, u in qs]
+            v_names += [f"{name}{s} [{u}]" if u else f"{name}{s}" for s, u in vs]
+        return q_names, v_names
+
     def check_state(self, q: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
         """Validated copies of a state: shapes, finiteness and normalised quaternions."""
         q = _validate.finite_array(q, "q (a configuration)", (self.nq,)).copy()
@@ -296,6 +313,29 @@ class Scene:
         obj = f"{self.object.name!r} ({self.object.joint})"
         return f"Scene(arms=[{arms}], object={obj}, links={len(self.links)}, nq={self.nq}, nv={self.nv})"
 
+
+_REVOLUTE = ([("", "rad")], [("", "rad/s")])
+_PRISMATIC_1 = ([("", "m")], [("", "m/s")])
+_QUATERNION = [(".qx", "1"), (".qy", "1"), (".qz", "1"), (".qw", "1")]
+_ANGULAR = [(".wx", "rad/s"), (".wy", "rad/s"), (".wz", "rad/s")]
+#: per Pinocchio joint type: (suffix, unit) of each q entry and of each v entry
+_JOINT_COORDINATES: dict[str, tuple[list[tuple[str, str]], list[tuple[str, str]]]] = {
+    **{f"JointModel{k}": _REVOLUTE for k in ("RX", "RY", "RZ", "RevoluteUnaligned")},
+    **{f"JointModel{k}": _PRISMATIC_1 for k in ("PX", "PY", "PZ", "PrismaticUnaligned")},
+    **{
+        f"JointModel{k}": ([(".cos", "1"), (".sin", "1")], [("", "rad/s")])
+        for k in ("RUBX", "RUBY", "RUBZ", "RevoluteUnboundedUnaligned")
+    },
+    "JointModelFreeFlyer": (
+        [(".x", "m"), (".y", "m"), (".z", "m"), *_QUATERNION],
+        [(".vx", "m/s"), (".vy", "m/s"), (".vz", "m/s"), *_ANGULAR],
+    ),
+    "JointModelPlanar": (
+        [(".x", "m"), (".y", "m"), (".cos", "1"), (".sin", "1")],
+        [(".vx", "m/s"), (".vy", "m/s"), (".wz", "rad/s")],
+    ),
+    "JointModelSpherical": (_QUATERNION, _ANGULAR),
+}
 
 #: Pinocchio joints along which the dynamics stay linear.
 _PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,7 @@ def facing_arms(
     box_size: Any = (0.2, 0.2, 0.2),
     separation: float | None = None,
     height: float | None = None,
-    stiffness: float = 1e4,
+    stiffness: float | Sequence[float] = 1e4,
     rotational_ratio: float = 0.01,
     damping: float = 0.0,
     joint_damping: float | str = 0.0,
@@ -54,7 +55,8 @@ def facing_arms(
         box_size: edge lengths (x, y, z) of the box [m]; the tools touch its faces y = ±size_y/2.
         separation: distance between the arm bases [m]; default per robot (:data:`PLACEMENT`).
         height: height of the box centre [m]; default per robot.
-        stiffness: translational interconnection stiffness k [N/m]; rotational = ratio·k [N·m/rad].
+        stiffness: translational interconnection stiffness k [N/m]: one value, or three along the
+            tool frame's x, y, z (z: the approach axis); rotational = ratio·k [N·m/rad] per axis.
         rotational_ratio: rotational/translational stiffness ratio [m²/rad].
         damping: interconnection damping as a ratio of stiffness [s] (D = damping·K).
         joint_damping: viscous joint damping of both arms (see :class:`coopdyn.Arm`).
@@ -73,8 +75,11 @@ def facing_arms(
     box = RigidObject.box(box_mass, box_size, pose=[0.0, 0.0, h])
     half = float(np.asarray(box_size, dtype=float)[1]) / 2.0
     sep = _validate.positive(default_sep if separation is None else separation, "separation", "m")
-    stiffness = _validate.positive(stiffness, "stiffness", "N/m")
-    K = diagonal(stiffness, _validate.non_negative(rotational_ratio, "rotational_ratio", "m²/rad") * stiffness)
+    k_xyz = _validate.finite_array(stiffness, "stiffness [N/m]")
+    if k_xyz.shape not in ((), (3,)) or not np.all(k_xyz > 0.0):
+        raise SceneError(f"stiffness must be one positive value or three (x, y, z of the tool frame) [N/m], got {k_xyz.tolist()}")
+    k_rot = _validate.non_negative(rotational_ratio, "rotational_ratio", "m²/rad") * k_xyz
+    K = diagonal(k_xyz.tolist(), k_rot.tolist())
     D = _validate.non_negative(damping, "damping", "s") * K
     # In each base frame: tool at distance sep/2 − half ahead, approach (tool z) along base x, tool x up.
     R_tool = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])

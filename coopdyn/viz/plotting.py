@@ -69,6 +69,15 @@ def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
     return path
 
 
+def result_figure(result: Result, reference: Any = None, path: str | os.PathLike[str] | None = None) -> Any:
+    """The figure that suits ``result``: the book's Figure 11 for the book's linear system (two
+    interconnections, three prismatic coordinates), :func:`cooperative_figure` otherwise."""
+    scene = result.scene
+    if scene.object.joint == "prismatic" and len(scene.links) == 2 and scene.nv == 3:
+        return book_figure(result, None, path)
+    return cooperative_figure(result, reference, path)
+
+
 def cooperative_figure(result: Result, reference: Any = None, path: str | os.PathLike[str] | None = None) -> Any:
     """Figure-11-style plot of any result: object and tool positions, interconnection forces,
     internal (squeeze) force, joint torques against time. ``reference(t)`` (e.g. a
