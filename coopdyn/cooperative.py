@@ -178,6 +178,15 @@ class GripLiftOscillate:
         """End of the oscillation [s]; the task holds after it."""
         return self.t_osc + self.cycles / self.frequency
 
+    def phases(self) -> list[tuple[str, float, float]]:
+        """The task's phases as (name, start [s], end [s]): grip, lift, oscillate, then hold (to ∞)."""
+        return [
+            ("grip", 0.0, self.t_grip),
+            ("lift", self.t_lift, self.t_lift + self.lift_duration),
+            ("oscillate", self.t_osc, self.duration),
+            ("hold", self.duration, math.inf),
+        ]
+
 
 def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
     """(linear, angular) object gains, each a non-negative scalar or 3-vector, as two (3,) arrays."""

@@ -298,3 +298,41 @@ def test_facing_arms_takes_a_stiffness_per_axis() -> None:
 def test_the_version_is_the_project_s() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert cd.__version__ == project["version"]
+
+
+def test_stl_meshes_get_normals_so_they_are_lit() -> None:
+    from coopdyn.viz.viewer import _STL, stl_with_normals
+
+    tri = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 0], [0, 0, 1], [1, 0, 0]]], dtype=np.float32)
+    records = np.zeros(2, _STL)
+    records["v"] = tri  # zero normals, as UR5's collision meshes have
+    blank = b"\0" * 80 + (2).to_bytes(4, "little") + records.tobytes()
+    fixed = np.frombuffer(stl_with_normals(blank), _STL, count=2, offset=84)
+    assert np.array_equal(fixed["n"], [[0, 0, 1], [0, 1, 0]]) and np.array_equal(fixed["v"], tri)
+    assert stl_with_normals(stl_with_normals(blank)) == stl_with_normals(blank)  # valid normals: the file as it is
+
+
+def test_arrows_cameras_and_meshes_of_the_animation(tmp_path: Path, book: cd.Scene) -> None:
+    from coopdyn.viz.viewer import ARROW_LENGTH, HEAD_LENGTH, _arrow, camera, force_scale, visual_model
+
+    res = cd.simulate(book, 0.2, integrator="exponential", dt=1e-3, progress=False)
+    scale, peak = force_scale(res)
+    assert peak == pytest.approx(np.abs(res.wrenches()[..., 2]).max()) and scale * peak == pytest.approx(ARROW_LENGTH)
+    parts = _arrow(np.zeros(3), np.array([0.0, 0.0, 0.2]))
+    T, _ = parts[""]
+    assert np.allclose(T[:3, 1], [0, 0, 1])  # along the force
+    (T_shaft, ss), (Th, sh) = parts["/shaft"], parts["/head"]
+    assert T_shaft[1, 3] == pytest.approx((0.2 - HEAD_LENGTH) / 2)
+    assert (
+        ss[1] + HEAD_LENGTH == pytest.approx(0.2)
+        and np.array_equal(sh, np.ones(3))
+        and Th[1, 3] == pytest.approx(0.2 - HEAD_LENGTH / 2)
+    )
+    lo, hi = np.array([-0.5, -0.3, 0.0]), np.array([0.5, 0.3, 0.9])
+    eye, target = camera(lo, hi)
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    angles = np.degrees(np.arccos(((corners - eye) @ forward) / np.linalg.norm(corners - eye, axis=1)))
+    assert angles.max() < 75.0 / 2 * 4 / 3 and angles.max() > 15.0  # in view, and not a speck
+    geom = visual_model(book)  # the book's slider URDF has visual geometry only: it is drawn, not left out
+    assert {g.name.split("/")[0] for g in geom.geometryObjects} >= {"tip1", "tip2"}

@@ -78,44 +78,86 @@ def result_figure(result: Result, reference: Any = None, path: str | os.PathLike
     return cooperative_figure(result, reference, path)
 
 
+#: line styles told apart at a glance, for up to 8 joints of an arm (then they repeat)
+JOINT_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1, 1, 1)), (0, (1, 3)), (0, (8, 2)), (0, (3, 1, 1, 1)))
+ARM_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+AXIS_COLOURS = {"x": "tab:red", "y": "tab:green", "z": "tab:blue"}
+PHASE_COLOURS = ("#f2f2f2", "#e3eef9", "#fdf0e0", "#eaf5ea")
+
+
+def _phases(axes: Any, reference: Any, t_end: float) -> None:
+    """Shade the task's phases (``reference.phases()``) on every panel, named on the first."""
+    phases = getattr(reference, "phases", None)
+    if not callable(phases):
+        return
+    top = axes[0]
+    lo, hi = top.get_ylim()
+    top.set_ylim(lo - 0.12 * (hi - lo), hi)  # a strip below the data for the phases' names
+    for k, (name, start, end) in enumerate(phases()):
+        end = min(end, t_end)
+        if end <= start:
+            continue
+        for ax in axes:
+            ax.axvspan(start, end, color=PHASE_COLOURS[k % len(PHASE_COLOURS)], zorder=0, lw=0)
+        top.text(
+            (start + end) / 2, 0.03, name, transform=top.get_xaxis_transform(), ha="center", va="bottom", fontsize=9, color="0.35"
+        )
+
+
 def cooperative_figure(result: Result, reference: Any = None, path: str | os.PathLike[str] | None = None) -> Any:
-    """Figure-11-style plot of any result: object and tool positions, interconnection forces,
-    internal (squeeze) force, joint torques against time. ``reference(t)`` (e.g. a
-    :class:`coopdyn.cooperative.GripLiftOscillate`) adds the desired object position."""
+    """Motion and forces of any result, one panel each: the object's displacement from its start
+    [mm] (with the desired one), every interconnection's force on the object [N], the internal
+    (squeeze) force [N] and the joint torques [N·m]. A colour per arm (per axis in the first panel),
+    a line style per force component or joint, legends beside the panels; with ``reference(t)``
+    (e.g. a :class:`coopdyn.cooperative.GripLiftOscillate`) the desired motion and squeeze are drawn
+    and its phases shaded."""
     plt = _pyplot()
     t = result.t
-    fig, axes = plt.subplots(4, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(4, 1, figsize=(11, 11), sharex=True, layout="constrained")
     obj = result.object_position()
+    start = obj[0]
     for k, c in enumerate("xyz"):
-        (line,) = axes[0].plot(t, obj[:, k], label=f"object {c}")
+        axes[0].plot(t, (obj[:, k] - start[k]) * 1e3, color=AXIS_COLOURS[c], lw=1.4, label=f"object {c}")
         if reference is not None:
-            axes[0].plot(t, [reference(s).position[k] for s in t], "--", color=line.get_color(), lw=1, label=f"desired {c}")
-    for arm in result.scene.arms:
-        axes[0].plot(t, result.tip_position(arm.name)[:, 2], ":", label=f"{arm.name} tool z")
-    axes[0].set_ylabel("position [m]")
+            desired = np.array([reference(s).position[k] for s in t])
+            axes[0].plot(t, (desired - start[k]) * 1e3, "--", color=AXIS_COLOURS[c], lw=1, label=f"desired {c}")
+    axes[0].set_ylabel("displacement [mm]")
+    axes[0].set_title("Object position, from its start [mm]", loc="left", fontsize=10)
     W = result.wrenches()
+    colour = {lk.name: ARM_COLOURS[i % len(ARM_COLOURS)] for i, lk in enumerate(result.scene.links)}
     for i, lk in enumerate(result.scene.links):
-        name = lk.name
         for k, c in enumerate("xyz"):
-            axes[1].plot(t, W[:, i, k], label=f"{name} F{c}")
-    axes[1].set_ylabel("interconnection force\non the object [N]")
+            axes[1].plot(t, W[:, i, k], JOINT_STYLES[k], color=colour[lk.name], lw=1.1, label=f"{lk.name} F{c}")
+    axes[1].set_ylabel("force [N]")
+    axes[1].set_title("Interconnection forces on the object, world axes [N]", loc="left", fontsize=10)
     sq = result.squeeze()
     for i, lk in enumerate(result.scene.links):
-        axes[2].plot(t, sq[:, i], label=lk.name)
+        axes[2].plot(t, sq[:, i], JOINT_STYLES[i % 2], color=colour[lk.name], lw=1.4, label=lk.name)  # equal ones stay visible
     if reference is not None:
         axes[2].plot(t, [reference(s).squeeze for s in t], "k--", lw=1, label="commanded")
-    axes[2].set_ylabel("internal (squeeze)\nforce [N]")
-    joints = [n for a in result.scene.arms for n in a.joint_names]
-    for j in range(result.tau.shape[1]):
-        axes[3].plot(t, result.tau[:, j], lw=0.8, label=joints[j] if j < len(joints) else str(j))
-    axes[3].set_ylabel("joint torque [N·m]")
+    axes[2].set_ylabel("squeeze [N]")
+    axes[2].set_title("Internal (squeeze) force at each grasp, positive = compression [N]", loc="left", fontsize=10)
+    v_names = result.scene.coordinates()[1]
+    for a, arm in enumerate(result.scene.arms):
+        c = ARM_COLOURS[a % len(ARM_COLOURS)]
+        for j, index in enumerate(arm.v_index):
+            column = int(np.flatnonzero(result.scene.actuated == index)[0])
+            joint = v_names[index].split(" [")[0]
+            axes[3].plot(t, result.tau[:, column], linestyle=JOINT_STYLES[j % len(JOINT_STYLES)], color=c, lw=1, label=joint)
+    units = {v_names[i].rsplit("[", 1)[-1] for i in result.scene.actuated}
+    what = {"rad/s]": "torque [N·m]", "m/s]": "force [N]"}.get(units.pop(), "") if len(units) == 1 else "torque [N·m], force [N]"
+    axes[3].set_ylabel(what or "torque [N·m], force [N]")
+    axes[3].set_title(
+        f"Joint {what.split(' ')[0] or 'torques'}s, a colour per arm, a line style per joint", loc="left", fontsize=10
+    )
     axes[3].set_xlabel("time [s]")
-    for ax in axes[:3]:
-        ax.legend(loc="best", fontsize=7, ncol=3)
-    axes[3].legend(loc="upper left", fontsize=5, ncol=7)
+    _phases(axes, reference, float(t[-1]) if len(t) else 0.0)
     for ax in axes:
         ax.grid(True, alpha=0.3)
-    fig.suptitle(f"{', '.join(a.name for a in result.scene.arms)} holding the object: {result.integrator}, dt = {result.dt:g} s")
+        n = len(ax.get_legend_handles_labels()[1])
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, ncol=1 if n <= 8 else 2, frameon=False)
+    arms = ", ".join(a.name for a in result.scene.arms) or "fixtures"
+    fig.suptitle(f"{arms} holding the object — {result.integrator}, dt = {result.dt:g} s")
     if path is not None:
         save_figure(fig, path)
     return fig

@@ -9,8 +9,10 @@ scene tree and packs it with meshcat's own viewer script, as ``meshcat-server`` 
 from __future__ import annotations
 
 import base64
+import html
 import logging
 import os
+import re
 import time
 import warnings
 from collections.abc import Iterator
@@ -21,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._signals import sigterm_as_interrupt
+from ..errors import ViewerError
 from ..model.arm import load_arm
 from ..model.scene import Scene
 from ..result import Result
@@ -74,19 +77,31 @@ class RecordingWindow:
         elif kind == "set_animation":
             node.animation = packed
 
-    def get_scene(self) -> str:
-        """The recorded scene as a standalone HTML page (meshcat's viewer script inlined)."""
+    def get_scene(self, extra_js: str = "", legend: str = "") -> str:
+        """The recorded scene as a standalone HTML page: meshcat's viewer script inlined, the
+        commands gzip-compressed (the page inflates them; meshes are mostly text) and sent in order
+        with the animations last (sent first, an animated scale can stay at its static value);
+        ``extra_js`` runs after them, ``legend`` is shown in a corner."""
+        import gzip
+
         from meshcat.servers.tree import walk
         from meshcat.servers.zmqserver import VIEWER_ROOT
 
         commands: list[bytes] = []
+        animations: list[bytes] = []
         for node in walk(self.tree):
-            blobs = [node.object, *node.properties, node.transform, node.animation]
-            commands.extend(b for b in blobs if b is not None)
+            commands.extend(b for b in [node.object, *node.properties, node.transform] if b is not None)
+            if node.animation is not None:
+                animations.append(node.animation)
+        stream = b"".join(len(c).to_bytes(4, "little") + c for c in commands + animations)
+        payload = base64.b64encode(gzip.compress(stream, 6)).decode()
         js = Path(VIEWER_ROOT, "main.min.js").read_text()
-        # decode synchronously, in order (fetch() of data URLs may resolve out of order)
-        calls = "\n".join(f'viewer.handle_command_bytearray(b64("{base64.b64encode(c).decode()}"));' for c in commands)
-        return _HTML.format(js=js, commands=calls)
+        return (
+            _HTML.replace("{js}", js)
+            .replace("{payload}", payload)
+            .replace("{extra}", extra_js)
+            .replace("{legend}", html.escape(legend))
+        )
 
     def url(self) -> str:
         return "(recording: no server)"
@@ -95,18 +110,27 @@ class RecordingWindow:
 _HTML = """<!DOCTYPE html>
 <html>
 <head><meta charset="utf-8"><title>coopdyn</title>
-<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}</style></head>
+<style>body { margin: 0; } #meshcat-pane { width: 100vw; height: 100vh; overflow: hidden; }
+#legend { position: absolute; left: 12px; bottom: 12px; font: 13px sans-serif; color: #222;
+  background: rgba(255, 255, 255, 0.8); padding: 4px 8px; border-radius: 4px; pointer-events: none; }</style></head>
 <body>
 <div id="meshcat-pane"></div>
+<div id="legend">{legend}</div>
 <script>{js}</script>
 <script>
-function b64(s) {{
-  const bin = atob(s); const out = new Uint8Array(bin.length);
-  for (let i = 0; i < bin.length; i++) out[i] = bin.charCodeAt(i);
-  return out;
-}}
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-{commands}
+(async function () {
+  const packed = Uint8Array.from(atob("{payload}"), c => c.charCodeAt(0));
+  const inflated = new Blob([packed]).stream().pipeThrough(new DecompressionStream("gzip"));
+  const buf = new Uint8Array(await new Response(inflated).arrayBuffer());
+  const view = new DataView(buf.buffer);
+  for (let o = 0; o < buf.length;) {
+    const n = view.getUint32(o, true);
+    viewer.handle_command_bytearray(buf.slice(o + 4, o + 4 + n));
+    o += 4 + n;
+  }
+  {extra}
+})();
 </script>
 </body>
 </html>
@@ -115,17 +139,21 @@ var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 
 def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
     """Display geometry of the whole scene on ``scene.model``: every arm's URDF ``meshes``
-    ("collision": compact, the default; "visual": the full meshes, ~30 MB of HTML for two
-    Pandas) and a box for the object (``RigidObject.size``, or a 5 cm cube)."""
+    ("collision": compact, the default — an arm whose URDF has none shows its visual meshes;
+    "visual": the full meshes, several MB of HTML per arm) and a box for the object
+    (``RigidObject.size``, or a 5 cm cube)."""
     import coal
 
     geom = pin.GeometryModel()
     model = scene.model
     for spec, info in zip(scene.arm_specs, scene.arms, strict=True):
         la = load_arm(spec, meshes=meshes)
-        assert la.visual is not None
+        if la.visual is not None and la.visual.ngeoms == 0 and meshes == "collision":  # a URDF with visual geometry only
+            la = load_arm(spec, meshes="visual")
+        visual = la.visual
+        assert visual is not None
         base = la.base
-        for g in la.visual.geometryObjects:
+        for g in visual.geometryObjects:
             joint_name = la.model.names[g.parentJoint]
             frame_name = la.model.frames[g.parentFrame].name
             copy = pin.GeometryObject(g)
@@ -163,25 +191,79 @@ def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
     return geom
 
 
+ARROW_LENGTH = 0.25  #: length of a result's largest force arrow [m]; the scale [m/N] follows from it
+HEAD_LENGTH, HEAD_RADIUS, SHAFT_RADIUS = 0.03, 0.013, 0.005  #: an arrow's head and shaft [m]
+
+_STL = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def stl_with_normals(data: bytes) -> bytes:
+    """A binary STL of the file's triangles whose facet normals are valid: the file itself when
+    they are; else the normals computed (right-hand rule). Some exporters write zero normals
+    (UR5's collision meshes), which the browser takes as they are: the mesh renders black."""
+    n = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
+    if len(data) == 84 + 50 * n:
+        records = np.frombuffer(data, _STL, count=n, offset=84)
+        if np.all(np.abs(np.linalg.norm(records["n"], axis=1) - 1.0) < 1e-2):
+            return data
+        triangles = records["v"].astype(np.float64)
+    else:  # ASCII
+        found = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
+        triangles = np.array(found, dtype=np.float64).reshape(-1, 3, 3)
+    out = np.zeros(len(triangles), _STL)
+    out["v"] = triangles
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    norm = np.linalg.norm(cross, axis=1, keepdims=True)
+    out["n"] = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
+    return b"coopdyn: normals computed".ljust(80, b"\0") + len(triangles).to_bytes(4, "little") + out.tobytes()
+
+
+def _visualizer_class() -> Any:
+    """Pinocchio's meshcat visualizer, with STL meshes sent with valid normals."""
+    import meshcat.geometry as mg
+    import umsgpack
+    from pinocchio.visualize import MeshcatVisualizer
+
+    class Visualizer(MeshcatVisualizer):
+        def loadMeshFromFile(self, geometry_object: Any) -> Any:
+            if Path(geometry_object.meshPath).suffix.lower() == ".stl":
+                data = stl_with_normals(Path(geometry_object.meshPath).read_bytes())
+                return mg.MeshGeometry(umsgpack.Ext(0x12, data), "stl")  # 0x12: meshcat's byte-array extension
+            return super().loadMeshFromFile(geometry_object)
+
+    return Visualizer
+
+
+def force_scale(result: Result) -> tuple[float, float]:
+    """(arrow length per newton [m/N], the peak interconnection force [N]): the largest force of
+    the run is drawn :data:`ARROW_LENGTH` long."""
+    W = result.wrenches()
+    peak = float(np.max(np.linalg.norm(W[..., :3], axis=-1))) if W.size else 0.0
+    return (ARROW_LENGTH / peak if peak > 0 else 0.01), peak
+
+
 class _Animator:
     """Loads a scene into a meshcat visualizer and writes poses of one result frame."""
 
-    def __init__(self, scene: Scene, viewer: Any, meshes: str = "collision", root: str = "coopdyn") -> None:
+    def __init__(self, scene: Scene, viewer: Any, meshes: str = "collision", root: str = "coopdyn", scale: float = 0.01) -> None:
         meshcat = _meshcat()
-        from pinocchio.visualize import MeshcatVisualizer
 
         self.scene = scene
         self.geom = visual_model(scene, meshes)
-        self.viz = MeshcatVisualizer(scene.model, None, self.geom)
+        self.viz = _visualizer_class()(scene.model, None, self.geom)
         self.viz.initViewer(viewer=viewer)
         self.viz.loadViewerModel(rootNodeName=root)
         self.viewer = viewer
+        self.scale = scale
         self.data = scene.model.createData()
         self.gdata = self.geom.createData()
         self.arrows = [f"{root}/forces/link{i}" for i in range(len(scene.links))]
+        g = meshcat.geometry
         for name in self.arrows:
-            red = meshcat.geometry.MeshLambertMaterial(color=0xD62728)
-            viewer[name].set_object(meshcat.geometry.Cylinder(1.0, 0.006), red)
+            red = g.MeshLambertMaterial(color=0xD62728)
+            viewer[f"{name}/shaft"].set_object(g.Cylinder(1.0, SHAFT_RADIUS), red)
+            viewer[f"{name}/head"].set_object(g.Cylinder(HEAD_LENGTH, radiusTop=0.0, radiusBottom=HEAD_RADIUS), red)
+        self.arrow_nodes = {f"{a}{part}" for a in self.arrows for part in ("", "/shaft", "/head")}
         self.nodes = [
             (self.viz.getViewerNodeName(g, pin.GeometryType.VISUAL), i, g.meshScale)
             for i, g in enumerate(self.geom.geometryObjects)
@@ -198,24 +280,76 @@ class _Animator:
         for name, i, scale in self.nodes:
             yield name, self.gdata.oMg[i].homogeneous, scale
         for name, lk, w in zip(self.arrows, self.scene.links, wrenches, strict=True):
-            vec = w[:3] * FORCE_SCALE  # drawn ending at the grasp point: the push, from outside the object
-            yield name, *_arrow(data.oMf[lk.grasp_frame].translation - vec, vec)
+            vec = w[:3] * self.scale  # drawn ending at the grasp point: the push, from outside the object
+            for part, (T, scale) in _arrow(data.oMf[lk.grasp_frame].translation - vec, vec).items():
+                yield f"{name}{part}", T, scale
+
+    def box(self, qs: Any, wrenches: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The world box (lower, upper corners) [m] that every geometry and force arrow stays in
+        over the configurations ``qs`` with interconnection ``wrenches``, at least 0.3 m wide."""
+        model, data, geom, gdata = self.scene.model, self.data, self.geom, self.gdata
+        corners = []
+        for g in geom.geometryObjects:
+            g.geometry.computeLocalAABB()
+            lo = np.asarray(g.geometry.aabb_local.min_) * g.meshScale
+            hi = np.asarray(g.geometry.aabb_local.max_) * g.meshScale
+            corners.append(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
+        points = []
+        for q, W in zip(qs, wrenches, strict=True):
+            pin.framesForwardKinematics(model, data, q)
+            pin.updateGeometryPlacements(model, data, geom, gdata)
+            points += [c @ M.rotation.T + M.translation for M, c in zip(gdata.oMg, corners, strict=True)]
+            points += [
+                np.array([data.oMf[lk.grasp_frame].translation - w[:3] * self.scale])
+                for lk, w in zip(self.scene.links, W, strict=True)
+            ]
+        stacked = np.concatenate(points)
+        centre, half = (stacked.min(axis=0) + stacked.max(axis=0)) / 2, (stacked.max(axis=0) - stacked.min(axis=0)) / 2
+        half = np.maximum(half, 0.15)
+        return centre - half, centre + half
 
 
-def _arrow(origin: np.ndarray, vec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(rigid transform, scale) turning meshcat's unit cylinder (along y, centred) into a bar
-    from ``origin`` along ``vec``."""
+def _arrow(tail: np.ndarray, vec: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{"": the arrow's rigid pose, "/shaft", "/head": their poses in it} with scales (3,): the
+    arrow from ``tail`` along ``vec`` (+y of the pose), a head of fixed size (an arrow shorter
+    than two heads shrinks as a whole) on a unit cylinder stretched to the rest."""
     length = float(np.linalg.norm(vec))
     T = np.eye(4)
-    T[:3, 3] = origin + 0.5 * vec
+    T[:3, 3] = tail
     if length < 1e-9:
-        return T, np.array([1e-6, 1e-6, 1e-6])
+        return {"": (T, np.full(3, 1e-6)), "/shaft": (np.eye(4), np.ones(3)), "/head": (np.eye(4), np.ones(3))}
     y = vec / length
     a = np.array([1.0, 0.0, 0.0]) if abs(y[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     x = np.cross(y, a)
     x /= np.linalg.norm(x)
     T[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
-    return T, np.array([1.0, length, 1.0])
+    s = min(1.0, length / (2 * HEAD_LENGTH))
+    head, shaft = HEAD_LENGTH * s, length - HEAD_LENGTH * s
+    T_shaft, T_head = np.eye(4), np.eye(4)
+    T_shaft[1, 3], T_head[1, 3] = shaft / 2, shaft + head / 2
+    return {"": (T, np.ones(3)), "/shaft": (T_shaft, np.array([s, max(shaft, 1e-6), s])), "/head": (T_head, np.full(3, s))}
+
+
+def camera(lo: np.ndarray, hi: np.ndarray, azimuth: float = -35.0, elevation: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
+    """(eye, target) [m]: looking at the centre of the box (lo, hi) from ``azimuth`` (from +x
+    towards +y) and ``elevation`` [deg], at the distance where its eight corners fit meshcat's
+    default camera (75° vertical field of view) in a 4:3 window, with a 5 % margin."""
+    centre = (lo + hi) / 2
+    az, el = np.radians(azimuth), np.radians(elevation)
+    u = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # from the target to the eye
+    right = np.cross(-u, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -u)
+    tan_v = np.tan(np.radians(75.0) / 2) * 0.95
+    tan_h = tan_v * 4 / 3
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - centre
+    distance = max(np.max(corners @ u + np.abs(corners @ right) / tan_h), np.max(corners @ u + np.abs(corners @ up) / tan_v))
+    return centre + distance * u, centre
+
+
+def _yup(p: np.ndarray) -> list[float]:
+    """A world point (z up) in the coordinates of meshcat's camera (three.js, y up)."""
+    return [float(p[0]), float(p[2]), float(-p[1])]
 
 
 def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -231,29 +365,45 @@ def _frames(result: Result, fps: float) -> np.ndarray:
 
 def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30.0, meshes: str = "collision") -> Path:
     """Write a self-contained HTML animation of ``result`` (plays offline in a browser),
-    atomically; ``meshes`` as in :func:`visual_model`."""
+    atomically; ``meshes`` as in :func:`visual_model`. The camera frames the arms and the object
+    over the whole run; red arrows show the interconnection forces on the object, the largest
+    :data:`ARROW_LENGTH` long (the scale is in the page's corner)."""
     meshcat = _meshcat()
     from meshcat.animation import Animation
 
+    from .._validate import positive
+
+    fps = positive(fps, "fps", "frames per second", ViewerError)
     window = RecordingWindow()
     vis = meshcat.Visualizer(window=window)
-    animator = _Animator(result.scene, vis, meshes)
+    scale, peak = force_scale(result)
+    animator = _Animator(result.scene, vis, meshes, scale=scale)
     idx = _frames(result, fps)
     wrenches = result.wrenches()
-    for name, T, scale in animator.poses(result.q[0], wrenches[0]):
-        vis[name].set_transform(_scaled(T, scale))
+    for name, T, s in animator.poses(result.q[0], wrenches[0]):
+        vis[name].set_transform(_scaled(T, s))
     anim = Animation(default_framerate=fps)
     for frame, k in enumerate(idx):
         with anim.at_frame(vis, frame) as f:
-            for name, T, scale in animator.poses(result.q[k], wrenches[k]):
+            for name, T, s in animator.poses(result.q[k], wrenches[k]):
                 f[name].set_transform(T)
-                if name in animator.arrows:
-                    f[name].set_property("scale", "vector3", scale.tolist())
+                if name in animator.arrow_nodes:
+                    f[name].set_property("scale", "vector3", s.tolist())
     vis.set_animation(anim, play=True, repetitions=1000)
+    sampled = idx[:: max(1, len(idx) // 20)]
+    eye, target = camera(*animator.box(result.q[sampled], wrenches[sampled]))
+    vis["/Cameras/default/rotated/<object>"].set_property("position", _yup(eye))
+    x, y, z = _yup(target)  # meshcat has no command for the orbit target: set it in the page
+    look = f"viewer.controls.target.set({x:.6g}, {y:.6g}, {z:.6g}); viewer.controls.update(); viewer.set_dirty();"
+    legend = (
+        f"red arrows: interconnection forces on the object, 1 cm = {0.01 / scale:.3g} N (peak {peak:.3g} N)"
+        if peak > 0
+        else "no interconnection force in this run"
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(window.get_scene())
+    tmp.write_text(window.get_scene(look, f"{legend} · {result.integrator}, {result.t[-1]:g} s"))
     os.replace(tmp, path)
     return path
 
@@ -290,7 +440,7 @@ def view(
             zmq_url = server.zmq_url
         with sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
-            animator = _Animator(result.scene, vis, meshes)
+            animator = _Animator(result.scene, vis, meshes, scale=force_scale(result)[0])
             idx = _frames(result, fps)
             wrenches = result.wrenches()
             url = server.web_url if server is not None else vis.url()
