@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import re
 import sys
 import time
@@ -78,7 +79,7 @@ def _plot(args: argparse.Namespace) -> int:
     from .io.scenefile import open_result
     from .viz.plotting import result_figure
 
-    saved = open_result(args.path)
+    saved = open_result(args.path, task=True)
     out = Path(args.out) if args.out else saved.path.with_name("plot.png")
     result_figure(saved.result, saved.task, out)
     print(f"wrote {out}")
@@ -93,13 +94,10 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-#: what an error says to a Python caller, and what the command line says instead
-_CLI_WORDS = (
-    (re.compile(r"[.;]? *[Tt]he trajectory (so far|up to t = \S+ s) is in (this error's|this exception's)? ?\.result\.?"), "."),
-    (
-        re.compile(r"pass max_steps=None( \(or a larger number\))?", re.IGNORECASE),
-        "give --max-steps 0 (no limit) or a larger number",
-    ),
+#: the keyword argument an error suggests to a Python caller, and the option the command line has instead
+_MAX_STEPS = (
+    re.compile(r"pass max_steps=None( \(or a larger number\))?", re.IGNORECASE),
+    "give --max-steps 0 (no limit) or a larger number",
 )
 
 
@@ -110,12 +108,9 @@ def _cli_warning(message: Warning | str, category: type[Warning], filename: str,
 
 
 def _cli_message(exc: BaseException) -> str:
-    """The error's message in command-line terms: where the trajectory was saved (not a Python
-    attribute), command-line options instead of keyword arguments."""
-    text = str(exc)
-    for pattern, words in _CLI_WORDS:
-        text = pattern.sub(words, text)
-    text = text.replace("..", ".")
+    """The error's message in command-line terms: where the trajectory was saved (not the Python
+    attribute ``.result``: its ``detail``), command-line options instead of keyword arguments."""
+    text = _MAX_STEPS[0].sub(_MAX_STEPS[1], getattr(exc, "detail", str(exc))).rstrip(".") + "."
     saved = [Path(p) for p in getattr(exc, "saved", ())]
     if saved:
         folder = saved[0].parent
@@ -235,6 +230,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.formatwarning = _cli_warning  # printed warnings speak CLI (restored below: main() is also called in-process)
     try:
         code = int(args.func(args))
+        print(f"done in {time.perf_counter() - t0:.1f} s")
+    except BrokenPipeError:  # the reader went away (`coopdyn … | head`): nothing more to say, to anyone
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (Python flushes stdout at exit)
+        return 0
     except CoopdynError as exc:
         print(f"coopdyn: error: {_cli_message(exc)}\n(exit code 2)", file=sys.stderr)
         return 2
@@ -246,7 +245,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     finally:
         warnings.formatwarning = formatwarning
-    print(f"done in {time.perf_counter() - t0:.1f} s")
     return code
 
 

@@ -22,43 +22,48 @@ class SimulationError(CoopdynError, RuntimeError):
     """A simulation was asked something invalid or could not proceed."""
 
 
-class DivergenceError(SimulationError):
+class _CarriesResult(BaseException):
+    """An error that carries the trajectory computed so far in ``result``; its message says so,
+    and ``detail`` is the message without that sentence (what the command line prints, with
+    where it saved the trajectory instead)."""
+
+    def __init__(self, message: str, *, result: object = None) -> None:
+        t = getattr(result, "t", None)
+        if t is None:
+            full = message
+        else:
+            upto = f"up to t = {t[-1]:.6g} s" if len(t) else "(no sample yet)"
+            kind = "exception" if isinstance(self, KeyboardInterrupt) else "error"
+            full = f"{message}. The trajectory {upto} is in this {kind}'s .result"
+        super().__init__(full)
+        self.detail = message
+        self.result = result
+
+
+class DivergenceError(_CarriesResult, SimulationError):
     """The simulation blew up. ``result`` holds the trajectory up to the failure and ``advice``
     the stability analysis (:class:`coopdyn.stability.Advice`) at the last saved state."""
 
     def __init__(self, message: str, *, result: object = None, advice: object = None) -> None:
-        super().__init__(message)
-        self.result = result
+        super().__init__(message, result=result)
         self.advice = advice
 
 
-class SimulationInterrupted(KeyboardInterrupt):
+class SimulationInterrupted(_CarriesResult, KeyboardInterrupt):
     """Ctrl-C during a simulation. A ``KeyboardInterrupt`` (it stops a script like one), with
     the trajectory computed so far in ``result``."""
 
-    def __init__(self, message: str, *, result: object = None) -> None:
-        super().__init__(message)
-        self.result = result
 
-
-class StepBudgetError(SimulationError):
+class StepBudgetError(_CarriesResult, SimulationError):
     """An adaptive method used up ``simulate``'s ``max_steps`` (accepted and rejected steps) before
     the end: its steps shrank to follow a mode it cannot step over. ``result`` holds the
     trajectory so far."""
 
-    def __init__(self, message: str, *, result: object = None) -> None:
-        super().__init__(message)
-        self.result = result
 
-
-class StepMatrixError(SimulationError):
+class StepMatrixError(_CarriesResult, SimulationError):
     """The step matrix of a linearly implicit step, M + γh·D̃ + (γh)²·K̃, is not positive definite
     (a negative gain or stiffness, or a state that is no longer finite). Raised by ``simulate``
     with the time and the method, and ``result`` holding the trajectory up to there."""
-
-    def __init__(self, message: str, *, result: object = None) -> None:
-        super().__init__(message)
-        self.result = result
 
 
 class KernelError(SimulationError):

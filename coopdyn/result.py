@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -25,6 +26,7 @@ from .model.description import build, describe
 from .model.scene import Scene
 
 RESULT_FORMAT = "coopdyn.result/1"  #: what a saved result's ``meta`` says it is
+ARRAYS = ("t", "q", "v", "tau")  #: the fields a saved result keeps as arrays (the others go in ``meta``)
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,7 +196,7 @@ class Result:
             if path.suffix == ".npz":
                 meta = json.dumps(self._meta(), allow_nan=False)
                 with open(tmp, "wb") as f:
-                    np.savez(f, t=self.t, q=self.q, v=self.v, tau=self.tau, wrenches=W, meta=np.array(meta))
+                    np.savez(f, **{k: getattr(self, k) for k in ARRAYS}, wrenches=W, meta=np.array(meta))
             else:
                 names = self.columns()
                 header = ",".join(f"{k} {n}" if k != "t" else n for k, ns in names.items() for n in ns)
@@ -210,19 +212,7 @@ class Result:
         return path
 
     def _meta(self) -> dict[str, Any]:
-        fields = (
-            "integrator",
-            "dt",
-            "n_rhs",
-            "cpu_time",
-            "n_jac",
-            "n_factor",
-            "n_steps",
-            "n_rejected",
-            "status",
-            "backend",
-            "loop",
-        )
+        fields = [f.name for f in dataclasses.fields(self) if f.name not in (*ARRAYS, "scene")]
         return {
             "format": RESULT_FORMAT,
             "coopdyn": __version__,
@@ -246,6 +236,9 @@ class Result:
                 arrays = {k: np.asarray(z[k]) for k in z.files}
         except Exception as exc:
             raise SimulationError(f"{path} is not a result coopdyn wrote ({type(exc).__name__}: {exc})") from exc
+        missing = [k for k in ARRAYS if k not in arrays]
+        if "meta" in arrays and missing:
+            raise SimulationError(f"{path}: no {', '.join(missing)} in the file (a damaged file?)")
         if "meta" not in arrays:
             raise SimulationError(
                 f"{path} has no description of its scene (saved by an older coopdyn, or not by coopdyn); "
@@ -257,15 +250,21 @@ class Result:
                 raise ValueError("an unknown format")
             meta.pop("coopdyn")
             meta.pop("columns")
+            _check_meta(meta)
             scene = build(meta.pop("scene"))
         except CoopdynError as exc:
             raise SimulationError(f"{path}: its scene cannot be rebuilt: {exc}") from exc
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise SimulationError(f"{path}: not a result coopdyn wrote, or damaged ({type(exc).__name__}: {exc})") from exc
-        n = len(arrays["t"]) if arrays["t"].ndim == 1 else -1
-        for key, shape in {"q": (n, scene.nq), "v": (n, scene.nv), "tau": (n, scene.n_actuated)}.items():
+        t = arrays["t"]
+        if t.ndim != 1 or t.dtype.kind != "f":
+            raise SimulationError(f"{path}: t must be a list of times [s], got {t.dtype} of shape {t.shape} (a damaged file?)")
+        for key, shape in {"q": (len(t), scene.nq), "v": (len(t), scene.nv), "tau": (len(t), scene.n_actuated)}.items():
             if arrays[key].shape != shape or arrays[key].dtype.kind != "f":
-                raise SimulationError(f"{path}: {key} has shape {arrays[key].shape}, its scene needs {shape} (a damaged file?)")
+                raise SimulationError(
+                    f"{path}: {key} is {arrays[key].dtype} of shape {arrays[key].shape}; its scene and the {len(t)} samples "
+                    f"need floats of shape {shape} (a damaged file?)"
+                )
         try:
             return cls(scene=scene, t=arrays["t"], q=arrays["q"], v=arrays["v"], tau=arrays["tau"], **meta)
         except TypeError as exc:
@@ -294,6 +293,21 @@ class Result:
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
         return self.readouts.object_position
+
+
+#: what a saved counter or setting may hold, by the annotation of its Result field
+_META_TYPES: dict[str, tuple[type, ...]] = {"float": (int, float), "int": (int,), "str": (str,), "str | None": (str, type(None))}
+
+
+def _check_meta(meta: dict[str, Any]) -> None:
+    """Raise ValueError unless the saved counters and settings have their fields' types."""
+    for f in dataclasses.fields(Result):
+        if f.name in meta and f.type in _META_TYPES:
+            value = meta[f.name]
+            if isinstance(value, bool) or not isinstance(value, _META_TYPES[str(f.type)]):
+                raise ValueError(f"{f.name} = {value!r} is not of type {f.type}")
+            if isinstance(value, float) and not np.isfinite(value):
+                raise ValueError(f"{f.name} = {value!r} is not finite")
 
 
 class SampleFiles:

@@ -189,7 +189,7 @@ def simulate(
             partial = run.result("completed" if done else "interrupted")
         reached = f"at t = {partial.t[-1]:.6g} s" if len(partial.t) else "before the first sample"
         raise SimulationInterrupted(
-            f"interrupted {reached} of {t_final:g} s; the trajectory so far is in this exception's .result",
+            f"interrupted {reached} of {t_final:g} s",
             result=partial,
         ) from None
     except BaseException:
@@ -252,7 +252,7 @@ class _Run:
             f"{self.method.name} took {attempts:,} steps (max_steps = {self.budget:,}) and reached only t = {t:.6g} s of "
             f"{self.t_final:g} s: its steps shrank to follow a fast mode (mean step {t / max(self.n_accepted, 1):.3g} s). "
             "An L-stable method (implicit_euler, ros2) steps over stiff modes; coopdyn.advise(scene) lists what is stable "
-            "at which dt. Pass max_steps=None to let it run. The trajectory so far is in this error's .result",
+            "at which dt. Pass max_steps=None to let it run",
             result=partial,
         )
 
@@ -296,7 +296,7 @@ class _Run:
         partial = self.result("diverged")
         raise DivergenceError(
             f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
-            f"At the last saved state, {diagnosis}. The trajectory up to t = {partial.t[-1]:.6g} s is in this error's .result",
+            f"At the last saved state, {diagnosis}",
             result=partial,
             advice=advice,
         )
@@ -334,7 +334,7 @@ class _Run:
             f"{exc} at t = {t:.6g} s ({self.method.name}, dt = {h:g} s). M is positive definite and the "
             "interconnections' K̃, D̃ are positive semi-definite, so a negative joint gain from the controller's "
             "gains() or a state that is no longer finite made it so: check the controller's gains, or run an "
-            "explicit method (rk4, dopri5) to see where the state goes. The trajectory so far is in .result",
+            "explicit method (rk4, dopri5) to see where the state goes",
             result=partial,
         )
 

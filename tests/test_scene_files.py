@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -10,7 +12,11 @@ import jsonschema
 import numpy as np
 import pinocchio as pin
 import pytest
-import tomllib
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 import coopdyn as cd
 from coopdyn import _progress
@@ -92,6 +98,9 @@ def test_description_errors_say_where() -> None:
         ),
         (lambda d: d["interconnections"][0].update(stiffness=[[1.0, 2.0], [3.0, 4.0]]), r"interconnections\[0\]: .*stiffness"),
         (lambda d: d.update(gravity=[0, 0]), r"gravity: must be 3 numbers"),
+        (lambda d: d.update(gravity=[0, 0, float("nan")]), r"^gravity: must be finite, got \[0.0, 0.0, nan\]$"),
+        (lambda d: d["arms"][1].update(name="tip1"), r"arms\[1\].name: arm names must be unique; arms\[0\] is named 'tip1' too"),
+        (lambda d: d["object"].update(pose=[0, 0, 0, 1]), r"object.pose: must be a translation \[x, y, z\], a 4x4 matrix"),
     ]
     for change, message in cases:
         bad = json.loads(json.dumps(doc))
@@ -148,6 +157,19 @@ def test_loading_what_is_not_a_result_says_so(tmp_path: Path, book: cd.Scene) ->
     np.savez(tmp_path / "bad.npz", t=res.t, q=res.q, v=res.v, tau=res.tau, meta=np.array("{not json"))
     with pytest.raises(SimulationError, match="not a result coopdyn wrote, or damaged"):
         cd.Result.load(tmp_path / "bad.npz")
+    arrays = {"t": res.t, "q": res.q, "v": res.v, "tau": res.tau}
+    res.save(tmp_path / "r.npz")
+    meta = json.loads(str(np.load(tmp_path / "r.npz")["meta"]))
+    for change, message in (
+        ({"q": None}, r"no q in the file"),
+        ({"q": res.q.astype(int)}, r"q is int64 of shape \(11, 3\); its scene and the 11 samples need floats of shape \(11, 3\)"),
+        ({"meta": {**meta, "dt": "x"}}, r"dt = 'x' is not of type float"),
+        ({"meta": {**meta, "n_rhs": float("nan")}}, r"n_rhs = nan is not of type int"),
+    ):
+        bad = {**arrays, "meta": np.array(json.dumps(change.pop("meta", meta)))} | change
+        np.savez(tmp_path / "damaged.npz", **{k: v for k, v in bad.items() if v is not None})
+        with pytest.raises(SimulationError, match=message):
+            cd.Result.load(tmp_path / "damaged.npz")
     (tmp_path / "text.npz").write_text("hello")
     with pytest.raises(SimulationError, match="is not a result coopdyn wrote"):
         cd.Result.load(tmp_path / "text.npz")
@@ -191,7 +213,7 @@ def test_scene_files_describe_arms_objects_and_interconnections() -> None:
         (('type = "box"', 'type = "ball"', 1), r"line 25: \[object\] type: type must be one of"),
         (
             ("rpy = [0.0, 0.0, 1.5707963267948966]", "rpy = [0.0, 1.5707963267948966]", 1),
-            r"line 12: \[\[arms\]\] #1 base: must be",
+            r"line 12: \[\[arms\]\] #1 base: rpy \[rad\] must have shape \(3,\), got shape \(2,\)",
         ),
         (
             ("[scene]\n", '[scene]\nbuilder = "facing_arms"\n', 1),
@@ -229,6 +251,15 @@ def test_simulate_then_view_and_plot_what_it_wrote(tmp_path: Path, capsys: pytes
     assert main(["plot", str(out), "--out", str(tmp_path / "p.png")]) == 0 and (tmp_path / "p.png").stat().st_size > 10_000
     assert main(["view", str(tmp_path)]) == 2
     assert "holds no trajectory.npz: run `coopdyn simulate` or `coopdyn demo` first" in capsys.readouterr().err
+    reader_gone = subprocess.Popen(  # `coopdyn plot … | head -c0`: the pipe is closed before coopdyn writes
+        [sys.executable, "-m", "coopdyn", "plot", str(out), "--out", str(tmp_path / "p2.png")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert reader_gone.stdout is not None
+    reader_gone.stdout.close()
+    _, err = reader_gone.communicate(timeout=120)
+    assert reader_gone.returncode == 0 and b"Traceback" not in err and (tmp_path / "p2.png").is_file()
 
 
 def test_the_command_line_describes_itself(capsys: pytest.CaptureFixture[str]) -> None:
@@ -262,6 +293,8 @@ def test_a_divergence_names_the_mode_that_limits_the_step(pandas: cd.Scene) -> N
     limit = advice.max_stable_dt("rk4")
     assert f"|λ| = {abs(lam):.4g} 1/s" in text and f"dt ≤ {limit * 1e3:.4g} ms" in text and limit < 5e-3
     assert "max_speed = 10000 rad/s or m/s" in text and "stable at dt = 5 ms: implicit_euler, ros2" in text
+    t_end = caught.value.result.t[-1]
+    assert text == f"{caught.value.detail}. The trajectory up to t = {t_end:.6g} s is in this error's .result"
     with np.errstate(all="ignore"):  # the limiting mode is where rk4's |R(hλ)| first passes 1
         from coopdyn.integrators import get_integrator
 

@@ -474,40 +474,42 @@ class Saved:
 
     result: Any  #: the :class:`coopdyn.Result`
     path: Path  #: the ``.npz`` it came from
-    run: Run | None  #: the scene file it belongs to, if known
-    task: Any  #: that file's task (a reference for plots), or None
+    task: Any  #: the task of the scene file it belongs to (a reference for plots), or None
 
 
-def open_result(path: str | Path) -> Saved:
+def open_result(path: str | Path, *, task: bool = False) -> Saved:
     """The saved result at ``path``: a ``.npz`` :meth:`coopdyn.Result.save` wrote, an output
     folder holding ``trajectory.npz`` (from ``coopdyn simulate`` or ``coopdyn demo``), or a scene
-    file (the result in its ``[output] folder``)."""
+    file (the result in its ``[output] folder``). With ``task``, also the task of that scene file
+    (or of the ``scene.toml`` copy beside the result), built on the result's scene."""
     if not isinstance(path, str | Path) or not str(path):
         raise SceneFileError(f"a result is given by a path, got {path!r}")
     path = Path(path)
-    loaded = None
     if path.suffix == ".toml":
         loaded = load(path)
         npz = Path(loaded.output["folder"]) / "trajectory.npz"
         if not npz.is_file() and (path.parent / "trajectory.npz").is_file():
             npz = path.parent / "trajectory.npz"  # a copy beside its results, written by an older coopdyn
-    else:
-        npz = path / "trajectory.npz" if path.is_dir() else path
-        if npz.suffix != ".npz":
-            raise SceneFileError(
-                f"{path}: give a result (.npz), an output folder holding trajectory.npz, or a scene file (.toml)"
-            )
-        if not npz.is_file():
-            where = "holds no trajectory.npz" if path.is_dir() else "does not exist"
-            raise SceneFileError(f"{npz if path.is_dir() else path} {where}: run `coopdyn simulate` or `coopdyn demo` first")
-        beside = npz.parent / "scene.toml"
-        if beside.is_file():
-            try:
-                loaded = load(beside)
-            except CoopdynError:
-                loaded = None  # the result carries its own scene; the file only adds the task
-    if loaded is not None:
-        return Saved(load_result(loaded, npz), npz, loaded, loaded.task)
+        return Saved(load_result(loaded, npz), npz, loaded.task)
+    npz = path / "trajectory.npz" if path.is_dir() else path
+    if npz.suffix != ".npz":
+        raise SceneFileError(f"{path}: give a result (.npz), an output folder holding trajectory.npz, or a scene file (.toml)")
+    if not npz.is_file():
+        where = "holds no trajectory.npz" if path.is_dir() else "does not exist"
+        raise SceneFileError(f"{npz if path.is_dir() else path} {where}: run `coopdyn simulate` or `coopdyn demo` first")
     from ..result import Result
 
-    return Saved(Result.load(npz), npz, None, None)
+    result = Result.load(npz)
+    beside = npz.parent / "scene.toml"
+    return Saved(result, npz, _task_of(beside, result.scene) if task and beside.is_file() else None)
+
+
+def _task_of(path: Path, scene: Scene) -> Any:
+    """The task a scene file describes, on ``scene`` (None when the file cannot be read: the
+    result carries its own scene, the file only adds the reference)."""
+    try:
+        text = _read_text(path)
+        doc = tomllib.loads(text).get("task")
+        return _task(_File(path, text), doc if isinstance(doc, dict) else None, scene)
+    except (CoopdynError, tomllib.TOMLDecodeError):
+        return None

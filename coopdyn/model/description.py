@@ -286,6 +286,12 @@ def build(doc: Mapping[str, Any], base: str | os.PathLike[str] | None = None) ->
     folder = Path(base) if base is not None else Path.cwd()
     gravity = _value("vector3", doc.get("gravity", [0.0, 0.0, -9.81]), Location("gravity"))
     arms = [_build_arm(entry, folder, k) for k, entry in enumerate(_tables(doc.get("arms", []), "arms"))]
+    names = [a.name for a in arms]
+    for k, name in enumerate(names):
+        if name in names[:k]:
+            raise DescriptionError(
+                f"arm names must be unique; arms[{names.index(name)}] is named {name!r} too", Location("arms", k, "name")
+            )
     if "object" not in doc:
         raise DescriptionError("missing: the held object (a table with type = 'box', 'rigid' or 'beam')", Location("object"))
     obj = _build_object(doc["object"])
@@ -364,8 +370,8 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         if kind == "pose":
             return _pose(value, str(where))
         arr = _validate.finite_array(value, str(where))
-    except SceneError as exc:
-        raise DescriptionError(f"must be {KINDS[kind]}: {exc}", where) from None
+    except SceneError as exc:  # the check's own words, without the name it was given (the location says it)
+        raise DescriptionError(str(exc).removeprefix(str(where)).lstrip(":. "), where) from None
     shapes: dict[str, list[tuple[int, ...]]] = {
         "number": [()],
         "vector3": [(3,)],
@@ -382,6 +388,9 @@ def _value(kind: str, value: Any, where: Location) -> Any:
 
 def _pose(value: Any, name: str) -> pin.SE3:
     if not isinstance(value, Mapping):
+        shape = _validate.finite_array(value, name).shape
+        if shape not in ((3,), (4, 4)):
+            raise SceneError(f"{name} must be {KINDS['pose']}, got shape {shape}")
         return _validate.se3(value, name)
     for key in value:
         if key not in ("translation", "rotation", "rpy", "quaternion"):
@@ -460,12 +469,15 @@ def _build_object(entry: Any) -> RigidObject | Beam:
         if kind == "beam":
             return Beam(**kwargs)
         if kind == "box":
-            return RigidObject.box(kwargs.pop("mass"), kwargs.pop("size"), **kwargs)
+            box = RigidObject.box(kwargs.pop("mass"), kwargs.pop("size"), **kwargs)
+            box.joint_model()  # (a prismatic box's axis)
+            return box
         inertia = kwargs["inertia"]
         if np.ndim(inertia) == 1:
             kwargs["inertia"] = np.diag(inertia) if len(inertia) == 3 else inertia
         obj = RigidObject(**kwargs)
         obj.spatial_inertia()  # checked here, where the message can say so
+        obj.joint_model()
         return obj
     except SceneError as exc:
         raise DescriptionError(str(exc), where) from None
