@@ -151,9 +151,9 @@ class Result:
 
     def squeeze(self) -> np.ndarray:
         """Internal (squeeze) force at each grasp (n, N) [N], positive = compression."""
-        from .grasp import squeeze_force
+        from .grasp import squeeze_forces
 
-        return np.array([squeeze_force(p, w) for p, w in zip(self.grasp_points(), self.wrenches(), strict=True)])
+        return squeeze_forces(self.grasp_points(), self.wrenches())
 
     def __repr__(self) -> str:
         duration = float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
@@ -275,6 +275,9 @@ class Result:
         :class:`coopdyn.cooperative.GripLiftOscillate`) or ``reference(t)`` returning (3,)."""
         if not callable(reference):
             raise SimulationError(f"reference must be a callable reference(t), got {type(reference).__name__}")
+        positions = getattr(reference, "positions", None)  # all samples at once (GripLiftOscillate)
+        if callable(positions):
+            return np.linalg.norm(self.object_position() - positions(self.t), axis=1)
         desired = []
         for t in self.t:
             try:

@@ -9,7 +9,7 @@ from scipy.optimize import curve_fit
 
 import coopdyn as cd
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
-from coopdyn.grasp import distribute, grasp_matrix, split, squeeze_force
+from coopdyn.grasp import distribute, grasp_matrix, split, squeeze_force, squeeze_forces
 from coopdyn.scenes import object_start
 
 
@@ -30,6 +30,22 @@ def test_non_squeezing_distribution_has_no_internal_force(n_grasps: int, seed: i
             e = (points[j] - points[i]) / np.linalg.norm(points[j] - points[i])
             assert abs((f[i, :3] - f[j, :3]) @ e) < 1e-12
     np.testing.assert_allclose(squeeze_force(points, f), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_grasps", [2, 3, 5])
+def test_batched_squeeze_equals_the_pseudo_inverse_projection(n_grasps: int) -> None:
+    """The closed-form G⁺G of many samples at once (what Result.squeeze uses) is the SVD one."""
+    rng = np.random.default_rng(n_grasps)
+    points, wrenches = rng.normal(size=(40, n_grasps, 3)), rng.normal(size=(40, n_grasps, 6)) * 10
+    expected = np.array([squeeze_force(p, w) for p, w in zip(points, wrenches, strict=True)])
+    np.testing.assert_allclose(squeeze_forces(points, wrenches), expected, rtol=0, atol=1e-12)
+
+
+def test_task_positions_at_once_equal_the_reference_sample_by_sample() -> None:
+    task = GripLiftOscillate(start=(0.1, 0.2, 0.3), axis=(1.0, 2.0, 0.5), cycles=1.5, frequency=2.0, lift=-0.2)
+    t = np.linspace(-0.5, 8.0, 3001)  # before, through every phase, after
+    expected = np.array([task(s).position for s in t])
+    np.testing.assert_allclose(task.positions(t), expected, rtol=0, atol=1e-15)
 
 
 def test_internal_part_exerts_no_resultant() -> None:
