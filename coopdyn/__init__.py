@@ -19,6 +19,8 @@ from .errors import (
     SimulationError,
     SimulationInterrupted,
     StepBudgetError,
+    SweepError,
+    SweepInterrupted,
     ViewerError,
 )
 from .model import (
@@ -37,6 +39,7 @@ from .model import (
 from .result import Result
 from .simulate import simulate
 from .stability import Advice, advise
+from .sweeps import Case, sweep
 
 __all__ = [
     "AccuracyWarning",
@@ -44,6 +47,7 @@ __all__ = [
     "Arm",
     "Beam",
     "BeamSegment",
+    "Case",
     "ControllerError",
     "CoopdynError",
     "DivergenceError",
@@ -64,6 +68,8 @@ __all__ = [
     "SimulationError",
     "SimulationInterrupted",
     "StepBudgetError",
+    "SweepError",
+    "SweepInterrupted",
     "ViewerError",
     "__version__",
     "advise",
@@ -80,4 +86,5 @@ __all__ = [
     "rigid_limit",
     "scenes",
     "simulate",
+    "sweep",
 ]

@@ -3,18 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
 import logging
 import os
 import re
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .errors import CoopdynError, SimulationInterrupted
+from .errors import CoopdynError, SimulationInterrupted, SweepError
 
 
 def _book(args: argparse.Namespace) -> int:
@@ -99,6 +102,114 @@ _MAX_STEPS = (
     re.compile(r"pass max_steps=None( \(or a larger number\))?", re.IGNORECASE),
     "give --max-steps 0 (no limit) or a larger number",
 )
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweeps import load_spec, rerun, run_spec
+
+    if args.rerun:
+        table, run = args.rerun
+        try:
+            number = int(run)
+        except ValueError:
+            raise SweepError(f"--rerun TABLE RUN: RUN is a run number, got {run!r}") from None
+        report = rerun(table, number)
+        return _print_rerun(report)
+    if args.spec is None:
+        raise SweepError("give a sweep spec (a scene file with a [sweep] table), or --rerun TABLE RUN")
+    spec = load_spec(args.spec)
+    if args.out is not None:
+        spec = dataclasses.replace(spec, folder=Path(args.out).resolve())
+    with _executor(args) as executor:
+        table = run_spec(spec, executor=executor, workers=args.workers, chunk_size=args.chunk_size)
+    meta = table.attrs["coopdyn.sweep"]
+    counts = table["status"].value_counts()
+    wall = meta["wall_s"]
+    print(
+        f"{len(table)} runs on {meta['executor']} in {wall:.1f} s wall "
+        f"({len(table) / max(wall, 1e-9) * 60:.0f} runs per minute): "
+        + ", ".join(f"{n} {status}" for status, n in counts.items())
+    )
+    done = table[table["status"] == "completed"]
+    params = set(meta["params"])
+    skip = {"run", "seed", "t_reached_s", "n_steps", "n_rhs", "dt_s", "duration_s", "save_every", "wall_s", *params}
+    for name in table.columns:
+        if name not in skip and len(done) and table[name].dtype.kind == "f":
+            col = done[name]
+            print(f"  {name}: min {col.min():.4g}, median {col.median():.4g}, max {col.max():.4g}")
+    for _, row in table[table["status"] != "completed"].head(10).iterrows():
+        values = ", ".join(f"{k} = {row[k]}" for k in meta["params"])
+        print(f"  run {row['run']} ({values}): {row['status']}: {str(row['message'])[:160]}")
+    print(f"  wrote {spec.folder / 'table.parquet'}")
+    if spec.heatmap:
+        from .viz.plotting import sweep_heatmap
+
+        png = spec.folder / "heatmap.png"
+        h = spec.heatmap
+        sweep_heatmap(
+            table, h["x"], h["y"], h["values"], png, title=spec.path.name, xlabel=h.get("xlabel"), ylabel=h.get("ylabel")
+        )
+        print(f"  wrote {png}")
+    print(f"  `coopdyn sweep --rerun {spec.folder / 'table.parquet'} RUN` runs a row again and compares it bit for bit")
+    return 0
+
+
+def _print_rerun(report: Any) -> int:
+    width = max(len(c) for c, _, _ in report.compared)
+    for column, stored, new in report.compared:
+        mark = "  " if column not in report.differences else "≠ "
+        print(f"{mark}{column:<{width}}  {_cell(stored):<24}  {_cell(new)}")
+    if report.other_versions:
+        print(f"versions differ from the row's: {', '.join(report.other_versions)}")
+    if report.identical:
+        print(
+            f"run {report.run}: identical bit for bit in all {len(report.compared)} columns (cpu_s, wall_s, worker not compared)"
+        )
+        return 0
+    print(f"run {report.run}: {len(report.differences)} column(s) differ: {', '.join(report.differences)}")
+    return 1
+
+
+def _cell(value: Any) -> str:
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if isinstance(value, float):
+        return repr(value)
+    text = str(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Any]:
+    """The executor the options choose; a Dask client (and a local cluster) closed on the way out."""
+    chosen = [o for o in ("serial", "scheduler", "local_cluster") if getattr(args, o)]
+    if len(chosen) > 1:
+        raise SweepError(f"choose one of --serial, --scheduler, --local-cluster (got {', '.join(chosen)})")
+    if args.serial:
+        yield "serial"
+        return
+    if not args.scheduler and not args.local_cluster:
+        yield None
+        return
+    from ._optional import require
+
+    distributed = require("distributed", "running a sweep on Dask (--scheduler, --local-cluster)", "coopdyn[dask]")
+    with contextlib.ExitStack() as stack:
+        if args.local_cluster:
+            if args.local_cluster < 1:
+                raise SweepError(f"--local-cluster N needs N >= 1 workers, got {args.local_cluster}")
+            cluster = stack.enter_context(
+                distributed.LocalCluster(
+                    n_workers=args.local_cluster, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+                )
+            )
+            client = stack.enter_context(distributed.Client(cluster))
+        else:
+            try:
+                client = stack.enter_context(distributed.Client(args.scheduler, timeout="20s"))
+            except (OSError, TimeoutError) as exc:
+                raise SweepError(f"cannot reach the Dask scheduler at {args.scheduler}: {exc}") from exc
+        yield client
 
 
 def _cli_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int, line: str | None = None) -> str:
@@ -223,6 +334,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--peers", action="store_true", help="instead: coopdyn vs MuJoCo on the Panda scene, interleaved (needs mujoco)"
     )
     bench.set_defaults(func=_bench)
+    sweep = command(
+        "sweep",
+        "run a parameter sweep (a scene file with a [sweep] table) into a table",
+        "Run every combination of the values a scene file's [sweep] table lists (grid, random draws per seed), on local "
+        "processes (default: every core) or a Dask cluster, into OUT/table.parquet: one row per run with its parameters, "
+        "status (a diverging, failing or crashing run is a row, not an error), metrics, settings and versions "
+        "(format: docs/sweeps.md). --rerun runs one row again and compares it bit for bit.",
+    )
+    sweep.add_argument("spec", nargs="?", metavar="SPEC", help="a .toml scene file with a [sweep] table")
+    sweep.add_argument("--out", default=None, help="output folder (default: the spec's [sweep] folder)")
+    sweep.add_argument("--workers", type=int, default=None, help="local processes (default: every core)")
+    sweep.add_argument("--serial", action="store_true", help="run in this process, one after the other")
+    sweep.add_argument(
+        "--scheduler", metavar="ADDRESS", default=None, help="run on the Dask cluster at ADDRESS (needs coopdyn[dask])"
+    )
+    sweep.add_argument(
+        "--local-cluster", metavar="N", type=int, default=None, help="start a local Dask cluster of N workers and run on it"
+    )
+    sweep.add_argument("--chunk-size", type=int, default=None, help="runs per task (default: automatic, up to 64)")
+    sweep.add_argument("--rerun", nargs=2, metavar=("TABLE", "RUN"), default=None, help="run row RUN of TABLE again and compare")
+    sweep.set_defaults(func=_sweep)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     t0 = time.perf_counter()

@@ -66,6 +66,23 @@ class StepMatrixError(_CarriesResult, SimulationError):
     with the time and the method, and ``result`` holding the trajectory up to there."""
 
 
+class SweepError(CoopdynError, ValueError):
+    """A sweep was asked something invalid (its parameters, executor or spec), or its table cannot
+    be read; a single run that fails is a row of the table, never this error."""
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep. A ``KeyboardInterrupt``, with the table so far in ``table`` (the
+    finished runs, and the others with status ``"not run"``) and the Parquet file it was written
+    to, if any, in ``saved``."""
+
+    def __init__(self, message: str, *, table: object = None, saved: object = None) -> None:
+        super().__init__(message)
+        self.detail = message
+        self.table = table
+        self.saved = saved
+
+
 class KernelError(SimulationError):
     """The compiled kernel refused a call (wrong shapes or types reaching it)."""
 

@@ -37,6 +37,9 @@ KNOWN_FILES = frozenset(
         "demo.png",
         "demo.html",
         "diagnosis.txt",
+        "table.parquet",  # a sweep's (coopdyn.sweeps)
+        "heatmap.png",
+        "trajectories",
     }
 )
 

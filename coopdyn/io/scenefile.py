@@ -51,7 +51,7 @@ CONTROLLERS: dict[str, Any] = {
     "book_drives": "book_drives",
 }
 TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
-TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output")
+TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output", "sweep")
 DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe a scene without a builder
 SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int}
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
@@ -183,13 +183,23 @@ def load(path: str | Path) -> Run:
         raise SceneFileError(f"a scene file path must be a str or pathlib.Path, got {type(path).__name__}")
     path = Path(path)
     text = _read_text(path)
-    f = _File(path, text)
+    return from_document(parse(text, path), _File(path, text))
+
+
+def parse(text: str, path: Path) -> dict[str, Any]:
+    """The TOML document of a scene file's text (``path`` names it in messages)."""
     try:
-        doc = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneFileError(f"{path}: not valid TOML: {exc}") from exc
     except RecursionError:
         raise SceneFileError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
+
+
+def from_document(doc: dict[str, Any], f: _File) -> Run:
+    """Validate a scene file's document and build its run; messages name the lines of ``f``'s text
+    (a sweep builds each of its runs from the spec's document with the run's values put in)."""
+    path = f.path
     for table, value in doc.items():
         if table in ("arms", "interconnections") and isinstance(value, list):
             continue

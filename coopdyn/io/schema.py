@@ -56,6 +56,53 @@ KIND_SCHEMAS: dict[str, dict[str, Any]] = {
 }
 
 
+_PAIR: dict[str, Any] = {"type": "array", "items": NUMBER, "minItems": 2, "maxItems": 2}
+_NAME: dict[str, Any] = {"type": "string", "minLength": 1}
+#: ``[sweep]``: what changes from run to run (coopdyn.sweeps.spec reads it; a test keeps the two in step)
+SWEEP: dict[str, Any] = {
+    "type": "object",
+    "description": "what changes from run to run: `coopdyn sweep` (docs/sweeps.md); `coopdyn simulate` ignores it",
+    "properties": {
+        "grid": {
+            "type": "object",
+            "description": '"table.key" = [values]: every combination',
+            "additionalProperties": {"type": "array", "minItems": 1},
+        },
+        "random": {
+            "type": "object",
+            "description": '"table.key" = {uniform | loguniform | normal = [a, b]} or {choice = [values]}, drawn per seed',
+            "additionalProperties": {
+                "type": "object",
+                "properties": {
+                    "uniform": _PAIR,
+                    "loguniform": _PAIR,
+                    "normal": _PAIR,
+                    "choice": {"type": "array", "minItems": 1},
+                },
+                "minProperties": 1,
+                "maxProperties": 1,
+                "additionalProperties": False,
+            },
+        },
+        "seeds": {
+            "oneOf": [
+                {"type": "integer", "minimum": 1},
+                {"type": "array", "items": {"type": "integer", "minimum": 0}, "minItems": 1},
+            ]
+        },
+        "folder": _NAME,
+        "trajectories": {"type": "boolean"},
+        "heatmap": {
+            "type": "object",
+            "properties": {"x": _NAME, "y": _NAME, "values": {"type": "array", "items": _NAME}, "xlabel": _NAME, "ylabel": _NAME},
+            "required": ["x", "y", "values"],
+            "additionalProperties": False,
+        },
+    },
+    "additionalProperties": False,
+}
+
+
 def _table(fields: Mapping[str, d.Field], extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     properties: dict[str, Any] = {}
     for key, f in fields.items():
@@ -180,6 +227,7 @@ def scene_file_schema() -> dict[str, Any]:
                 "properties": {k: simple[t] for k, t in scenefile.OUTPUT_KEYS.items()},
                 "additionalProperties": False,
             },
+            "sweep": SWEEP,
         },
         "required": ["simulation"],
         "additionalProperties": False,

@@ -161,3 +161,94 @@ def cooperative_figure(result: Result, reference: Any = None, path: str | os.Pat
     if path is not None:
         save_figure(fig, path)
     return fig
+
+
+#: a metric column's unit suffix → (label unit, scale to it)
+_UNITS = {"_m": ("mm", 1e3), "_N": ("N", 1.0), "_s": ("s", 1.0), "_Nm": ("N·m", 1.0)}
+
+
+def column_label(name: str) -> tuple[str, float]:
+    """``"tracking_error_max_m"`` → ``("tracking error max [mm]", 1000.0)``: a sweep column's
+    name as an axis label, and the factor to its unit."""
+    for suffix, (unit, scale) in _UNITS.items():
+        if name.endswith(suffix):
+            return f"{name[: -len(suffix)].replace('_', ' ')} [{unit}]", scale
+    return name.replace("_", " ").replace(".", " "), 1.0
+
+
+def _tick(value: Any) -> str:
+    if isinstance(value, list | tuple | np.ndarray):
+        return "(" + ", ".join(_tick(v) for v in value) + ")"
+    if isinstance(value, float | np.floating):
+        return f"{value:g}"
+    return str(value)
+
+
+def sweep_heatmap(
+    table: Any,
+    x: str,
+    y: str,
+    values: Any,
+    path: str | os.PathLike[str] | None = None,
+    *,
+    title: str | None = None,
+    xlabel: str | None = None,
+    ylabel: str | None = None,
+) -> Any:
+    """One heat map per metric of a sweep table over two of its parameters (``x``, ``y``): each
+    cell the mean over the cell's completed runs (several with seeds), written in the cell; a
+    cell with no completed run is grey and names what happened (diverged, failed, …). Values
+    spanning more than a factor 20 get a logarithmic colour scale. ``xlabel``/``ylabel`` name the
+    axes (default: the column names)."""
+    from matplotlib.colors import LogNorm
+
+    plt = _pyplot()
+    values = [values] if isinstance(values, str) else list(values)
+    for name in (x, y, *values):
+        if name not in table.columns:
+            raise ValueError(f"the table has no column {name!r}; columns: {list(table.columns)}")
+    xs = list(dict.fromkeys(_tick(v) for v in table[x]))
+    ys = list(dict.fromkeys(_tick(v) for v in table[y]))
+    fig, axes = plt.subplots(
+        1,
+        len(values),
+        figsize=(1.2 + 0.9 * len(xs) * len(values) + 1.6 * len(values), 1.6 + 0.55 * len(ys)),
+        constrained_layout=True,
+        squeeze=False,
+    )
+    x_label, y_label = xlabel or column_label(x)[0], ylabel or column_label(y)[0]
+    for ax, name in zip(axes[0], values, strict=True):
+        label, scale = column_label(name)
+        grid = np.full((len(ys), len(xs)), np.nan)
+        notes = [["" for _ in xs] for _ in ys]
+        for i, yv in enumerate(ys):
+            for j, xv in enumerate(xs):
+                cell = table[(table[x].map(_tick) == xv) & (table[y].map(_tick) == yv)]
+                ok = cell[cell["status"] == "completed"]
+                if len(ok):
+                    grid[i, j] = float(np.mean(ok[name].astype(float))) * scale
+                if len(ok) < len(cell):
+                    notes[i][j] = ", ".join(sorted(set(cell["status"]) - {"completed"}))
+        finite = grid[np.isfinite(grid)]
+        log = finite.size > 1 and finite.min() > 0 and finite.max() > 20 * finite.min()
+        norm = LogNorm(finite.min(), finite.max()) if log else None
+        cmap = plt.get_cmap("viridis").with_extremes(bad="#d9d9d9")  # grey: no completed run
+        image = ax.imshow(np.ma.masked_invalid(grid), cmap=cmap, aspect="auto", origin="lower", norm=norm)
+        for i in range(len(ys)):
+            for j in range(len(xs)):
+                text = f"{grid[i, j]:.3g}" if np.isfinite(grid[i, j]) else ""
+                if notes[i][j]:
+                    text = f"{text}\n({notes[i][j]})" if text else notes[i][j]
+                light = np.isfinite(grid[i, j]) and image.norm(grid[i, j]) < 0.5
+                ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white" if light else "black")
+        ax.set_xticks(range(len(xs)), xs, rotation=30 if max(map(len, xs)) > 6 else 0)
+        ax.set_yticks(range(len(ys)), ys)
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(y_label)
+        ax.set_title(label, fontsize=10)
+        fig.colorbar(image, ax=ax, label=label, shrink=0.9)
+    if title:
+        fig.suptitle(title)
+    if path is not None:
+        save_figure(fig, path)
+    return fig

@@ -1,0 +1,405 @@
+"""One run of a sweep: what to simulate (:class:`Case`), the list of runs (:func:`expand`), and
+the code a worker runs for each (:func:`run_chunk`), which turns any outcome into a row.
+
+A worker receives a *job* — the user's ``make_case`` function, or a scene-file spec's text —
+once per process (:func:`run_chunk` keeps it by its hash) and a chunk of items (run number,
+parameters, seed). It builds each case itself, so no scene, Pinocchio ``Data`` or compiled
+kernel ever crosses a process boundary: the kernel is built lazily, in the worker, by the first
+simulation of each scene.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import inspect
+import itertools
+import math
+import os
+import socket
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._version import __version__
+from ..errors import DivergenceError, StepBudgetError, SweepError
+from ..model.scene import Scene
+from ..simulate import simulate
+
+#: columns every row has, besides the parameters and the metrics
+STATUS = ("run", "seed", "status", "message")
+SETTINGS = ("integrator", "dt_s", "duration_s", "save_every", "loop", "backend")
+COUNTERS = ("t_reached_s", "n_steps", "n_rhs")
+TIMING = ("cpu_s", "wall_s", "worker")  #: what depends on the machine and its load: not reproduced by a rerun
+VERSIONS = ("coopdyn_version", "pinocchio_version", "numpy_version")
+RESERVED = frozenset((*STATUS, *SETTINGS, *COUNTERS, *TIMING, *VERSIONS, "warnings", "trajectory"))
+#: what a row's status says
+STATUSES = {
+    "completed": "the run reached its duration",
+    "diverged": "the state stopped being finite or exceeded max_speed (message: the stability diagnosis)",
+    "stopped": "an adaptive method used up max_steps",
+    "failed": "an exception: building the case, simulating or computing the metrics (message: what and where)",
+    "crashed": "the worker process running it died (message: its exit code or signal)",
+    "not run": "the sweep was interrupted (Ctrl-C) before this run finished",
+}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run of a sweep: a scene and how to simulate it. ``make_case`` returns one (or a bare
+    :class:`coopdyn.Scene`, simulated without a controller).
+
+    Attributes:
+        scene: the scene.
+        controller: ``controller(t, q, v) -> τ`` (a built-in one runs in the compiled loop).
+        task: the object's reference ``task(t)`` for the tracking metrics (e.g. a
+            :class:`coopdyn.cooperative.GripLiftOscillate`); default: the controller's
+            ``reference`` when it has one.
+        duration: simulated time [s]; integrator, dt [s], save_every: as for
+            :func:`coopdyn.simulate`. ``None`` takes the sweep's setting.
+    """
+
+    scene: Scene
+    controller: Any = None
+    task: Any = None
+    duration: float | None = None
+    integrator: str | None = None
+    dt: float | None = None
+    save_every: int | None = None
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The sweep's simulation settings, for cases that leave them unset."""
+
+    duration: float | None = None
+    integrator: str = "rk4"
+    dt: float = 1e-3
+    save_every: int | None = None  #: None: a sample every millisecond
+    max_steps: int | None = 2 * 10**6
+    energy_check: str = "warn"
+
+
+@dataclass(frozen=True)
+class Item:
+    """A run to do: its number, parameter values and seed."""
+
+    run: int
+    params: dict[str, Any]
+    seed: int | None
+
+
+def _plain(value: Any, name: str) -> Any:
+    """A parameter value as a plain number, string, bool or list of them (what a table stores)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, bool | str) or value is None:
+        return value
+    if isinstance(value, int | float):
+        return value
+    if isinstance(value, list | tuple):
+        return [_plain(v, name) for v in value]
+    raise SweepError(
+        f"parameter {name!r}: a value must be a number, string, bool or list of them (what a table stores), "
+        f"got {type(value).__name__}; build objects inside make_case from plain values"
+    )
+
+
+def expand(params: Any, seeds: Any) -> list[Item]:
+    """The runs: ``params`` as a grid (a dict of value lists: every combination, the first key
+    varying slowest; a scalar is one value), given samples (a list of dicts, or a pandas
+    DataFrame, one run per row), or ``None`` (one run); each combined with every seed
+    (``seeds``: None, a count n for 0..n-1, or a list of integers)."""
+    if params is None:
+        sets: list[dict[str, Any]] = [{}]
+    elif hasattr(params, "to_dict") and hasattr(params, "columns"):  # a pandas DataFrame
+        sets = [dict(r) for r in params.to_dict(orient="records")]
+    elif isinstance(params, Mapping):
+        names = list(params)
+        values = []
+        for name in names:
+            v = params[name]
+            if isinstance(v, np.ndarray):
+                v = list(v)
+            v = list(v) if isinstance(v, list | tuple | range) else [v]
+            if not v:
+                raise SweepError(f"parameter {name!r} has no values")
+            values.append(v)
+        sets = [dict(zip(names, combo, strict=True)) for combo in itertools.product(*values)]
+    elif isinstance(params, Sequence) and not isinstance(params, str | bytes):
+        sets = [dict(p) if isinstance(p, Mapping) else _bad_params(p) for p in params]
+        if not sets:
+            raise SweepError("params is an empty list: no runs to do")
+    else:
+        _bad_params(params)
+    for s in sets:
+        for name in s:
+            if not isinstance(name, str) or not name:
+                raise SweepError(f"parameter names must be non-empty strings, got {name!r}")
+            if name in RESERVED:
+                raise SweepError(f"parameter name {name!r} is a column of every row; rename it (reserved: {sorted(RESERVED)})")
+    seed_list = _seeds(seeds)
+    items: list[Item] = []
+    for p, s in itertools.product(sets, seed_list):
+        items.append(Item(len(items), {k: _plain(v, k) for k, v in p.items()}, s))
+    return items
+
+
+def _bad_params(value: Any) -> dict[str, Any]:
+    raise SweepError(
+        "params must be a dict of value lists (a grid), a list of dicts or a pandas DataFrame (samples), or None; "
+        f"got {type(value).__name__}"
+    )
+
+
+def _seeds(seeds: Any) -> list[int | None]:
+    if seeds is None:
+        return [None]
+    if isinstance(seeds, bool):
+        raise SweepError(f"seeds must be a count or a list of integers, got {seeds!r}")
+    if isinstance(seeds, int | np.integer):
+        if seeds < 1:
+            raise SweepError(f"seeds must be a count >= 1 or a list of integers, got {seeds}")
+        return list(range(int(seeds)))
+    if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes):
+        out = list(seeds)
+        if not out or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0 for s in out):
+            raise SweepError(f"seeds must be a non-empty list of integers >= 0, got {out!r}")
+        return [int(s) for s in out]
+    raise SweepError(f"seeds must be a count or a list of integers, got {type(seeds).__name__}")
+
+
+# ---------------------------------------------------------------------------------------------
+# jobs: how a worker turns an item into a case
+
+
+@dataclass
+class PythonJob:
+    """Cases from the user's ``make_case(**params[, seed=…])``; ``metrics(result, case)``
+    adds columns."""
+
+    make_case: Callable[..., Any]
+    metrics: Callable[..., Mapping[str, Any]] | None
+    settings: Settings
+
+    def case(self, item: Item) -> Case:
+        kwargs = dict(item.params)
+        if item.seed is not None:
+            kwargs["seed"] = item.seed
+        made = self.make_case(**kwargs)
+        if isinstance(made, Scene):
+            return Case(made)
+        if not isinstance(made, Case):
+            raise SweepError(f"make_case must return a coopdyn.sweeps.Case or a coopdyn.Scene, got {type(made).__name__}")
+        return made
+
+
+@dataclass
+class SpecJob:
+    """Cases from a scene file's document with each run's values put in (:mod:`.spec`)."""
+
+    text: str
+    path: str
+    settings: Settings
+    metrics: Callable[..., Mapping[str, Any]] | None = None
+    _parsed: Any = field(default=None, repr=False, compare=False)
+
+    def case(self, item: Item) -> Case:
+        from ..io import scenefile
+        from .spec import put
+
+        if self._parsed is None:
+            path = Path(self.path)
+            self._parsed = (scenefile.parse(self.text, path), scenefile._File(path, self.text))
+        doc, f = self._parsed
+        doc = copy.deepcopy(doc)
+        for name, value in item.params.items():
+            put(doc, name, value)
+        run = scenefile.from_document(doc, f)
+        return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every)
+
+
+def signature_check(make_case: Callable[..., Any], items: Sequence[Item]) -> None:
+    """Refuse, before anything runs, parameters ``make_case`` does not take."""
+    try:
+        sig = inspect.signature(make_case)
+    except (TypeError, ValueError):
+        return  # a builtin or C callable: its errors come per run
+    seen: set[tuple[str, ...]] = set()
+    for item in items:
+        keys = (*item.params, *(("seed",) if item.seed is not None else ()))
+        if keys in seen:
+            continue
+        seen.add(keys)
+        try:
+            sig.bind(**dict.fromkeys(keys))
+        except TypeError as exc:
+            hint = " (seeds are passed as seed=…)" if item.seed is not None else ""
+            raise SweepError(f"make_case{sig} cannot take the parameters {list(keys)}: {exc}{hint}") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# the worker
+
+
+def versions() -> dict[str, str]:
+    import pinocchio as pin
+
+    return {"coopdyn_version": __version__, "pinocchio_version": str(pin.__version__), "numpy_version": np.__version__}
+
+
+def default_metrics(result: Any, case: Case) -> tuple[dict[str, float], list[str]]:
+    """The metrics every completed run gets (and notes on those that could not be computed):
+    object tracking error [m] against the task (max and rms over the samples), peak and final
+    internal (squeeze) force [N] with two or more interconnections, and the peak interconnection
+    force [N]."""
+    out: dict[str, float] = {}
+    notes: list[str] = []
+    scene = result.scene
+    reference = case.task if case.task is not None else getattr(case.controller, "reference", None)
+    if callable(reference):
+        try:
+            e = result.tracking_error(reference)
+            out["tracking_error_max_m"] = float(e.max())
+            out["tracking_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
+        except Exception as exc:
+            notes.append(f"tracking error not computed: {type(exc).__name__}: {exc}")
+    try:
+        if len(scene.links) > 1:
+            squeeze = result.squeeze()
+            out["peak_internal_force_N"] = float(np.max(np.abs(squeeze)))
+            out["internal_force_end_N"] = float(np.mean(squeeze[-1]))
+        if scene.links:
+            out["peak_interconnection_force_N"] = float(np.max(np.linalg.norm(result.wrenches()[..., :3], axis=-1)))
+    except Exception as exc:
+        notes.append(f"force metrics not computed: {type(exc).__name__}: {exc}")
+    return out, notes
+
+
+def _where(exc: BaseException) -> str:
+    """`` (at file.py:12 in fn)``: the innermost frame outside coopdyn, or the innermost one."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    package = str(Path(__file__).resolve().parent.parent)
+    outside = [f for f in frames if not str(Path(f.filename).resolve()).startswith(package)]
+    frame = (outside or frames)[-1] if frames else None
+    return f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""
+
+
+def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> dict[str, Any]:
+    """Build, simulate and measure one case; every outcome is a row (a Ctrl-C propagates)."""
+    row: dict[str, Any] = {"run": item.run, **item.params, "seed": item.seed}
+    wall0 = time.perf_counter()
+    result: Any = None
+    status, message = "completed", ""
+    metrics: dict[str, Any] = {}
+    notes: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            case = job.case(item)
+            s = job.settings
+            duration = case.duration if case.duration is not None else s.duration
+            if duration is None:
+                raise SweepError("no duration: give sweep(..., duration=…) or Case(duration=…)")
+            dt = case.dt if case.dt is not None else s.dt
+            save_every = case.save_every or s.save_every or max(1, round(1e-3 / dt))
+            integrator = case.integrator or s.integrator
+            row.update(integrator=integrator, dt_s=float(dt), duration_s=float(duration), save_every=int(save_every))
+            try:
+                result = simulate(
+                    case.scene,
+                    duration,
+                    controller=case.controller,
+                    integrator=integrator,
+                    dt=dt,
+                    save_every=save_every,
+                    max_steps=s.max_steps,
+                    energy_check=s.energy_check,
+                )
+            except DivergenceError as exc:
+                result, status, message = exc.result, "diverged", exc.detail
+            except StepBudgetError as exc:
+                result, status, message = exc.result, "stopped", exc.detail
+            if status == "completed":
+                metrics, notes = default_metrics(result, case)
+                if job.metrics is not None:
+                    extra = job.metrics(result, case)
+                    if not isinstance(extra, Mapping):
+                        raise SweepError(f"metrics must return a dict of name → number, got {type(extra).__name__}")
+                    for name, value in extra.items():
+                        if name in RESERVED or name in item.params:
+                            raise SweepError(f"metric {name!r} would overwrite a column of the row; rename it")
+                        metrics[str(name)] = _plain(value, f"metric {name}")
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:
+            result = getattr(exc, "result", result)
+            status, message, metrics = "failed", f"{type(exc).__name__}: {getattr(exc, 'detail', exc)}{_where(exc)}", {}
+    row.update(status=status, message=message, **metrics)
+    texts = dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught)
+    row["warnings"] = "; ".join([*texts, *notes])
+    if result is not None:
+        row.update(
+            t_reached_s=float(result.t[-1]) if len(result.t) else math.nan,
+            n_steps=int(result.n_steps),
+            n_rhs=int(result.n_rhs),
+            loop=result.loop,
+            backend=result.backend,
+            cpu_s=float(result.cpu_time),
+        )
+        if trajectories is not None:
+            name = f"run-{item.run:06d}.npz"
+            try:
+                result.save(Path(trajectories) / name)
+                row["trajectory"] = name
+            except Exception as exc:
+                row["warnings"] = "; ".join(filter(None, [row["warnings"], f"trajectory not saved: {exc}"]))
+    row.update(wall_s=time.perf_counter() - wall0, worker=f"{socket.gethostname()}:{os.getpid()}", **versions())
+    return row
+
+
+_JOBS: dict[str, Any] = {}  #: jobs a worker process has unpacked, by the hash of their bytes
+
+
+def _job(payload: bytes | PythonJob | SpecJob) -> Any:
+    if not isinstance(payload, bytes):
+        return payload  # in-process: the job itself
+    key = hashlib.sha256(payload).hexdigest()
+    if key not in _JOBS:
+        import cloudpickle
+
+        if len(_JOBS) > 8:
+            _JOBS.clear()
+        _JOBS[key] = cloudpickle.loads(payload)
+    return _JOBS[key]
+
+
+def run_chunk(
+    payload: bytes | PythonJob | SpecJob, items: Sequence[Item], trajectories: str | None, markers: str | None = None
+) -> list[dict[str, Any]]:
+    """A worker's task: run ``items`` one after the other; the rows. With ``markers`` (a folder),
+    the run in progress is written to ``markers/<pid>`` so that the parent can tell, if this
+    process dies, which run it was running."""
+    job = _job(payload)
+    mark = Path(markers) / str(os.getpid()) if markers else None
+    rows = []
+    for item in items:
+        if mark is not None:
+            mark.write_text(str(item.run))
+        rows.append(run_item(job, item, trajectories))
+        if mark is not None:
+            mark.write_text("")
+    return rows
+
+
+def placeholder(item: Item, status: str, message: str) -> dict[str, Any]:
+    """The row of a run that produced none (crashed worker, not run)."""
+    return {"run": item.run, **item.params, "seed": item.seed, "status": status, "message": message, **versions()}

@@ -1,0 +1,366 @@
+"""Run a sweep, and rerun one of its rows (:func:`sweep`, :func:`run_spec`, :func:`rerun`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import importlib
+import importlib.util
+import inspect
+import math
+import shutil
+import sys
+import time
+import warnings
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .._optional import require
+from .._version import __version__
+from ..errors import SweepError, SweepInterrupted
+from ..outputs import check_folder
+from . import table as tables
+from .cases import TIMING, Item, PythonJob, Settings, SpecJob, expand, placeholder, run_item, signature_check, versions
+from .engines import Executor, LocalProcesses, Serial, chunks, engine
+
+MAX_CHUNK = 64  #: the most runs per task with the automatic chunk size
+PAYLOAD_WARN_BYTES = 10 << 20  #: a job bigger than this is sent to every worker: say so
+
+
+def sweep(
+    make_case: Callable[..., Any],
+    params: Any = None,
+    *,
+    seeds: Any = None,
+    duration: float | None = None,
+    integrator: str = "rk4",
+    dt: float = 1e-3,
+    save_every: int | None = None,
+    metrics: Callable[..., Mapping[str, Any]] | None = None,
+    executor: Any = None,
+    workers: int | None = None,
+    chunk_size: int | None = None,
+    out: str | Path | None = None,
+    trajectories: bool = False,
+    progress: bool = True,
+    max_steps: int | None = 2 * 10**6,
+    energy_check: str = "warn",
+) -> Any:
+    """Run ``make_case`` for every parameter set (and seed) and collect a table, one row per run.
+
+    Args:
+        make_case: ``make_case(**params[, seed=…]) -> Case | Scene``, called in the worker that
+            runs the case (so nothing heavy crosses a process boundary; the compiled kernel is
+            built there, lazily). Any function works — a lambda or one defined in a notebook too
+            (it is sent with cloudpickle); keep big objects inside it, not in globals it uses.
+        params: a grid ``{name: [values…]}`` (every combination, the first name varying slowest;
+            a list-valued parameter is given as a list of lists), given samples (a list of dicts
+            or a pandas DataFrame, one run each), or None (one run).
+        seeds: None, a count n (seeds 0..n−1) or a list of integers: every parameter set runs
+            once per seed, passed as ``make_case(..., seed=s)``.
+        duration, integrator, dt, save_every: simulation settings for cases that leave them
+            unset (duration [s] and dt [s]; save_every default: a sample every millisecond, what
+            the metrics see).
+        metrics: ``metrics(result, case) -> {name: value}``: columns added to every completed
+            row, beside the built-in ones (tracking error, internal and interconnection forces).
+        executor: ``None`` or ``"processes"``: local processes (``workers`` of them, default
+            every core); ``"serial"``: this process; any ``concurrent.futures.Executor``; or a
+            ``dask.distributed.Client`` (a cluster: ``pip install coopdyn[dask]``).
+        workers: the number of local processes.
+        chunk_size: runs per task (default: up to 64, at least 4 tasks per worker): short runs in
+            chunks cost less scheduling; long ones in chunks of one balance best.
+        out: a folder for ``table.parquet`` (and ``trajectories/``); None writes nothing.
+        trajectories: also save every run's trajectory (``trajectories/run-NNNNNN.npz``).
+        progress: a progress bar (runs done, and how many did not complete).
+        max_steps, energy_check: as for :func:`coopdyn.simulate`.
+
+    Returns:
+        a pandas DataFrame, one row per run (columns: :mod:`coopdyn.sweeps.table`). A run that
+        diverges, raises or kills its worker process is a row with its status and diagnosis.
+
+    Raises:
+        SweepError: invalid arguments (checked before anything runs).
+        SweepInterrupted: Ctrl-C; its ``table`` holds the finished rows (the others
+            ``"not run"``), also written to ``out`` when given.
+    """
+    if not callable(make_case):
+        raise SweepError(f"make_case must be a function make_case(**params) -> Case, got {type(make_case).__name__}")
+    items = expand(params, seeds)
+    signature_check(make_case, items)
+    if metrics is not None and not callable(metrics):
+        raise SweepError(f"metrics must be a function metrics(result, case) -> dict, got {type(metrics).__name__}")
+    settings = _settings(duration, integrator, dt, save_every, max_steps, energy_check)
+    job = PythonJob(make_case, metrics, settings)
+    meta = {
+        "source": {"kind": "python", **_reference(make_case)},
+        "metrics": _reference(metrics) if metrics is not None else None,
+    }
+    return _execute(job, items, meta, executor, workers, chunk_size, out, trajectories, progress)
+
+
+def run_spec(
+    spec: Any, *, executor: Any = None, workers: int | None = None, chunk_size: int | None = None, progress: bool = True
+) -> Any:
+    """Run a loaded sweep spec (:func:`coopdyn.sweeps.spec.load_spec`) into its folder; the table."""
+    settings = Settings(max_steps=2 * 10**6)
+    job = SpecJob(spec.text, str(spec.path), settings)
+    meta = {"source": {"kind": "spec", "file": str(spec.path), "text": spec.text}, "metrics": None}
+    return _execute(job, spec.items, meta, executor, workers, chunk_size, spec.folder, spec.trajectories, progress)
+
+
+def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any) -> Settings:
+    from ..integrators import INTEGRATORS
+
+    if duration is not None and (isinstance(duration, bool) or not isinstance(duration, int | float) or not duration >= 0):
+        raise SweepError(f"duration must be a number of seconds >= 0 (or None: each case's own), got {duration!r}")
+    if not isinstance(integrator, str) or integrator not in INTEGRATORS:
+        raise SweepError(f"integrator must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
+    if isinstance(dt, bool) or not isinstance(dt, int | float) or not dt > 0 or not math.isfinite(dt):
+        raise SweepError(f"dt must be a positive number of seconds, got {dt!r}")
+    if save_every is not None and (isinstance(save_every, bool) or not isinstance(save_every, int) or save_every < 1):
+        raise SweepError(f"save_every must be a count >= 1 (or None), got {save_every!r}")
+    if energy_check not in ("warn", "raise", "off"):
+        raise SweepError(f"energy_check must be 'warn', 'raise' or 'off', got {energy_check!r}")
+    return Settings(None if duration is None else float(duration), integrator, float(dt), save_every, max_steps, energy_check)
+
+
+def _execute(
+    job: PythonJob | SpecJob,
+    items: list[Item],
+    meta: dict[str, Any],
+    executor: Any,
+    workers: int | None,
+    chunk_size: int | None,
+    out: str | Path | None,
+    trajectories: bool,
+    progress: bool,
+) -> Any:
+    folder = check_folder(out) if out is not None else None
+    if folder is not None:  # what an earlier sweep wrote there goes: the folder holds one sweep
+        shutil.rmtree(folder / "trajectories", ignore_errors=True)
+        for name in (tables.TABLE_NAME, "heatmap.png"):
+            (folder / name).unlink(missing_ok=True)
+    if trajectories and folder is None:
+        raise SweepError("trajectories are saved as files: give out=a folder")
+    if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1):
+        raise SweepError(f"chunk_size must be a count >= 1, got {chunk_size!r}")
+    runner = engine(executor, workers)
+    try:
+        payload: Any = job
+        if runner.pickles:
+            payload = _pickled(job)
+        size = chunk_size or (1 if isinstance(runner, Serial) else max(1, min(MAX_CHUNK, len(items) // (4 * runner.workers))))
+        traj_folder = None
+        if trajectories and folder is not None:
+            (folder / "trajectories").mkdir(parents=True, exist_ok=True)
+            traj_folder = str(folder / "trajectories")
+        meta = {
+            "format": tables.FORMAT,
+            "coopdyn": __version__,
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            **meta,
+            "settings": dataclasses.asdict(job.settings),
+            "params": list(items[0].params),
+            "runs": len(items),
+            "executor": runner.name,
+            "chunk_size": size,
+            "trajectories": traj_folder is not None,
+        }
+        rows: dict[int, dict[str, Any]] = {}
+        bar = _bar(len(items), runner.name) if progress else None
+        wall0 = time.perf_counter()
+        try:
+            for done in runner.run(payload, chunks(items, size), traj_folder):
+                for row in done:
+                    rows[row["run"]] = row
+                if bar is not None:
+                    others = Counter(r["status"] for r in rows.values() if r["status"] != "completed")
+                    if others:
+                        bar.set_postfix(others, refresh=False)
+                    bar.update(len(done))
+        except KeyboardInterrupt:
+            runner.abort()
+            missing = [
+                placeholder(i, "not run", "the sweep was interrupted (Ctrl-C) before this run finished")
+                for i in items
+                if i.run not in rows
+            ]
+            meta["wall_s"] = time.perf_counter() - wall0
+            table = tables.frame([*rows.values(), *missing], meta["params"], meta)
+            saved = tables.save(table, folder / tables.TABLE_NAME) if folder is not None else None
+            raise SweepInterrupted(
+                f"sweep interrupted after {len(rows)} of {len(items)} runs"
+                + (
+                    f"; the table (the others 'not run') is in {saved}"
+                    if saved
+                    else "; the table so far is in this exception's .table"
+                ),
+                table=table,
+                saved=saved,
+            ) from None
+        finally:
+            if bar is not None:
+                bar.close()
+        meta["wall_s"] = time.perf_counter() - wall0
+        table = tables.frame(list(rows.values()), meta["params"], meta)
+        if folder is not None:
+            tables.save(table, folder / tables.TABLE_NAME)
+        return table
+    finally:
+        runner.close()
+
+
+def _pickled(job: Any) -> bytes:
+    cloudpickle = require("cloudpickle", "sending a sweep's cases to worker processes", "cloudpickle")
+    try:
+        data = cloudpickle.dumps(job)
+    except Exception as exc:
+        raise SweepError(
+            f"cannot send make_case (or metrics) to the worker processes: {type(exc).__name__}: {exc}. "
+            "Build what it holds inside the function, or run in this process with executor='serial'"
+        ) from exc
+    if len(data) > PAYLOAD_WARN_BYTES:
+        warnings.warn(
+            f"make_case and metrics pickle to {len(data) / 2**20:.0f} MiB, sent to every worker: they carry big objects "
+            "(a scene with visual meshes?); build those inside make_case",
+            stacklevel=4,
+        )
+    return data
+
+
+def _bar(total: int, where: str) -> Any:
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="run", desc=f"sweep ({where})", dynamic_ncols=True, leave=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# rerun
+
+
+def _reference(fn: Any) -> dict[str, Any]:
+    """Where ``fn`` is defined, to find it again for a rerun (None fields: it cannot be found)."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
+    try:
+        file = inspect.getsourcefile(fn)
+    except TypeError:
+        file = None
+    findable = bool(module and qualname and "<" not in qualname)
+    return {
+        "module": module if findable else None,
+        "qualname": qualname if findable else None,
+        "file": str(Path(file).resolve()) if file and findable else None,
+        "name": getattr(fn, "__qualname__", repr(fn)),
+    }
+
+
+def _resolve(ref: dict[str, Any], what: str) -> Callable[..., Any]:
+    """The function a :func:`_reference` names: imported by module, or loaded from its file."""
+    if not ref.get("qualname"):
+        raise SweepError(
+            f"the sweep's {what} ({ref.get('name')}) is a lambda or a nested function, which cannot be found again; "
+            "define it at the top level of a module or script to rerun rows"
+        )
+    module = None
+    if ref["module"] != "__main__":
+        try:
+            module = importlib.import_module(ref["module"])
+        except ImportError:
+            module = None
+    if module is None:
+        file = ref.get("file")
+        if not file or not Path(file).is_file():
+            raise SweepError(f"the sweep's {what} {ref['qualname']} was defined in {file}, which is not there any more")
+        name = f"_coopdyn_rerun_{Path(file).stem}"
+        spec = importlib.util.spec_from_file_location(name, file)
+        if spec is None or spec.loader is None:
+            raise SweepError(f"cannot load {file}")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)  # runs the script's top level (its sweep sits under `if __name__ == "__main__"`)
+    obj: Any = module
+    try:
+        for part in ref["qualname"].split("."):
+            obj = getattr(obj, part)
+    except AttributeError:
+        raise SweepError(f"{ref['file'] or ref['module']} defines no {ref['qualname']} any more") from None
+    return obj
+
+
+def _value(value: Any) -> Any:
+    """A table cell as the value the run had (lists from array cells, None for missing)."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if value is None:
+        return None
+    try:
+        import pandas as pd
+
+        if not isinstance(value, list) and pd.isna(value):
+            return None
+    except (TypeError, ValueError):
+        pass
+    return value
+
+
+def _same(a: Any, b: Any) -> bool:
+    a, b = _value(a), _value(b)
+    if isinstance(a, float) and isinstance(b, float):
+        return a == b or (math.isnan(a) and math.isnan(b))
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return bool(a == b)
+
+
+@dataclass(frozen=True)
+class Rerun:
+    """A row run again: the stored and the new values of every compared column."""
+
+    run: int
+    compared: tuple[tuple[str, Any, Any], ...]  #: (column, stored, rerun) for every reproducible column
+    differences: tuple[str, ...]  #: the columns whose values differ
+    other_versions: tuple[str, ...]  #: versions that differ from the row's ("numpy 2.1 → 2.2")
+
+    @property
+    def identical(self) -> bool:
+        return not self.differences
+
+
+def rerun(path: str | Path, run: int) -> Rerun:
+    """Run row ``run`` of a saved sweep table again, in this process, and compare it with the
+    stored row column by column (all but the timing columns ``cpu_s``, ``wall_s``, ``worker``
+    and ``trajectory``): the same code and versions give the same bits."""
+    table = tables.load(path)
+    meta = table.attrs["coopdyn.sweep"]
+    if isinstance(run, bool) or not isinstance(run, int):
+        raise SweepError(f"a row is given by its run number, got {run!r}")
+    match = table[table["run"] == run]
+    if match.empty:
+        raise SweepError(f"{path} has runs 0..{len(table) - 1}, not {run}")
+    stored = match.iloc[0].to_dict()
+    settings = Settings(**meta["settings"])
+    source = meta["source"]
+    if source["kind"] == "spec":
+        job: PythonJob | SpecJob = SpecJob(source["text"], source["file"], settings)
+    else:
+        make_case = _resolve(source, "make_case")
+        metrics = _resolve(meta["metrics"], "metrics") if meta.get("metrics") else None
+        job = PythonJob(make_case, metrics, settings)
+    seed = _value(stored.get("seed"))
+    item = Item(run, {name: _value(stored[name]) for name in meta["params"]}, None if seed is None else int(seed))
+    new = run_item(job, item, None)
+    mine = versions()
+    other = tuple(
+        f"{name.removesuffix('_version')} {stored.get(name)} → {mine[name]}"
+        for name in mine
+        if _value(stored.get(name)) is not None and stored.get(name) != mine[name]
+    )
+    skip = {*TIMING, "trajectory"}
+    compared = tuple((c, stored[c], new.get(c)) for c in table.columns if c not in skip)
+    return Rerun(run, compared, tuple(c for c, a, b in compared if not _same(a, b)), other)
+
+
+__all__ = ["Executor", "LocalProcesses", "Rerun", "rerun", "run_spec", "sweep"]
