@@ -132,16 +132,22 @@ def _sweep(args: argparse.Namespace) -> int:
     )
     done = table[table["status"] == "completed"]
     params = set(meta["params"])
-    skip = {"run", "seed", "t_reached_s", "n_steps", "n_rhs", "dt_s", "duration_s", "save_every", "wall_s", *params}
+    skip = {"run", "seed", "t_reached_s", "n_steps", "n_rhs", "dt_s", "duration_s", "save_every", "cpu_s", "wall_s", *params}
     for name in table.columns:
         if name not in skip and len(done) and table[name].dtype.kind == "f":
             col = done[name]
             print(f"  {name}: min {col.min():.4g}, median {col.median():.4g}, max {col.max():.4g}")
-    for _, row in table[table["status"] != "completed"].head(10).iterrows():
+    others = table[table["status"] != "completed"]
+    for _, row in others.head(10).iterrows():
         values = ", ".join(f"{k} = {row[k]}" for k in meta["params"])
-        print(f"  run {row['run']} ({values}): {row['status']}: {str(row['message'])[:160]}")
+        print(f"  run {row['run']} ({values}): {row['status']}: {row['message']}")
+    if len(others) > 10:
+        print(f"  … and {len(others) - 10} more runs that did not complete (status and message in the table)")
     print(f"  wrote {spec.folder / 'table.parquet'}")
-    if spec.heatmap:
+    missing = [v for v in (spec.heatmap or {}).get("values", []) if v not in table.columns or not table[v].notna().any()]
+    if spec.heatmap and missing:
+        print(f"  no heat map: no completed run has {', '.join(missing)}")
+    elif spec.heatmap:
         from .viz.plotting import sweep_heatmap
 
         png = spec.folder / "heatmap.png"
@@ -163,7 +169,8 @@ def _print_rerun(report: Any) -> int:
         print(f"versions differ from the row's: {', '.join(report.other_versions)}")
     if report.identical:
         print(
-            f"run {report.run}: identical bit for bit in all {len(report.compared)} columns (cpu_s, wall_s, worker not compared)"
+            f"run {report.run}: identical bit for bit in all {len(report.compared)} columns "
+            "(cpu_s, wall_s, worker and trajectory not compared)"
         )
         return 0
     print(f"run {report.run}: {len(report.differences)} column(s) differ: {', '.join(report.differences)}")
@@ -182,20 +189,20 @@ def _cell(value: Any) -> str:
 @contextlib.contextmanager
 def _executor(args: argparse.Namespace) -> Iterator[Any]:
     """The executor the options choose; a Dask client (and a local cluster) closed on the way out."""
-    chosen = [o for o in ("serial", "scheduler", "local_cluster") if getattr(args, o)]
+    chosen = [o for o in ("serial", "scheduler", "local_cluster") if getattr(args, o) not in (None, False)]
     if len(chosen) > 1:
         raise SweepError(f"choose one of --serial, --scheduler, --local-cluster (got {', '.join(chosen)})")
     if args.serial:
         yield "serial"
         return
-    if not args.scheduler and not args.local_cluster:
+    if args.scheduler is None and args.local_cluster is None:
         yield None
         return
     from ._optional import require
 
     distributed = require("distributed", "running a sweep on Dask (--scheduler, --local-cluster)", "coopdyn[dask]")
     with contextlib.ExitStack() as stack:
-        if args.local_cluster:
+        if args.local_cluster is not None:
             if args.local_cluster < 1:
                 raise SweepError(f"--local-cluster N needs N >= 1 workers, got {args.local_cluster}")
             cluster = stack.enter_context(
@@ -343,8 +350,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "(format: docs/sweeps.md). --rerun runs one row again and compares it bit for bit.",
     )
     sweep.add_argument("spec", nargs="?", metavar="SPEC", help="a .toml scene file with a [sweep] table")
-    sweep.add_argument("--out", default=None, help="output folder (default: the spec's [sweep] folder)")
-    sweep.add_argument("--workers", type=int, default=None, help="local processes (default: every core)")
+    sweep.add_argument("--out", metavar="DIR", default=None, help="output folder (default: the spec's [sweep] folder)")
+    sweep.add_argument("--workers", metavar="N", type=int, default=None, help="local processes (default: every core)")
     sweep.add_argument("--serial", action="store_true", help="run in this process, one after the other")
     sweep.add_argument(
         "--scheduler", metavar="ADDRESS", default=None, help="run on the Dask cluster at ADDRESS (needs coopdyn[dask])"
@@ -352,7 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sweep.add_argument(
         "--local-cluster", metavar="N", type=int, default=None, help="start a local Dask cluster of N workers and run on it"
     )
-    sweep.add_argument("--chunk-size", type=int, default=None, help="runs per task (default: automatic, up to 64)")
+    sweep.add_argument("--chunk-size", metavar="N", type=int, default=None, help="runs per task (default: automatic, up to 64)")
     sweep.add_argument("--rerun", nargs=2, metavar=("TABLE", "RUN"), default=None, help="run row RUN of TABLE again and compare")
     sweep.set_defaults(func=_sweep)
     args = parser.parse_args(argv)

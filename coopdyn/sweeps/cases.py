@@ -38,6 +38,14 @@ SETTINGS = ("integrator", "dt_s", "duration_s", "save_every", "loop", "backend")
 COUNTERS = ("t_reached_s", "n_steps", "n_rhs")
 TIMING = ("cpu_s", "wall_s", "worker")  #: what depends on the machine and its load: not reproduced by a rerun
 VERSIONS = ("coopdyn_version", "pinocchio_version", "numpy_version")
+#: the metrics every completed run gets (:func:`default_metrics`; the force ones with interconnections)
+METRICS = (
+    "tracking_error_max_m",
+    "tracking_error_rms_m",
+    "peak_internal_force_N",
+    "internal_force_end_N",
+    "peak_interconnection_force_N",
+)
 RESERVED = frozenset((*STATUS, *SETTINGS, *COUNTERS, *TIMING, *VERSIONS, "warnings", "trajectory"))
 #: what a row's status says
 STATUSES = {
@@ -95,8 +103,8 @@ class Item:
     seed: int | None
 
 
-def _plain(value: Any, name: str) -> Any:
-    """A parameter value as a plain number, string, bool or list of them (what a table stores)."""
+def _plain(value: Any, name: str, what: str = "parameter") -> Any:
+    """A parameter (or metric) value as a plain number, string, bool or list of them (what a table stores)."""
     if isinstance(value, np.generic):
         value = value.item()
     if isinstance(value, np.ndarray):
@@ -106,10 +114,11 @@ def _plain(value: Any, name: str) -> Any:
     if isinstance(value, int | float):
         return value
     if isinstance(value, list | tuple):
-        return [_plain(v, name) for v in value]
+        return [_plain(v, name, what) for v in value]
+    hint = "; build objects inside make_case from plain values" if what == "parameter" else ""
     raise SweepError(
-        f"parameter {name!r}: a value must be a number, string, bool or list of them (what a table stores), "
-        f"got {type(value).__name__}; build objects inside make_case from plain values"
+        f"{what} {name!r}: a value must be a number, string, bool or list of them (what a table stores), "
+        f"got {type(value).__name__}{hint}"
     )
 
 
@@ -337,7 +346,7 @@ def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> 
                     for name, value in extra.items():
                         if name in RESERVED or name in item.params:
                             raise SweepError(f"metric {name!r} would overwrite a column of the row; rename it")
-                        metrics[str(name)] = _plain(value, f"metric {name}")
+                        metrics[str(name)] = _plain(value, str(name), "metric")
         except KeyboardInterrupt:
             raise
         except BaseException as exc:

@@ -139,10 +139,6 @@ def _execute(
     progress: bool,
 ) -> Any:
     folder = check_folder(out) if out is not None else None
-    if folder is not None:  # what an earlier sweep wrote there goes: the folder holds one sweep
-        shutil.rmtree(folder / "trajectories", ignore_errors=True)
-        for name in (tables.TABLE_NAME, "heatmap.png"):
-            (folder / name).unlink(missing_ok=True)
     if trajectories and folder is None:
         raise SweepError("trajectories are saved as files: give out=a folder")
     if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1):
@@ -153,6 +149,10 @@ def _execute(
         if runner.pickles:
             payload = _pickled(job)
         size = chunk_size or (1 if isinstance(runner, Serial) else max(1, min(MAX_CHUNK, len(items) // (4 * runner.workers))))
+        if folder is not None:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
+            shutil.rmtree(folder / "trajectories", ignore_errors=True)
+            for name in (tables.TABLE_NAME, "heatmap.png"):
+                (folder / name).unlink(missing_ok=True)
         traj_folder = None
         if trajectories and folder is not None:
             (folder / "trajectories").mkdir(parents=True, exist_ok=True)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import CoopdynError, SweepError
 from ..io import scenefile
-from .cases import Item, _plain, expand
+from .cases import COUNTERS, METRICS, Item, _plain, expand
 
 SWEEP_KEYS = ("grid", "random", "seeds", "folder", "trajectories", "heatmap")
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice")
@@ -64,6 +64,8 @@ def put(doc: dict[str, Any], name: str, value: Any) -> None:
         if len(parts) == 3:
             try:
                 index = int(parts[1])
+                if index < 0:
+                    raise IndexError
                 entries = [target[index]]
             except (ValueError, IndexError):
                 raise SweepError(f"{name!r}: [[{table}]] has entries 0..{len(target) - 1}, not {parts[1]!r}") from None
@@ -173,6 +175,11 @@ def load_spec(path: str | Path) -> Spec:
                 "xlabel, ylabel (axis names with units)",
                 "sweep.heatmap",
             )
+    if heatmap is not None:
+        numeric = (*METRICS, *COUNTERS, "cpu_s", "wall_s")
+        unknown = [v for v in heatmap["values"] if v not in numeric]
+        if unknown:
+            raise f.error(f"values {unknown}: a spec's runs have the columns {list(numeric)}", "sweep.heatmap", "values")
     out = Path(folder)
     return Spec(
         path.resolve(), text, items, out if out.is_absolute() else (path.parent / out).resolve(), trajectories, heatmap, random

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import SweepError
 from ..problems.linear_book import BookSolution
 from ..result import Result
 
@@ -206,7 +207,7 @@ def sweep_heatmap(
     values = [values] if isinstance(values, str) else list(values)
     for name in (x, y, *values):
         if name not in table.columns:
-            raise ValueError(f"the table has no column {name!r}; columns: {list(table.columns)}")
+            raise SweepError(f"the table has no column {name!r}; columns: {list(table.columns)}")
     xs = list(dict.fromkeys(_tick(v) for v in table[x]))
     ys = list(dict.fromkeys(_tick(v) for v in table[y]))
     fig, axes = plt.subplots(
