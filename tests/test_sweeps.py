@@ -98,6 +98,8 @@ def test_sweep_arguments_are_checked_before_anything_runs(tmp_path: Path) -> Non
         cd.sweep(make_case, None, duration=0.1, workers=0)
     with pytest.raises(cd.SweepError, match="chunk_size"):
         cd.sweep(make_case, None, duration=0.1, chunk_size=0)
+    with pytest.raises(cd.SweepError, match="duration must be a finite number"):
+        cd.sweep(make_case, None, duration=float("inf"))
     with pytest.raises(cd.SweepError, match="integrator must be one of"):
         cd.sweep(make_case, None, duration=0.1, integrator="euler")
     with pytest.raises(cd.SweepError, match="give out=a folder"):

@@ -242,16 +242,14 @@ class Executor:
         else:
             self.workers = int(getattr(executor, "_max_workers", None) or cpu_count())
             self.name = f"{type(executor).__name__} ({self.workers} workers)"
-        self._pending: set[cf.Future[Rows]] = set()
+        self._futures: dict[cf.Future[Rows], list[Item]] = {}  #: submitted, not yet collected
 
     def run(self, payload: Any, work: Sequence[list[Item]], trajectories: str | None) -> Iterator[Rows]:
-        futures = {self.executor.submit(run_chunk, payload, c, trajectories): c for c in work}
-        self._pending = set(futures)
+        futures = self._futures = {self.executor.submit(run_chunk, payload, c, trajectories): c for c in work}
         while futures:
             done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
             for future in done:
                 chunk = futures.pop(future)
-                self._pending.discard(future)
                 try:
                     yield future.result()
                 except cf.CancelledError:
@@ -269,12 +267,11 @@ class Executor:
                         for item in chunk:
                             f = self.executor.submit(run_chunk, payload, [item], trajectories)
                             futures[f] = [item]
-                            self._pending.add(f)
                     else:
                         yield [placeholder(chunk[0], "crashed", f"its task failed: {_describe_failure(exc)}")]
 
     def abort(self) -> None:
-        for future in self._pending:
+        for future in self._futures:
             future.cancel()
         if self.client is not None:  # its futures are Dask's: cancel them on the cluster
             with contextlib.suppress(Exception):

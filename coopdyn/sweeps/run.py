@@ -114,8 +114,10 @@ def run_spec(
 def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any) -> Settings:
     from ..integrators import INTEGRATORS
 
-    if duration is not None and (isinstance(duration, bool) or not isinstance(duration, int | float) or not duration >= 0):
-        raise SweepError(f"duration must be a number of seconds >= 0 (or None: each case's own), got {duration!r}")
+    if duration is not None and (
+        isinstance(duration, bool) or not isinstance(duration, int | float) or not 0 <= duration < math.inf
+    ):
+        raise SweepError(f"duration must be a finite number of seconds >= 0 (or None: each case's own), got {duration!r}")
     if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise SweepError(f"integrator must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
     if isinstance(dt, bool) or not isinstance(dt, int | float) or not dt > 0 or not math.isfinite(dt):

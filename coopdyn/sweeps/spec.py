@@ -19,7 +19,7 @@ which of its values change from run to run:
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,6 @@ class Spec:
     folder: Path
     trajectories: bool
     heatmap: dict[str, Any] | None = None
-    random: dict[str, Any] = field(default_factory=dict)
 
 
 def put(doc: dict[str, Any], name: str, value: Any) -> None:
@@ -181,6 +180,4 @@ def load_spec(path: str | Path) -> Spec:
         if unknown:
             raise f.error(f"values {unknown}: a spec's runs have the columns {list(numeric)}", "sweep.heatmap", "values")
     out = Path(folder)
-    return Spec(
-        path.resolve(), text, items, out if out.is_absolute() else (path.parent / out).resolve(), trajectories, heatmap, random
-    )
+    return Spec(path.resolve(), text, items, out if out.is_absolute() else (path.parent / out).resolve(), trajectories, heatmap)
