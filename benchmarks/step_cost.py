@@ -42,7 +42,7 @@ def _kernel_work(dyn: cd.Dynamics, method: str, q: np.ndarray, v: np.ndarray, ta
                 k.acceleration(q, v, tau, None)
         else:
             f, M, K, D = k.implicit_terms(q, v, tau, None)
-            k.factor(M, K, D, 5e-4, kp, kd)
+            k.factor(M, K, D, 5e-4, kp, kd, 5e-4**2)
             k.solve(v, f)
             k.acceleration(q, v, tau, None)
             k.solve(v, f)

@@ -216,16 +216,17 @@ class System:
         self._record(q, v, tau, w)
         return terms
 
-    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, gh2: float | None = None) -> None:
         """Factorise the step matrix ``M + γh D̃ + (γh)² K̃`` with the controller's PD gains added
-        (see :meth:`coopdyn.Dynamics.factor`); counts one factorisation.
+        (see :meth:`coopdyn.Dynamics.factor`; ``gh2`` replaces (γh)² when given); counts one
+        factorisation.
 
         Raises:
             StepMatrixError: the matrix is not positive definite.
         """
         self.n_factor += 1
         kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
-        self.dynamics.factor(M, K, D, gh, kp, kd)
+        self.dynamics.factor(M, K, D, gh, kp, kd, gh2)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(k_q, k_v)`` of ``(I − γhJ) k = (f_q, f_v)`` with the last :meth:`factor`, given ``M f_v``."""

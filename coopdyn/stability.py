@@ -31,7 +31,7 @@ from .model.scene import Scene
 RESOLVE_LIMIT = 1.0
 
 #: Methods :func:`advise` reports on by default.
-ADVISED = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "exponential")
+ADVISED = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "exponential")
 
 
 @dataclass(frozen=True)
@@ -258,7 +258,8 @@ def advise(
         fastest = max(explicit, key=lambda a: a.max_stable_dt, default=None)
         rec = (
             f"explicit methods need dt below {fastest.max_stable_dt * 1e3:.3g} ms ({fastest.name}); "
-            "above that use 'implicit_euler' (cheapest) or 'ros2' (second order)"
+            "above that use 'implicit_euler' (cheapest), or a second-order one: 'trapezoid' or 'generalized_alpha' "
+            "keep the interconnections' oscillations, 'ros2' damps them"
             if fastest is not None
             else "use 'implicit_euler' or 'ros2'"
         )

@@ -15,7 +15,7 @@ import coopdyn as cd
 from coopdyn.control import ComputedTorque, GravityCompensationPD
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
 from coopdyn.errors import StepMatrixError
-from coopdyn.integrators import RK4, DormandPrince, Exponential, LinearlyImplicitEuler, Trapezoid
+from coopdyn.integrators import RK4, DormandPrince, Exponential, GeneralizedAlpha, LinearlyImplicitEuler, Trapezoid
 from coopdyn.scenes import object_start
 
 METHODS = [
@@ -26,6 +26,8 @@ METHODS = [
     "ros2",
     "trapezoid",
     Trapezoid(rho_inf=0.5),
+    "generalized_alpha",
+    GeneralizedAlpha(rho_inf=0.3),
     DormandPrince(rtol=1e-7, atol=1e-9),
     "ros2_adaptive",
 ]
@@ -76,7 +78,9 @@ def test_object_impedance_holding_computed_torque_and_no_controller(damped: cd.S
         _assert_same(py, co)
 
 
-@pytest.mark.parametrize("method", ["rk4", "trapezoid", "dopri5", "exponential", Exponential("foh")], ids=str)
+@pytest.mark.parametrize(
+    "method", ["rk4", "trapezoid", "generalized_alpha", "dopri5", "exponential", Exponential("foh")], ids=str
+)
 def test_open_loop_drives_on_the_book_case(book: cd.Scene, method: object) -> None:
     d1, d2 = cd.scenes.book_task()
     py, co = _both(book, 3.0, controller=cd.scenes.drives_controller(d1, d2), integrator=method, dt=1e-3, save_every=7)

@@ -50,7 +50,7 @@ def test_rk4_keeps_fourth_order_on_a_free_flyer(pandas: cd.Scene) -> None:
         ({"t_final": -1.0}, r"t_final must be >= 0 \[s\], got -1.0"),
         (
             {"integrator": "rk45"},
-            r"unknown integrator 'rk45'; valid: \['dopri5', 'exponential', 'implicit_euler', 'rk4', 'ros2',",
+            r"unknown integrator 'rk45'; valid: \['dopri5', 'exponential', 'generalized_alpha', 'implicit_euler', 'rk4', 'ros2',",
         ),
         ({"save_every": 0}, r"save_every must be an integer >= 1"),
         ({"q0": np.zeros(2)}, r"q \(a configuration\) must have shape \(3,\), got shape \(2,\)"),
@@ -81,7 +81,7 @@ def test_divergence_raises_instead_of_returning_nan() -> None:
         cd.simulate(stiff, 5.0, integrator="symplectic_euler", dt=1e-3)
     message = str(info.value)
     assert "the mode that limits symplectic_euler's step has |λ| = " in message
-    assert "stable at dt = 1 ms: implicit_euler, ros2, exponential" in message
+    assert "stable at dt = 1 ms: implicit_euler, ros2, trapezoid, generalized_alpha, exponential" in message
     partial = info.value.result
     assert isinstance(partial, cd.Result) and 0 < partial.t[-1] < 5.0 and np.all(np.isfinite(partial.q))
 

@@ -122,9 +122,12 @@ class Dynamics:
         ``D̃ = Σ Jrᵀ S_D Jr + B`` (the force-proportional geometric stiffness is left out)."""
         raise NotImplementedError
 
-    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
+    def factor(
+        self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
+    ) -> None:
         """Factorise the step matrix ``S = M + γh (D̃ + Kd) + (γh)² (K̃ + Kp)`` (Cholesky) for
-        :meth:`solve`; ``kp``, ``kd`` (n_actuated,) are joint PD gains [N·m/rad], [N·m·s/rad].
+        :meth:`solve`; ``kp``, ``kd`` (n_actuated,) are joint PD gains [N·m/rad], [N·m·s/rad];
+        ``gh2`` [s²], when given, replaces (γh)² (generalized-α's β' ≠ γ'²).
 
         Raises:
             StepMatrixError: S is not finite or not positive definite.
@@ -304,10 +307,12 @@ class PythonDynamics(Dynamics):
         assert self._K is not None and self._D is not None
         return f, pin.crba(model, data, q).reshape(model.nv, model.nv).copy(), self._K, self._D
 
-    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
+    def factor(
+        self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
+    ) -> None:
         K_g, D_g = K.copy(), D.copy()
         self.add_joint_gains(K_g, D_g, kp, kd)
-        S = M + gh * D_g + (gh * gh) * K_g
+        S = M + gh * D_g + (gh * gh if gh2 is None else gh2) * K_g
         if not np.all(np.isfinite(S)):  # numpy's Cholesky "succeeds" on NaN
             self._step = None
             raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite")

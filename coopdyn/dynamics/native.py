@@ -64,8 +64,11 @@ class NativeDynamics(Dynamics):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return self._call("implicit_terms(q, v, tau, object_wrench)", self._kernel.implicit_terms, q, v, tau, object_wrench)
 
-    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray) -> None:
-        self._call("factor(M, K, D, gh, kp, kd)", self._kernel.factor, M, K, D, gh, kp, kd)
+    def factor(
+        self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
+    ) -> None:
+        gh2 = gh * gh if gh2 is None else gh2
+        self._call("factor(M, K, D, gh, kp, kd, gh2)", self._kernel.factor, M, K, D, gh, kp, kd, gh2)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self._call("solve(f_q, Mf_v)", self._kernel.solve, f_q, Mf_v)

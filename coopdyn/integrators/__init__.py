@@ -10,6 +10,7 @@ name                          order  adaptive  per step
 ``ros2``                      2      no        2 RHS, 1 Jacobian, 1 factorisation
 ``ros2_adaptive``             2(1)   yes       as ros2
 ``trapezoid``                 2      no        as ros2; does not damp oscillations (ρ∞ = 1)
+``generalized_alpha``         2      no        2 RHS, 1 Jacobian, 1 factorisation; ρ∞ = 0.9
 ``exponential``               2*     no        1 matrix–vector product (linear scenes only)
 ``scipy``                     —      inside    scipy ``solve_ivp`` per step (reference)
 ============================  =====  ========  ===========================================
@@ -23,7 +24,7 @@ from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
 from .exponential import Exponential, LinearForm, linear_form
-from .implicit import ROS2, AdaptiveROS2, LinearlyImplicitEuler, Trapezoid
+from .implicit import ROS2, AdaptiveROS2, GeneralizedAlpha, LinearlyImplicitEuler, Trapezoid
 from .scipy_reference import ScipyReference
 
 #: Name → integrator class. ``simulate(..., integrator=name)`` builds one with default settings.
@@ -37,6 +38,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
         ROS2,
         AdaptiveROS2,
         Trapezoid,
+        GeneralizedAlpha,
         Exponential,
         ScipyReference,
     )
@@ -63,6 +65,7 @@ __all__ = [
     "DormandPrince",
     "ExplicitRungeKutta",
     "Exponential",
+    "GeneralizedAlpha",
     "Integrator",
     "LinearForm",
     "LinearlyImplicitEuler",

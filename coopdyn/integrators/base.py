@@ -68,8 +68,9 @@ class Problem(Protocol):
         """(f = M q̈, M, K̃, D̃) at (t, q, v)."""
         ...
 
-    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float) -> None:
-        """Factorise M + γh D̃ + (γh)² K̃ (controller gains added); StepMatrixError if not SPD."""
+    def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, gh2: float | None = None) -> None:
+        """Factorise M + γh D̃ + (γh)² K̃ (controller gains added; ``gh2`` in place of (γh)²
+        when given); StepMatrixError if not SPD."""
         ...
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -127,6 +127,7 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
   else if (method == "implicit_euler") m = cn::IMPLICIT_EULER;
   else if (method == "rosenbrock") m = cn::ROSENBROCK;
   else if (method == "exponential") m = cn::EXPONENTIAL;
+  else if (method == "generalized_alpha") m = cn::GENERALIZED_ALPHA;
   else throw std::invalid_argument("compiled loop: unknown method " + method);
   if (m == cn::RK) {
     bp::list A = get<bp::list>(cfg, "A");
@@ -171,6 +172,7 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
       loop->add_discretisation(std::move(x));
     }
   }
+  if (m == cn::GENERALIZED_ALPHA) loop->set_alpha(doubles(cfg["alpha"]));
   if (cfg.has_key("n_factor")) loop->set_factorisations(get<long>(cfg, "n_factor"));
   return loop;
 }
@@ -199,7 +201,7 @@ BOOST_PYTHON_MODULE(_native) {
       bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame")))
     .def("acceleration", &Kernel::acceleration, bp::args("self", "q", "v", "tau", "wrench"))
     .def("implicit_terms", &Kernel::implicit_terms, bp::args("self", "q", "v", "tau", "wrench"))
-    .def("factor", &Kernel::factor, bp::args("self", "M", "K", "D", "gh", "kp", "kd"))
+    .def("factor", &Kernel::factor, bp::args("self", "M", "K", "D", "gh", "kp", "kd", "gh2"))
     .def("solve", &Kernel::solve, bp::args("self", "f_q", "Mf_v"))
     .def("implicit_euler_velocity", &Kernel::implicit_euler_velocity,
          bp::args("self", "q", "v", "tau", "h", "kp", "kd", "wrench"))

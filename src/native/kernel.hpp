@@ -127,7 +127,7 @@ public:
   void ie_velocity(const VectorXd & q, const VectorXd & v, const VectorXd & tau, double h, const VectorXd & kp,
                    const VectorXd & kd, VectorXd & v_new) {
     implicit_parts(q, v, tau, nullptr);
-    factor(data_.M, K_t_, D_t_, h, kp, kd);
+    factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
     v_new = v + h * llt_.solve(rhs_);
   }
@@ -147,8 +147,10 @@ public:
     return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
   }
 
-  // Factorise S = M + gh (D̃ + Kd) + gh² (K̃ + Kp) from the last implicit_terms (or given matrices).
-  void factor(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd) {
+  // Factorise S = M + gh (D̃ + Kd) + gh2 (K̃ + Kp) from the last implicit_terms (or given matrices);
+  // gh2 = gh² but for generalized-α.
+  void factor(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd,
+              double gh2) {
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
     const auto nv = model_.nv;
@@ -160,7 +162,7 @@ public:
       Kg_(actuated_[i], actuated_[i]) += kp[i];
       S_(actuated_[i], actuated_[i]) += gh * kd[i];
     }
-    S_.noalias() += (gh * gh) * Kg_;
+    S_.noalias() += gh2 * Kg_;
     gh_ = gh;
     if (!S_.allFinite()) {  // LLT "succeeds" on NaN
       factored_ = false;
@@ -190,7 +192,7 @@ public:
                                    const RefVec & kp, const RefVec & kd, bp::object wrench) {
     const Vector6 w = object_wrench(wrench);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
-    factor(data_.M, K_t_, D_t_, h, kp, kd);
+    factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
     return v + h * llt_.solve(rhs_);
   }

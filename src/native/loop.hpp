@@ -25,7 +25,7 @@ namespace coopdyn_native {
 enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7, SCENE = 8 };
 inline const char * const STATUS_NAMES[] = {"running", "done", "diverged", "step_matrix", "energy", "h_min", "controller", "failed", "scene"};
 
-enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK, EXPONENTIAL };
+enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK, EXPONENTIAL, GENERALIZED_ALPHA };
 
 struct Tableau {
   std::vector<std::vector<double>> A;
@@ -239,9 +239,9 @@ private:
     k_.terms(q, v, tau_);
     record(v);
   }
-  void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh) {
+  void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh, double gh2 = -1.0) {
     ++n_factor_;
-    k_.factor(M, K, D, gh, kp_, kd_);
+    k_.factor(M, K, D, gh, kp_, kd_, gh2 < 0.0 ? gh * gh : gh2);
   }
   void integrate(const VectorXd & q, const VectorXd & dq, VectorXd & out) { pinocchio::integrate(model_, q, dq, out); }
   // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks.
@@ -403,6 +403,39 @@ private:
         e_d_ = 0.5 * h * (kq1_ + kq2_);
         e_v_ = 0.5 * h * (kv1_ + kv2_);
         return error_norm(q, v, v_new_);
+      }
+      case GENERALIZED_ALPHA: {  // implicit.py: GeneralizedAlpha.step, the same operations
+        const double am = alpha_[0], af = alpha_[1], g = alpha_[2], b = alpha_[3];
+        implicit_terms(t, q, v);
+        f1_ = k_.f_terms();
+        M_ = k_.mass();
+        if (!alpha_ready_) {  // a fresh start: a = q̈
+          alpha_a_ = M_.llt().solve(f1_);
+          alpha_ready_ = true;
+        }
+        const double c = h / (1.0 - am), gp = (1.0 - af) * g * c, bp = (1.0 - af) * b * h * c;
+        tmp2_ = (h * (1.0 - g - g * am / (1.0 - am))) * alpha_a_;                 // dv₀
+        delta_ = h * v + (h * h * (0.5 - b - b * am / (1.0 - am))) * alpha_a_;    // Δ₀
+        factor(M_, k_.stiffness(), k_.damping_matrix(), gp, bp);
+        kq1_ = (1.0 - af) * (delta_ - (bp / gp) * tmp2_);
+        tmp_.noalias() = M_ * tmp2_;
+        tmp_ = (1.0 - af) * tmp_ + gp * f1_;
+        k_.solve_into(kq1_, tmp_, kq2_, kv1_);
+        xh_ = (kv1_ - (1.0 - af) * tmp2_) / gp;
+        integrate(q, delta_ + (b * h * c) * xh_, qs_);
+        vs_ = v + tmp2_ + (g * c) * xh_;
+        acceleration(t + h, qs_, vs_, tmp_);  // the Newton correction's residual
+        kv2_.noalias() = M_ * tmp_;
+        kv2_ *= (1.0 - af);
+        kv2_ += af * f1_;
+        kv2_.noalias() -= M_ * xh_;
+        kq1_.setZero(v.size());
+        k_.solve_into(kq1_, kv2_, kq2_, kv1_);
+        xh_ += kv1_;
+        integrate(q, delta_ + (b * h * c) * xh_, q_new_);
+        v_new_ = v + tmp2_ + (g * c) * xh_;
+        alpha_a_ = (xh_ - am * alpha_a_) / (1.0 - am);
+        return 0.0;
       }
     }
     return 0.0;
@@ -649,6 +682,9 @@ private:
   bool w_ready_ = false;
   int w_count_ = 0;
   double w_h_ = 0.0;
+  std::vector<double> alpha_;  // generalized-α's (α_m, α_f, γ, β)
+  VectorXd alpha_a_, xh_;      // its algorithmic acceleration, carried between steps
+  bool alpha_ready_ = false;
   // outputs
   std::vector<double> T_, Q_, V_, TAU_;
   std::vector<Event> events_;
@@ -661,6 +697,11 @@ private:
 public:
   void set_first_step(double h) { h_ = h; }
   void add_discretisation(Discretisation d) { exp_.push_back(std::move(d)); }
+  void set_alpha(const std::vector<double> & alpha) {
+    if (alpha.size() != 4 || !(alpha[0] < 1.0) || !(alpha[2] > 0.0) || !(alpha[3] > 0.0))
+      throw std::invalid_argument("compiled loop: generalized-alpha needs (alpha_m < 1, alpha_f, gamma > 0, beta > 0)");
+    alpha_ = alpha;
+  }
   void set_factorisations(long n) { n_factor_ = n; }
 };
 
