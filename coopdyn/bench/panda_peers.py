@@ -24,9 +24,10 @@ from ..errors import CoopdynError, SimulationError
 from ..integrators import INTEGRATORS, Integrator, Trapezoid
 from ..result import Result
 from .cases import OUTPUT_INTERVAL, Case, Row, _forces, panda_case
+from .drake_scene import drake_available
 from .measure import _bar, _make, diverged_row, errors_against, measured_row, run_point
 
-PEERS = ("mujoco", "exudyn")
+PEERS = ("mujoco", "exudyn", "drake")
 
 
 def exudyn_available() -> bool:
@@ -41,13 +42,16 @@ def exudyn_available() -> bool:
 #: force-error levels of the comparison table [N]
 LEVELS = (10.0, 0.1, 1e-3, 1e-6)
 #: coopdyn methods in the comparison (fixed steps, or tolerances for the adaptive one)
-METHODS = ("implicit_euler", "trapezoid", "trapezoid rho_inf=0.7", "ros2", "rk4", "dopri5")
+METHODS = ("implicit_euler", "trapezoid", "trapezoid rho_inf=0.7", "generalized_alpha", "ros2", "rk4", "dopri5")
 #: settings of a method other than its default, by label (ρ∞ = 0.7: picked on this benchmark, at
 #: k = 1e4 and 5 ms, from 1, 0.9, 0.7, 0.5, 0 — a user's choice, shown beside the default)
 VARIANTS: dict[str, Callable[[], Integrator]] = {"trapezoid rho_inf=0.7": lambda: Trapezoid(rho_inf=0.7)}
 MUJOCO = ("implicitfast", "RK4")
 #: Exudyn's solvers in the comparison (when ``import exudyn`` works)
 EXUDYN = ("RK44", "GeneralizedAlpha")
+#: Drake's ways of running the scene (when ``import pydrake`` works): its discrete plant over
+#: steps, and a continuous plant with its default error-controlled integrator over accuracies
+DRAKE = ("discrete", "runge_kutta3")
 
 
 def _steps(quick: bool) -> list[float]:
@@ -92,6 +96,32 @@ def _mujoco_point(case: Case, integrator: str, dt: float) -> Callable[[], tuple[
         if not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
             return math.nan, None
         return cpu, res
+
+    return run
+
+
+def _drake_accuracies(quick: bool) -> list[float]:
+    return [1e-2, 1e-4, 1e-6] if quick else [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7]
+
+
+def _drake_point(case: Case, integrator: str, setting: float) -> Callable[[], tuple[float, Result | None]]:
+    """A Drake run: the discrete plant at step ``setting`` [s], or a continuous plant with
+    ``integrator`` at target accuracy ``setting``."""
+    from .drake_scene import DrakeScene
+
+    discrete = integrator == "discrete"
+    peer = DrakeScene(case.scene, case.controller, time_step=setting if discrete else 0.0)
+
+    def run() -> tuple[float, Result | None]:
+        t, Q, V, cpu, n_steps = peer.run(
+            case.scene.q0, case.v0, case.t_final, OUTPUT_INTERVAL, None if discrete else integrator, setting
+        )
+        if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1 or not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
+            return math.nan, None
+        tau = np.zeros((t.size, case.scene.n_actuated))
+        return cpu, Result(
+            case.scene, t, Q, V, tau, f"drake {integrator}", setting if discrete else OUTPUT_INTERVAL, n_steps, cpu
+        )
 
     return run
 
@@ -161,6 +191,22 @@ def compare(
                     plan.append((case, m, f"dt={dt:g}", dt, math.nan, _coopdyn_point(case, m, dt, math.nan, flags, len(plan))))
         for mj in MUJOCO:
             plan += [(case, f"mujoco {mj}", f"dt={dt:g}", dt, math.nan, _mujoco_point(case, mj, dt)) for dt in _steps(quick)]
+        if drake_available():
+            from .drake_scene import DrakeScene
+
+            checks[f"{case.name} (Drake)"] = DrakeScene(case.scene, case.controller).check()
+            if checks[f"{case.name} (Drake)"] > 1e-9:
+                raise SimulationError(
+                    f"Drake's accelerations differ from coopdyn's by {checks[f'{case.name} (Drake)']:.1e} (relative) on "
+                    f"{case.name}: the Drake model is not coopdyn's scene, nothing was timed"
+                )
+            plan += [
+                (case, "drake discrete", f"dt={dt:g}", dt, math.nan, _drake_point(case, "discrete", dt)) for dt in _steps(quick)
+            ]
+            plan += [
+                (case, "drake runge_kutta3", f"accuracy={a:g}", OUTPUT_INTERVAL, a, _drake_point(case, "runge_kutta3", a))
+                for a in _drake_accuracies(quick)
+            ]
         if exudyn_available():
             from .exudyn_scene import ExudynScene
 
@@ -210,9 +256,13 @@ def format_comparison(result: dict[str, Any]) -> str:
     from .report import _best_to_reach
 
     rows: list[Row] = result["rows"]
-    peers = "MuJoCo and Exudyn" if any(r.method.startswith("exudyn") for r in rows) else "MuJoCo (Exudyn not installed)"
+    present = ["MuJoCo"] + [name for name in ("Drake", "Exudyn") if any(r.method.startswith(name.lower()) for r in rows)]
+    missing = [name for name in ("Drake", "Exudyn") if name not in present]
+    peers = ", ".join(present[:-1]) + " and " + present[-1] if len(present) > 1 else present[0]
+    if missing:
+        peers += f" ({' and '.join(missing)} not installed)"
     lines = [
-        f"coopdyn vs {peers} (same model and controller; MuJoCo with coopdyn's interconnection law), "
+        f"coopdyn vs {peers} (same model and controller; MuJoCo and Drake with coopdyn's interconnection law), "
         f"{result['t_final']:g} s, CPU median of {result['rounds']} interleaved rounds",
         "accelerations checked first, largest relative difference: "
         + ", ".join(f"{name}: {err:.1e}" for name, err in result["checks"].items()),

@@ -33,6 +33,10 @@ def read_csv(path: str | os.PathLike[str]) -> list[Row]:
         return [Row(**{k: convert[str(types[k])](v) for k, v in d.items()}) for d in csv.DictReader(f)]
 
 
+#: line and marker of each peer simulator's runs in the charts (coopdyn's are solid with dots)
+_PEER_STYLES = {"mujoco": "x--", "drake": "s:", "exudyn": "^-."}
+
+
 def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
     """Log–log wrench error vs CPU per simulated second, one panel per scene; × marks divergence."""
     from ..viz.plotting import _pyplot, save_figure
@@ -40,7 +44,7 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
     plt = _pyplot()
     names = list(dict.fromkeys(r.scene for r in rows))
     methods = list(dict.fromkeys(r.method for r in rows))
-    palette = plt.get_cmap("tab10").colors + plt.get_cmap("Dark2").colors
+    palette = (*plt.get_cmap("tab10").colors, "black", "#999999", "#b8860b", "#00ced1", "#8b008b")
     colour = {m: palette[i % len(palette)] for i, m in enumerate(methods)}  # one colour per method in every panel
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), constrained_layout=True, squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
@@ -48,7 +52,7 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
         for method in dict.fromkeys(r.method for r in rows if r.scene == name):
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
-                style = "x--" if method.startswith(("mujoco", "exudyn")) else "o-"  # peers dashed
+                style = _PEER_STYLES.get(method.split()[0], "o-")  # coopdyn solid; each peer its own line and marker
                 ax.loglog(
                     [r.cpu_per_sim_s for r in pts],
                     [max(r.wrench_error, 1e-16) for r in pts],
