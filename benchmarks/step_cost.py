@@ -7,8 +7,9 @@ For each method, interleaved run by run in one process (medians of ``--repeats``
     on, one sample saved per 10 ms), in each loop;
   * ``kernel``: CPU per step of the kernel calls the method makes, timed from Python on a fixed
     state (each call also pays ~0.5–1 µs of binding overhead, so this overstates the kernel's
-    work): implicit Euler one ``implicit_euler_velocity``; RK4 four ``acceleration``; ROS2 and
-    the trapezoid one ``implicit_terms`` + ``factor`` + two ``solve`` + one ``acceleration``;
+    work): implicit Euler one ``implicit_euler_velocity``; RK4 four ``acceleration``; ROS2, the
+    trapezoid and generalized-α one ``implicit_terms`` + ``factor`` + two ``solve`` + one
+    ``acceleration``;
     Dormand–Prince six ``acceleration``. The controller is not in this column (the loops
     include it).
 
@@ -26,7 +27,7 @@ import numpy as np
 import coopdyn as cd
 from coopdyn.control import GravityCompensationPD
 
-METHODS = ("symplectic_euler", "rk4", "implicit_euler", "ros2", "trapezoid", "dopri5")
+METHODS = ("symplectic_euler", "rk4", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "dopri5")
 
 
 def _kernel_work(dyn: cd.Dynamics, method: str, q: np.ndarray, v: np.ndarray, tau: np.ndarray, n: int) -> float:

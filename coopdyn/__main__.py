@@ -117,6 +117,9 @@ def _sweep(args: argparse.Namespace) -> int:
         return _print_rerun(report)
     if args.spec is None:
         raise SweepError("give a sweep spec (a scene file with a [sweep] table), or --rerun TABLE RUN")
+    for flag, value in (("--workers", args.workers), ("--chunk-size", args.chunk_size)):
+        if value is not None and value < 1:  # named as typed here; the library names its arguments
+            raise SweepError(f"{flag} N needs N >= 1, got {value}")
     spec = load_spec(args.spec)
     if args.out is not None:
         spec = dataclasses.replace(spec, folder=Path(args.out).resolve())
@@ -189,9 +192,10 @@ def _cell(value: Any) -> str:
 @contextlib.contextmanager
 def _executor(args: argparse.Namespace) -> Iterator[Any]:
     """The executor the options choose; a Dask client (and a local cluster) closed on the way out."""
-    chosen = [o for o in ("serial", "scheduler", "local_cluster") if getattr(args, o) not in (None, False)]
-    if len(chosen) > 1:
-        raise SweepError(f"choose one of --serial, --scheduler, --local-cluster (got {', '.join(chosen)})")
+    options = {"workers": "--workers", "serial": "--serial", "scheduler": "--scheduler", "local_cluster": "--local-cluster"}
+    chosen = [flag for attr, flag in options.items() if getattr(args, attr) not in (None, False)]
+    if len(chosen) > 1:  # --workers sizes the local processes, which the other three replace
+        raise SweepError(f"choose one of --workers, --serial, --scheduler, --local-cluster (got {' and '.join(chosen)})")
     if args.serial:
         yield "serial"
         return
@@ -333,12 +337,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "bench",
         "work–precision and stability benchmarks (tables, CSV, PNG)",
         "CPU time against accuracy for every integrator on the book system and the Panda scene, and where each method "
-        "loses stability; --peers compares with MuJoCo (and Exudyn when installed) in the same run.",
+        "loses stability; --peers compares with MuJoCo (and Drake and Exudyn when installed) in the same run.",
     )
     bench.add_argument("--out", default="out/bench", help="output folder (default: out/bench)")
     bench.add_argument("--quick", action="store_true", help="few points, short runs, one repetition (CI)")
     bench.add_argument(
-        "--peers", action="store_true", help="instead: coopdyn vs MuJoCo on the Panda scene, interleaved (needs mujoco)"
+        "--peers",
+        action="store_true",
+        help="instead: coopdyn vs MuJoCo, Drake and Exudyn on the Panda scenes, interleaved (needs mujoco; others if installed)",
     )
     bench.set_defaults(func=_bench)
     sweep = command(

@@ -229,7 +229,9 @@ class System:
         self.dynamics.factor(M, K, D, gh, kp, kd, gh2)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(k_q, k_v)`` of ``(I − γhJ) k = (f_q, f_v)`` with the last :meth:`factor`, given ``M f_v``."""
+        """``(k_q, k_v)`` with the last :meth:`factor`, given ``M f_v`` (see :meth:`coopdyn.Dynamics.solve`):
+        ``S k_v = M f_v − γh K_g f_q``, ``k_q = f_q + γh k_v``; ``(I − γhJ) k = (f_q, f_v)`` when
+        ``gh2 = (γh)²``."""
         return self.dynamics.solve(f_q, Mf_v)
 
     def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:

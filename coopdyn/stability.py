@@ -75,7 +75,7 @@ def fastest_oscillation(lam: np.ndarray) -> Oscillation | None:
     if not np.any(osc):
         return None
     k = int(np.argmax(np.where(osc, mag, -1.0)))
-    return Oscillation(float(mag[k]), float(-lam[k].real / mag[k]))
+    return Oscillation(float(mag[k]), 0.0 - float(lam[k].real / mag[k]))  # 0.0 −: an undamped mode prints 0, not −0
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ class Advice:
             lam = self.limiting_mode(name)
             if lam is not None:
                 rate = abs(lam)
-                zeta = -lam.real / rate if rate > 0 else 1.0
+                zeta = 0.0 - lam.real / rate if rate > 0 else 1.0
                 freq = abs(lam.imag) / (2 * math.pi)
                 kind = f"{freq:.4g} Hz, damping ratio {zeta:.3g}" if abs(lam.imag) > 0 else "non-oscillatory"
                 parts.append(
@@ -231,7 +231,7 @@ def advise(
     lam = np.linalg.eigvals(A)
     k = int(np.argmax(np.abs(lam)))
     lam_max = float(abs(lam[k]))
-    zeta = float(-lam[k].real / lam_max) if lam_max > 0 else 1.0
+    zeta = 0.0 - float(lam[k].real / lam_max) if lam_max > 0 else 1.0
     M_inv_K = -A[n:, :n]
     omega_max = float(math.sqrt(max(np.max(np.linalg.eigvals(M_inv_K).real), 0.0)))
     why_nonlinear = scene.nonlinearity()

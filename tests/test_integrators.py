@@ -261,28 +261,34 @@ def test_trapezoid_keeps_the_energy_that_ros2_dissipates(pandas: cd.Scene) -> No
     assert drift["ros2", 1e-3] > 5 * drift["trapezoid", 1e-3]
 
 
-def test_generalized_alpha_stability_rho_inf_and_the_newmark_limit() -> None:
-    """On the mode with eigenvalues z, z̄: the principal root is e^z to third order (a second-order
-    method); ρ∞ = 1 is Newmark's average acceleration, whose principal root is the trapezoid's
-    Cayley map and never damps (|R(iω)| = 1); the step's spectral radius tends to ρ∞ at high
-    frequency and never exceeds 1 on the left half-plane (unconditionally stable)."""
+def test_generalized_alpha_at_rho_inf_1_is_newmark_average_acceleration() -> None:
+    """ρ∞ = 1: the principal root is the trapezoid's Cayley map, which never damps (|R(iω)| = 1)."""
     from coopdyn.integrators import GeneralizedAlpha
 
     z = np.concatenate([1j * np.logspace(-3, 6, 40), -np.logspace(-3, 4, 40) + 3j, -np.logspace(-2, 3, 20) * (1 + 1j)])
     assert np.allclose(GeneralizedAlpha(1.0).stability_function(z), (1 + z / 2) / (1 - z / 2), rtol=1e-9, atol=1e-9)
     assert np.allclose(np.abs(GeneralizedAlpha(1.0).stability_function(1j * np.logspace(-3, 6, 40))), 1.0, atol=1e-9)
-    for rho in (0.0, 0.5, 0.9, 1.0):
-        method = GeneralizedAlpha(rho)
-        small = np.array([1e-2j, -1e-2 + 1e-2j, 2e-2j])
-        assert np.all(np.abs(method.stability_function(small) - np.exp(small)) < 2 * np.abs(small) ** 3)
-        for omega in (1e-1, 1e1, 1e3):
-            A = np.array([[0.0, 1.0], [-(omega**2), -0.02 * omega]])  # a lightly damped oscillator
-            assert method.spectral_radius(A, 1.0) <= 1.0 + 1e-12
-        A = np.array([[0.0, 1.0], [-1e16, 0.0]])
-        assert method.spectral_radius(A, 1.0) == pytest.approx(rho, abs=1e-4)  # ρ∞ = 0: a triple root
-        assert np.all(np.abs(method.stability_function(z)) <= 1.0 + 1e-9)
     with pytest.raises(cd.SimulationError, match=r"rho_inf must be a number in \[0, 1\], got -0.1"):
         GeneralizedAlpha(-0.1)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 1.0])
+def test_generalized_alpha_is_second_order_stable_and_rho_inf_is_its_limit(rho: float) -> None:
+    """On the mode with eigenvalues z, z̄ the principal root is e^z to third order (a second-order
+    method); the step's spectral radius never exceeds 1 on lightly damped oscillators of any
+    frequency (unconditionally stable) and tends to ρ∞ at high frequency."""
+    from coopdyn.integrators import GeneralizedAlpha
+
+    method = GeneralizedAlpha(rho)
+    small = np.array([1e-2j, -1e-2 + 1e-2j, 2e-2j])
+    assert np.all(np.abs(method.stability_function(small) - np.exp(small)) < 2 * np.abs(small) ** 3)
+    for omega in (1e-1, 1e1, 1e3):
+        A = np.array([[0.0, 1.0], [-(omega**2), -0.02 * omega]])
+        assert method.spectral_radius(A, 1.0) <= 1.0 + 1e-12
+    A = np.array([[0.0, 1.0], [-1e16, 0.0]])
+    assert method.spectral_radius(A, 1.0) == pytest.approx(rho, abs=1e-4)  # ρ∞ = 0: a triple root
+    z = np.concatenate([1j * np.logspace(-3, 6, 40), -np.logspace(-3, 4, 40) + 3j])
+    assert np.all(np.abs(method.stability_function(z)) <= 1.0 + 1e-9)
 
 
 def test_generalized_alpha_spectral_radius_is_that_of_its_real_step(book: cd.Scene) -> None:

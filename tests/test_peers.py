@@ -89,30 +89,3 @@ def test_exudyn_panda_scene_is_coopdyns_scene_up_to_its_spring_law() -> None:
     gap = max(np.max(np.abs(pin.difference(scene.model, Q[i], ref.q[i]))) for i in range(len(t)))
     motion = max(np.max(np.abs(pin.difference(scene.model, ref.q[0], ref.q[i]))) for i in range(len(t)))
     assert gap < 1e-3 * motion, (gap, motion)
-
-
-def test_drake_panda_scene_is_coopdyns_scene() -> None:
-    """The Panda scene rebuilt as a Drake MultibodyPlant from coopdyn's model, with coopdyn's law
-    and controller as its applied generalized force: the same accelerations at random states
-    (round-off); Drake's error-controlled RK3 approaches coopdyn's trajectory as its accuracy is
-    tightened, and its discrete plant converges at first order in its step."""
-    pytest.importorskip("pydrake")
-    import pinocchio as pin
-
-    from coopdyn.bench.drake_scene import DrakeScene
-    from coopdyn.control import GravityCompensationPD
-
-    scene = scenes.facing_arms("panda", stiffness=1e4, damping=0.002, joint_damping=0.5)
-    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
-    assert DrakeScene(scene, ctrl).check(n=5) < 1e-12
-    v0 = np.random.default_rng(4).normal(size=scene.nv) * 0.3
-    ref = __import__("coopdyn").simulate(scene, 0.05, controller=ctrl, integrator="rk4", dt=1e-5, v0=v0, save_every=1000)
-
-    def gap(Q: np.ndarray) -> float:
-        assert len(Q) == len(ref.q)
-        return max(float(np.max(np.abs(pin.difference(scene.model, Q[i], ref.q[i])))) for i in range(len(Q)))
-
-    loose, tight = (gap(DrakeScene(scene, ctrl).run(scene.q0, v0, 0.05, 0.01, "runge_kutta3", a)[1]) for a in (1e-3, 1e-7))
-    assert tight < 1e-6 and tight < 1e-2 * loose, (loose, tight)
-    coarse, fine = (gap(DrakeScene(scene, ctrl, time_step=dt).run(scene.q0, v0, 0.05, 0.01)[1]) for dt in (1e-3, 5e-4))
-    assert np.log2(coarse / fine) == pytest.approx(1.0, abs=0.3), (coarse, fine)

@@ -395,7 +395,15 @@ def test_the_dask_options_name_the_install(
     assert main(["sweep", str(spec), "--local-cluster", "2"]) == 2
     assert "pip install coopdyn[dask]" in capsys.readouterr().err
     assert main(["sweep", str(spec), "--serial", "--local-cluster", "2"]) == 2
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--serial", "--workers", "2"]) == 2  # --workers sizes the local processes only
+    assert (
+        "choose one of --workers, --serial, --scheduler, --local-cluster (got --workers and --serial)" in capsys.readouterr().err
+    )
     assert main(["sweep", str(spec), "--local-cluster", "0"]) == 2
+    capsys.readouterr()
+    assert main(["sweep", str(spec), "--chunk-size", "0"]) == 2
+    assert "--chunk-size N needs N >= 1, got 0" in capsys.readouterr().err
     assert main(["sweep"]) == 2
 
 

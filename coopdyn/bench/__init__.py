@@ -31,7 +31,7 @@ from .stability import is_stable_at, measure_stable_dt
 def run_peer_comparison(
     out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True
 ) -> dict[str, Any]:
-    """coopdyn against MuJoCo and Exudyn on two Pandas, k = 1e4 and 1e6 N/m, and one Panda (a
+    """coopdyn against MuJoCo, and Drake and Exudyn when installed, on two Pandas, k = 1e4 and 1e6 N/m, and one Panda (a
     7-link chain holding the box), k = 1e4 (:mod:`.panda_peers`);
     writes ``peers.csv`` and ``peers.png`` (work–precision, every simulator on the same axes) and
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).

@@ -29,7 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._optional import require
-from ..errors import SimulationError
+from ..errors import CoopdynError, SimulationError
 from ..model.scene import Scene
 from .mujoco_scene import _rotation
 
@@ -58,6 +58,8 @@ class DrakeScene:
     """
 
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None, time_step: float = 0.0) -> None:
+        if not (isinstance(time_step, (int, float)) and np.isfinite(time_step) and time_step >= 0):
+            raise SimulationError(f"time_step must be a finite number >= 0 [s], got {time_step!r}")
         drake: Any = require("pydrake.all", "the Drake peer", "coopdyn[peers]")
         self.drake, self.scene, self.controller = drake, scene, controller
         model = scene.model
@@ -71,6 +73,8 @@ class DrakeScene:
         for j in range(1, model.njoints):
             name, kind = model.names[j], model.joints[j].shortname().replace("JointModel", "")
             I = model.inertias[j]
+            # Pinocchio allows a massless body, Drake does not: 1e-9 kg and kg·m² change no acceleration
+            # the check below can see (as in the MuJoCo peer)
             mass = max(float(I.mass), 1e-9)
             Ic = np.asarray(I.inertia) if I.mass > 0 else np.eye(3) * 1e-9
             inertia = drake.SpatialInertia.MakeFromCentralInertia(
@@ -120,11 +124,12 @@ class DrakeScene:
         from ..dynamics import Dynamics
 
         self._dynamics = Dynamics(scene)
+        self._built: Any = None  # the diagram, once run() has built it
         self._actuated = np.asarray(scene.actuated, dtype=int)
 
     # --- state and force conversion (Pinocchio ↔ Drake) ----------------------------------------
     def to_drake(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Drake's state x = (q, v) from Pinocchio's."""
+        """Drake's state x = (q, v) (nq + nv,) from Pinocchio's q (nq,) and v (nv,)."""
         nq = self.plant.num_positions()
         x = np.zeros(nq + self.plant.num_velocities())
         x[self._qd] = q[self._qi]
@@ -139,7 +144,7 @@ class DrakeScene:
         return x
 
     def to_pinocchio(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pinocchio's (q, v) from Drake's state."""
+        """Pinocchio's q (nq,) and v (nv,) from Drake's state x (nq + nv,)."""
         model, nq = self.scene.model, self.plant.num_positions()
         q, v = np.zeros(model.nq), np.zeros(model.nv)
         q[self._qi] = x[self._qd]
@@ -155,7 +160,8 @@ class DrakeScene:
         return q, v
 
     def generalized_force(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """The interconnections' and the controller's generalized force in Drake's velocities."""
+        """The interconnections' and the controller's generalized force (nv,) [N, N·m] at time t [s]
+        and Pinocchio's (q, v), in Drake's velocity coordinates."""
         Q = self._dynamics.generalized_spring_force(q, v)  # joint damping is Drake's own
         if self.controller is not None:
             Q[self._actuated] += np.asarray(self.controller(t, q, v), dtype=float)
@@ -168,8 +174,10 @@ class DrakeScene:
             out[va + 3 : va + 6] = R @ Q[iv : iv + 3]
         return out
 
-    def _diagram(self) -> tuple[Any, Any]:
-        """The plant with the force system in a loop: (diagram, its context)."""
+    def _diagram(self) -> Any:
+        """The plant with the force system in a loop, built once (a plant belongs to one diagram)."""
+        if self._built is not None:
+            return self._built
         drake, plant, peer = self.drake, self.plant, self
         nx = plant.num_positions() + plant.num_velocities()
 
@@ -188,8 +196,8 @@ class DrakeScene:
         forces = builder.AddSystem(Forces())
         builder.Connect(plant.get_state_output_port(), forces.get_input_port(0))
         builder.Connect(forces.get_output_port(0), plant.get_applied_generalized_force_input_port())
-        diagram = builder.Build()
-        return diagram, diagram.CreateDefaultContext()
+        self._built = builder.Build()
+        return self._built
 
     # --- checks and runs -------------------------------------------------------------------------
     def check(self, n: int = 5, seed: int = 0) -> float:
@@ -244,7 +252,8 @@ class DrakeScene:
         discrete plant steps at its time_step; a continuous one uses ``integrator`` (one of
         :data:`CONTINUOUS`) at the target ``accuracy``. Stops early at a non-finite state."""
         drake, plant = self.drake, self.plant
-        diagram, context = self._diagram()
+        diagram = self._diagram()
+        context = diagram.CreateDefaultContext()
         plant_context = plant.GetMyMutableContextFromRoot(context)
         plant.SetPositionsAndVelocities(plant_context, self.to_drake(q0, v0))
         simulator = drake.Simulator(diagram, context)
@@ -267,7 +276,9 @@ class DrakeScene:
                 ts.append(k * output_interval)
                 Q.append(q)
                 V.append(v)
-        except RuntimeError:  # Drake's integrator gave up (step below its minimum)
+        except CoopdynError:  # coopdyn's own failures (a controller's, a kernel's) are not a diverged run
+            raise
+        except RuntimeError:  # Drake's integrator gave up (its step fell below its minimum): the samples so far
             pass
         cpu = time.process_time() - cpu0
         if plant.time_step() > 0:

@@ -1,14 +1,17 @@
-"""coopdyn against MuJoCo on the Panda scene (``coopdyn bench --peers``), interleaved in one process.
+"""coopdyn against MuJoCo, Drake and Exudyn on the Panda scenes (``coopdyn bench --peers``),
+interleaved in one process (Drake and Exudyn when installed).
 
 For each stiffness: the benchmark's Panda case (two Pandas + 2 kg box, undamped
 interconnections, gravity compensation + PD 50/5, perturbed start; reference Dormand–Prince at
 rtol 1e-11), built in MuJoCo from coopdyn's own model (:mod:`.mujoco_scene`) after checking that
 the accelerations agree at random states. Every run — coopdyn's methods over steps and
-tolerances, MuJoCo's ``implicitfast`` and ``RK4`` over steps — is timed in rounds: round r runs
+tolerances, MuJoCo's ``implicitfast`` and ``RK4`` over steps, Drake's discrete plant over steps
+and its RK3 over accuracies, Exudyn's RK44 and generalized-α over steps — is timed in rounds: round r runs
 every point once, so machine noise hits all simulators alike; the CPU time is the median over
 rounds. Errors are each run's largest interconnection-force error on the 10 ms output grid,
 against the same reference (MuJoCo's trajectory is read back into coopdyn's coordinates and its
-forces are evaluated by the same law).
+forces are evaluated by the same law; Drake's likewise; Exudyn's against Exudyn's own reference,
+since its spring law differs).
 """
 
 from __future__ import annotations
@@ -153,6 +156,16 @@ def _exudyn_reference(case: Case, peer: Any) -> tuple[np.ndarray, np.ndarray]:
     return res.object_position(), _forces(res)
 
 
+def _check(checks: dict[str, float], case: Case, peer: str, difference: float) -> None:
+    """Record a peer's acceleration check; refuse to time a model that is not coopdyn's scene."""
+    checks[f"{case.name} ({peer})"] = difference
+    if difference > 1e-9:
+        raise SimulationError(
+            f"{peer}'s accelerations differ from coopdyn's by {difference:.1e} (relative) on {case.name}: "
+            f"the {peer} model is not coopdyn's scene, nothing was timed"
+        )
+
+
 def compare(
     stiffnesses: Sequence[float] = (1e4, 1e6),
     *,
@@ -163,24 +176,20 @@ def compare(
     chain: bool = True,
 ) -> dict[str, Any]:
     """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first;
-    returns ``rows`` (:class:`Row`, MuJoCo's methods named ``"mujoco …"``)
-    and ``checks`` (stiffness → largest relative acceleration difference MuJoCo vs coopdyn)."""
+    returns ``rows`` (:class:`Row`, the peers' methods named ``"mujoco …"``, ``"drake …"``,
+    ``"exudyn …"``) and ``checks`` (``"scene (MuJoCo)"`` / ``"scene (Drake)"`` → largest
+    relative difference between that peer's accelerations and coopdyn's)."""
     from .mujoco_scene import MujocoScene
 
     cases = [panda_case(k, t_final) for k in stiffnesses]
     if chain:  # one Panda: a 7-link revolute chain holding the box by one spring
         cases.append(panda_case(stiffnesses[0], t_final, n_arms=1))
-    checks = {}
+    checks: dict[str, float] = {}
     references: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # Exudyn's own, per scene
     plan: list[tuple[Case, str, str, float, float, Callable[[], tuple[float, Result | None]]]] = []
     flags: set[int] = set()
     for case in cases:
-        checks[case.name] = MujocoScene(case.scene, case.controller, "RK4", 1e-3).check()
-        if checks[case.name] > 1e-9:
-            raise SimulationError(
-                f"MuJoCo's accelerations differ from coopdyn's by {checks[case.name]:.1e} (relative) on {case.name}: "
-                "the MuJoCo model is not coopdyn's scene, nothing was timed"
-            )
+        _check(checks, case, "MuJoCo", MujocoScene(case.scene, case.controller, "RK4", 1e-3).check())
         h = OUTPUT_INTERVAL
         for m in METHODS:
             if m not in VARIANTS and INTEGRATORS[m].adaptive:
@@ -194,19 +203,17 @@ def compare(
         if drake_available():
             from .drake_scene import DrakeScene
 
-            checks[f"{case.name} (Drake)"] = DrakeScene(case.scene, case.controller).check()
-            if checks[f"{case.name} (Drake)"] > 1e-9:
-                raise SimulationError(
-                    f"Drake's accelerations differ from coopdyn's by {checks[f'{case.name} (Drake)']:.1e} (relative) on "
-                    f"{case.name}: the Drake model is not coopdyn's scene, nothing was timed"
-                )
-            plan += [
-                (case, "drake discrete", f"dt={dt:g}", dt, math.nan, _drake_point(case, "discrete", dt)) for dt in _steps(quick)
-            ]
-            plan += [
-                (case, "drake runge_kutta3", f"accuracy={a:g}", OUTPUT_INTERVAL, a, _drake_point(case, "runge_kutta3", a))
-                for a in _drake_accuracies(quick)
-            ]
+            _check(checks, case, "Drake", DrakeScene(case.scene, case.controller).check())
+            for dk in DRAKE:
+                if dk == "discrete":
+                    plan += [
+                        (case, f"drake {dk}", f"dt={dt:g}", dt, math.nan, _drake_point(case, dk, dt)) for dt in _steps(quick)
+                    ]
+                else:
+                    plan += [
+                        (case, f"drake {dk}", f"accuracy={a:g}", OUTPUT_INTERVAL, a, _drake_point(case, dk, a))
+                        for a in _drake_accuracies(quick)
+                    ]
         if exudyn_available():
             from .exudyn_scene import ExudynScene
 

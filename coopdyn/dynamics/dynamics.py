@@ -135,8 +135,9 @@ class Dynamics:
         raise NotImplementedError
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(k_q, k_v)`` solving ``(I − γhJ) k = (f_q, f_v)`` with the last :meth:`factor`, given
-        ``M f_v``: ``S k_v = M f_v − γh (K̃ + Kp) f_q``, ``k_q = f_q + γh k_v``."""
+        """``(k_q, k_v)`` with the last :meth:`factor`, given ``M f_v``:
+        ``S k_v = M f_v − γh (K̃ + Kp) f_q``, ``k_q = f_q + γh k_v`` — the solution of
+        ``(I − γhJ) k = (f_q, f_v)`` when S was factored with ``gh2 = (γh)²``."""
         raise NotImplementedError
 
     def implicit_euler_velocity(

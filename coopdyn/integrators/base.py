@@ -74,7 +74,8 @@ class Problem(Protocol):
         ...
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(k_q, k_v) of (I − γhJ) k = (f_q, f_v) with the last factorisation, given M f_v."""
+        """(k_q, k_v) with the last factorisation, given M f_v: S k_v = M f_v − γh K_g f_q,
+        k_q = f_q + γh k_v — that is (I − γhJ) k = (f_q, f_v) when gh2 = (γh)²."""
         ...
 
     def implicit_euler_velocity(self, t: float, q: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:

@@ -19,6 +19,7 @@ import numbers
 from typing import Any
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
@@ -169,6 +170,16 @@ class AdaptiveROS2(AdaptiveIntegrator):
         return _ros2_stability(z)
 
 
+def _check_rho(rho_inf: object) -> float:
+    """ρ∞ as a float, or a SimulationError naming the bad value."""
+    rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
+    if not 0.0 <= rho <= 1.0:
+        from ..errors import SimulationError
+
+        raise SimulationError(f"rho_inf must be a number in [0, 1], got {rho_inf!r}")
+    return rho
+
+
 class Trapezoid(Integrator):
     """The linearly implicit trapezoidal rule on the Lie group: ROS2's two stages at γ = ½.
 
@@ -190,13 +201,8 @@ class Trapezoid(Integrator):
     a_stable = True
 
     def __init__(self, rho_inf: float = 1.0) -> None:
-        rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
-        if not 0.0 <= rho <= 1.0:
-            from ..errors import SimulationError
-
-            raise SimulationError(f"rho_inf must be a number in [0, 1], got {rho_inf!r}")
-        self.rho_inf = rho
-        self.gamma = gamma_for(rho)
+        self.rho_inf = _check_rho(rho_inf)
+        self.gamma = gamma_for(self.rho_inf)
 
     def step(
         self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
@@ -219,19 +225,14 @@ def alpha_parameters(rho_inf: float) -> tuple[float, float, float, float]:
     ``α_m = (2ρ∞ − 1)/(ρ∞ + 1)``, ``α_f = ρ∞/(ρ∞ + 1)``, ``γ = ½ − α_m + α_f``,
     ``β = ¼ (1 − α_m + α_f)²`` — second order, unconditionally stable, least low-frequency
     dissipation for the given high-frequency dissipation. ρ∞ = 1 is Newmark's average
-    acceleration (the trapezoidal rule)."""
-    rho = float(rho_inf)
+    acceleration (the trapezoidal rule).
+
+    Raises:
+        SimulationError: ρ∞ is not a number in [0, 1].
+    """
+    rho = _check_rho(rho_inf)
     am, af = (2.0 * rho - 1.0) / (rho + 1.0), rho / (rho + 1.0)
     return am, af, 0.5 - am + af, 0.25 * (1.0 - am + af) ** 2
-
-
-def _check_rho(rho_inf: object) -> float:
-    rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
-    if not 0.0 <= rho <= 1.0:
-        from ..errors import SimulationError
-
-        raise SimulationError(f"rho_inf must be a number in [0, 1], got {rho_inf!r}")
-    return rho
 
 
 class _AlphaState:
@@ -244,9 +245,9 @@ class _AlphaState:
 
 
 def alpha_amplification(Aq: np.ndarray, Av: np.ndarray, h: float, rho_inf: float) -> np.ndarray:
-    """The matrix of one generalized-α step on the linear system ``q̈ = Aq q + Av q̇``, acting
-    on ``(q, q̇, a)`` (3n × 3n; a: the algorithmic acceleration). For a batch, Aq and Av are
-    (..., n, n)."""
+    """The matrix of one generalized-α step of ``h`` [s] on the linear system
+    ``q̈ = Aq q + Av q̇``, acting on ``(q, q̇, a)`` (3n × 3n; a: the algorithmic acceleration).
+    For a batch, Aq and Av are (..., n, n)."""
     am, af, gamma, beta = alpha_parameters(rho_inf)
     Aq, Av = np.asarray(Aq), np.asarray(Av)
     n = Aq.shape[-1]
@@ -278,8 +279,10 @@ class GeneralizedAlpha(Integrator):
     where q̈ is the true acceleration (the equations of motion) and a the algorithmic one,
     carried from step to step (the first step starts from a = q̈). Second order in q and v on
     the Lie group, unconditionally stable on linear problems; ρ∞ = 1 damps nothing (Newmark's
-    average acceleration: |R(iω)| = 1), ρ∞ = 0 annihilates modes far above 1/h in one step,
-    and a mode well resolved by the step is damped only at third order in ωh.
+    average acceleration: |R(iω)| = 1); smaller ρ∞ damp modes far above 1/h by ρ∞ per step
+    (ρ∞ = 0: gone within three steps), and a mode well resolved by the step is damped only at
+    third order in ωh. Like every generalized-α, a displaced mode far above 1/h overshoots in
+    velocity for a step or two before it decays (by up to ~ωh/4 of its displacement at ρ∞ = 0).
 
     The implicit equation for ``x̂ = (1 − α_m)a⁺ + α_m a`` is solved by one linearised solve
     about the step's start (with the Jacobian of ``implicit_terms``: ``S = M + γ' D̃ + β' K̃``,
@@ -309,13 +312,16 @@ class GeneralizedAlpha(Integrator):
         am, af, gamma, beta = self.alpha_m, self.alpha_f, self.gamma, self.beta
         f, M, K, D = system.implicit_terms(t, q, v)  # f = M q̈ at the step's start
         carried = ws is not None and ws.a is not None and np.array_equal(ws.q, q) and np.array_equal(ws.v, v)
-        a = ws.a if carried else np.linalg.solve(M, f)  # a fresh start: a = q̈
+        a = ws.a if carried else cho_solve(cho_factor(M), f)  # a fresh start: a = q̈ (Cholesky, as the kernel)
+        # With x̂ = (1 − α_m)a⁺ + α_m a the unknown and c = h/(1 − α_m): a⁺ = (x̂ − α_m a)/(1 − α_m),
+        # v⁺ = v + dv0 + γc x̂ and q⁺ = q ⊕ (dq0 + βhc x̂), dv0 and dq0 the parts known at the start.
         c = h / (1.0 - am)
         gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c  # γ', β'
         dv0 = (h * (1.0 - gamma - gamma * am / (1.0 - am))) * a
         dq0 = h * v + (h * h * (0.5 - beta - beta * am / (1.0 - am))) * a
         system.factor(M, K, D, gp, bp)
-        # the linearised solve for y = γ' x̂ + (1 − α_f) dv₀: S y = (1 − α_f) M dv₀ + γ' f − γ' K_g (1 − α_f)(Δ₀ − (β'/γ') dv₀)
+        # the linearised solve, for y = γ' x̂ + (1 − α_f) dv0 (the form solve() takes; the D̃ dv0 terms
+        # cancel): S y = (1 − α_f) M dv0 + γ' f − γ' K_g (1 − α_f)(dq0 − (β'/γ') dv0)
         _, y = system.solve((1.0 - af) * (dq0 - (bp / gp) * dv0), (1.0 - af) * (M @ dv0) + gp * f)
         xh = (y - (1.0 - af) * dv0) / gp
         q1, v1 = system.integrate(q, dq0 + (beta * h * c) * xh), v + dv0 + (gamma * c) * xh

@@ -239,9 +239,9 @@ private:
     k_.terms(q, v, tau_);
     record(v);
   }
-  void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh, double gh2 = -1.0) {
+  void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh, double gh2) {
     ++n_factor_;
-    k_.factor(M, K, D, gh, kp_, kd_, gh2 < 0.0 ? gh * gh : gh2);
+    k_.factor(M, K, D, gh, kp_, kd_, gh2);
   }
   void integrate(const VectorXd & q, const VectorXd & dq, VectorXd & out) { pinocchio::integrate(model_, q, dq, out); }
   // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks.
@@ -340,7 +340,7 @@ private:
           implicit_terms(t, q, v);
           f1_ = k_.f_terms();
           M_ = k_.mass();
-          factor(M_, k_.stiffness(), k_.damping_matrix(), h);
+          factor(M_, k_.stiffness(), k_.damping_matrix(), h, h * h);
           w_count_ = 0;
           w_h_ = h;
           w_ready_ = true;
@@ -386,7 +386,7 @@ private:
         implicit_terms(t, q, v);
         f1_ = k_.f_terms();
         M_ = k_.mass();
-        factor(M_, k_.stiffness(), k_.damping_matrix(), gamma_ * h);
+        factor(M_, k_.stiffness(), k_.damping_matrix(), gamma_ * h, (gamma_ * h) * (gamma_ * h));
         k_.solve_into(v, f1_, kq1_, kv1_);
         delta_ = h * kq1_;
         vs_ = v + h * kv1_;
@@ -409,21 +409,23 @@ private:
         implicit_terms(t, q, v);
         f1_ = k_.f_terms();
         M_ = k_.mass();
+        // The run's steps follow one another, so a carries over from the previous step (Python
+        // checks that the state is the one it left; here it always is).
         if (!alpha_ready_) {  // a fresh start: a = q̈
           alpha_a_ = M_.llt().solve(f1_);
           alpha_ready_ = true;
         }
         const double c = h / (1.0 - am), gp = (1.0 - af) * g * c, bp = (1.0 - af) * b * h * c;
-        tmp2_ = (h * (1.0 - g - g * am / (1.0 - am))) * alpha_a_;                 // dv₀
-        delta_ = h * v + (h * h * (0.5 - b - b * am / (1.0 - am))) * alpha_a_;    // Δ₀
+        alpha_dv0_ = (h * (1.0 - g - g * am / (1.0 - am))) * alpha_a_;
+        alpha_dq0_ = h * v + (h * h * (0.5 - b - b * am / (1.0 - am))) * alpha_a_;
         factor(M_, k_.stiffness(), k_.damping_matrix(), gp, bp);
-        kq1_ = (1.0 - af) * (delta_ - (bp / gp) * tmp2_);
-        tmp_.noalias() = M_ * tmp2_;
+        kq1_ = (1.0 - af) * (alpha_dq0_ - (bp / gp) * alpha_dv0_);
+        tmp_.noalias() = M_ * alpha_dv0_;
         tmp_ = (1.0 - af) * tmp_ + gp * f1_;
         k_.solve_into(kq1_, tmp_, kq2_, kv1_);
-        xh_ = (kv1_ - (1.0 - af) * tmp2_) / gp;
-        integrate(q, delta_ + (b * h * c) * xh_, qs_);
-        vs_ = v + tmp2_ + (g * c) * xh_;
+        xh_ = (kv1_ - (1.0 - af) * alpha_dv0_) / gp;
+        integrate(q, alpha_dq0_ + (b * h * c) * xh_, qs_);
+        vs_ = v + alpha_dv0_ + (g * c) * xh_;
         acceleration(t + h, qs_, vs_, tmp_);  // the Newton correction's residual
         kv2_.noalias() = M_ * tmp_;
         kv2_ *= (1.0 - af);
@@ -432,8 +434,8 @@ private:
         kq1_.setZero(v.size());
         k_.solve_into(kq1_, kv2_, kq2_, kv1_);
         xh_ += kv1_;
-        integrate(q, delta_ + (b * h * c) * xh_, q_new_);
-        v_new_ = v + tmp2_ + (g * c) * xh_;
+        integrate(q, alpha_dq0_ + (b * h * c) * xh_, q_new_);
+        v_new_ = v + alpha_dv0_ + (g * c) * xh_;
         alpha_a_ = (xh_ - am * alpha_a_) / (1.0 - am);
         return 0.0;
       }
@@ -683,7 +685,8 @@ private:
   int w_count_ = 0;
   double w_h_ = 0.0;
   std::vector<double> alpha_;  // generalized-α's (α_m, α_f, γ, β)
-  VectorXd alpha_a_, xh_;      // its algorithmic acceleration, carried between steps
+  VectorXd alpha_a_, xh_;      // its algorithmic acceleration, carried between steps, and x̂
+  VectorXd alpha_dv0_, alpha_dq0_;  // the parts of v⁺ − v and q⁺ ⊖ q known at the step's start
   bool alpha_ready_ = false;
   // outputs
   std::vector<double> T_, Q_, V_, TAU_;
