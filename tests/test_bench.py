@@ -50,10 +50,14 @@ def test_peer_comparison_on_the_panda_scene() -> None:
 
     result = compare((1e4,), t_final=0.05, quick=True, rounds=1, progress=False)
     rows = {(r.method, r.setting): r for r in result["rows"]}
-    assert result["checks"]["pandas k=1e+04"] < 1e-12
+    assert result["checks"]["pandas k=1e+04 (MuJoCo)"] < 1e-12
     mine, theirs = rows["rk4", "dt=0.000625"], rows["mujoco RK4", "dt=0.000625"]
     assert mine.stable and theirs.stable
     assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05)  # the same method on the same system
     table = format_comparison(result)
     assert "pandas k=1e+04" in table and "1 panda k=1e+04" in table and "coopdyn / best peer" in table
-    assert result["checks"]["1 panda k=1e+04"] < 1e-12  # the chain holding the box, too
+    assert result["checks"]["1 panda k=1e+04 (MuJoCo)"] < 1e-12  # the chain holding the box, too
+    if "pandas k=1e+04 (Drake)" in result["checks"]:  # Drake installed: checked, timed and tabled
+        assert max(v for k, v in result["checks"].items() if k.endswith("(Drake)")) < 1e-12
+        assert {"drake discrete", "drake runge_kutta3"} <= {r.method for r in result["rows"]}
+        assert "MuJoCo, Drake and Exudyn" in table or "MuJoCo and Drake" in table

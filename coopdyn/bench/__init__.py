@@ -67,7 +67,17 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     out_dir.mkdir(parents=True, exist_ok=True)
     stiffnesses = [1e4, 1e5, 1e6]
     cases = [linear_case(3.0)] + [panda_case(k, 0.1 if quick else 0.2) for k in stiffnesses]
-    methods = ["symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "ros2_adaptive", "trapezoid", "exponential"]
+    methods = [
+        "symplectic_euler",
+        "rk4",
+        "dopri5",
+        "implicit_euler",
+        "ros2",
+        "ros2_adaptive",
+        "trapezoid",
+        "generalized_alpha",
+        "exponential",
+    ]
     rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
     rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
     stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, fields
 from pathlib import Path
@@ -31,6 +32,12 @@ def read_csv(path: str | os.PathLike[str]) -> list[Row]:
     convert: dict[str, Callable[[str], Any]] = {"str": str, "float": float, "int": int, "bool": lambda x: x == "True"}
     with open(path, newline="") as f:
         return [Row(**{k: convert[str(types[k])](v) for k, v in d.items()}) for d in csv.DictReader(f)]
+
+
+def _short(x: float) -> str:
+    """1e4 for 10000.0, 2.5e5 for 250000.0: a stiffness as people write it."""
+    mantissa, exponent = f"{x:.3e}".split("e")
+    return f"{mantissa.rstrip('0').rstrip('.')}e{int(exponent)}"
 
 
 #: line and marker of each peer simulator's runs in the charts (coopdyn's are solid with dots)
@@ -71,7 +78,7 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
                     fontsize=6,
                     color="red",
                 )
-        ax.set_title(name)
+        ax.set_title(re.sub(r"k=(\S+)", lambda m: f"k = {_short(float(m.group(1)))} N/m", name))  # the scene's name, with units
         ax.set_xlabel("CPU s per simulated s")
         ax.set_ylabel("max interconnection force error [N]")
         ax.grid(True, which="both", alpha=0.3)
