@@ -87,6 +87,13 @@ def test_unknown_locked_joint_lists_the_joints() -> None:
         cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
 
 
+def test_a_joint_locked_twice_is_refused_by_name() -> None:
+    """Found by the slow fuzz run: Pinocchio refused a repeated locked joint with a ValueError."""
+    arm = cd.Arm("a", urdf_path("slider_z.urdf"), tip_frame="tip", locked_joints=["slide", "slide"])
+    with pytest.raises(cd.SceneError, match=r"locked_joints names \['slide'\] more than once"):
+        cd.Scene([arm], cd.RigidObject.box(1.0, (0.1,) * 3), [cd.Interconnection("a", np.ones(6))])
+
+
 def test_interconnection_to_unknown_arm() -> None:
     arm = cd.Arm("left", urdf_path("slider_z.urdf"), tip_frame="tip")
     with pytest.raises(cd.SceneError, match=r"names arm 'lft'.*Did you mean 'left'"):

@@ -223,6 +223,9 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     if isinstance(locked, str):
         raise SceneError(f"{what}: locked_joints must be a list of joint names, not a string {locked!r}")
     lock_ids = [_joint_id(model, j, f"{what}, locked_joints") for j in locked]
+    repeated = sorted({j for j in locked if list(locked).count(j) > 1})
+    if repeated:  # Pinocchio would refuse it with a ValueError
+        raise SceneError(f"{what}: locked_joints names {repeated} more than once; name each joint once")
     if isinstance(locked, Mapping):
         q_full = q_full.copy()
         for j, jid in zip(locked, lock_ids, strict=True):
