@@ -82,6 +82,18 @@ def _coopdyn_point(
     return run
 
 
+def _peer_result(
+    case: Case, run: tuple[np.ndarray, np.ndarray, np.ndarray, float], method: str, dt: float, n_steps: int
+) -> tuple[float, Result | None]:
+    """A peer's run (t, Q, V in Pinocchio's convention, CPU seconds) as a point: its CPU time and
+    result, or (nan, None) when it stopped early or ran away (a diverged point)."""
+    t, Q, V, cpu = run
+    if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1 or not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
+        return math.nan, None
+    tau = np.zeros((t.size, case.scene.n_actuated))  # the peers' torques are not read back
+    return cpu, Result(case.scene, t, Q, V, tau, method, dt, n_steps, cpu)
+
+
 def _mujoco_point(case: Case, integrator: str, dt: float) -> Callable[[], tuple[float, Result | None]]:
     from .mujoco_scene import MujocoScene
 
@@ -92,13 +104,7 @@ def _mujoco_point(case: Case, integrator: str, dt: float) -> Callable[[], tuple[
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t, Q, V, cpu, n_steps = peer.run(case.scene.q0, case.v0, case.t_final, save_every)
-        if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1:
-            return math.nan, None  # stopped at a non-finite state
-        tau = np.zeros((t.size, case.scene.n_actuated))
-        res = Result(case.scene, t, Q, V, tau, f"mujoco {integrator}", dt, n_steps * (4 if integrator == "RK4" else 1), cpu)
-        if not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
-            return math.nan, None
-        return cpu, res
+        return _peer_result(case, (t, Q, V, cpu), f"mujoco {integrator}", dt, n_steps * (4 if integrator == "RK4" else 1))
 
     return run
 
@@ -119,30 +125,20 @@ def _drake_point(case: Case, integrator: str, setting: float) -> Callable[[], tu
         t, Q, V, cpu, n_steps = peer.run(
             case.scene.q0, case.v0, case.t_final, OUTPUT_INTERVAL, None if discrete else integrator, setting
         )
-        if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1 or not (np.all(np.isfinite(Q)) and np.all(np.abs(V) < 1e4)):
-            return math.nan, None
-        tau = np.zeros((t.size, case.scene.n_actuated))
-        return cpu, Result(
-            case.scene, t, Q, V, tau, f"drake {integrator}", setting if discrete else OUTPUT_INTERVAL, n_steps, cpu
-        )
+        return _peer_result(case, (t, Q, V, cpu), f"drake {integrator}", setting if discrete else OUTPUT_INTERVAL, n_steps)
 
     return run
 
 
-def _exudyn_point(
-    case: Case, peer: Any, solver: str, dt: float, reference: tuple[np.ndarray, np.ndarray]
-) -> Callable[[], tuple[float, Result | None]]:
+def _exudyn_point(case: Case, peer: Any, solver: str, dt: float) -> Callable[[], tuple[float, Result | None]]:
     """An Exudyn run; its errors are against Exudyn's own reference (its spring law is not coopdyn's)."""
 
     def run() -> tuple[float, Result | None]:
         try:
-            t, Q, V, cpu = peer.run(case.scene.q0, case.v0, case.t_final, dt, solver)
+            run = peer.run(case.scene.q0, case.v0, case.t_final, dt, solver)
         except Exception:  # Exudyn's solver gave up (its own error types)
             return math.nan, None
-        if t.size != round(case.t_final / OUTPUT_INTERVAL) + 1 or not np.all(np.isfinite(Q)):
-            return math.nan, None
-        tau = np.zeros((t.size, case.scene.n_actuated))
-        return cpu, Result(case.scene, t, Q, V, tau, f"exudyn {solver}", dt, round(case.t_final / dt), cpu)
+        return _peer_result(case, run, f"exudyn {solver}", dt, round(case.t_final / dt))
 
     return run
 
@@ -219,18 +215,11 @@ def compare(
 
             peer = ExudynScene(case.scene, case.controller)
             references[case.name] = _exudyn_reference(case, peer)
-            for ex in EXUDYN:
-                for dt in _steps(quick):
-                    plan.append(
-                        (
-                            case,
-                            f"exudyn {ex}",
-                            f"dt={dt:g}",
-                            dt,
-                            math.nan,
-                            _exudyn_point(case, peer, ex, dt, references[case.name]),
-                        )
-                    )
+            plan += [
+                (case, f"exudyn {ex}", f"dt={dt:g}", dt, math.nan, _exudyn_point(case, peer, ex, dt))
+                for ex in EXUDYN
+                for dt in _steps(quick)
+            ]
     cpu: dict[int, list[float]] = {i: [] for i in range(len(plan))}
     results: dict[int, Result | None] = {}
     with _bar(len(plan) * rounds, "coopdyn vs peers", progress) as bar:

@@ -244,6 +244,14 @@ class _AlphaState:
         self.v: np.ndarray | None = None
 
 
+def _alpha_step(am: float, gamma: float, beta: float, h: float) -> tuple[float, float, float]:
+    """What one step of ``h`` [s] knows at its start, with x̂ = (1 − α_m)a⁺ + α_m a the unknown:
+    a⁺ = (x̂ − α_m a)/(1 − α_m), so ``q⁺ = q ⊕ (h v + dq_a·a + βhc x̂)`` and
+    ``v⁺ = v + dv_a·a + γc x̂``; returns (c = h/(1 − α_m), dq_a, dv_a)."""
+    c = h / (1.0 - am)
+    return c, h * h * (0.5 - beta - beta * am / (1.0 - am)), h * (1.0 - gamma - gamma * am / (1.0 - am))
+
+
 def alpha_amplification(Aq: np.ndarray, Av: np.ndarray, h: float, rho_inf: float) -> np.ndarray:
     """The matrix of one generalized-α step of ``h`` [s] on the linear system
     ``q̈ = Aq q + Av q̇``, acting on ``(q, q̇, a)`` (3n × 3n; a: the algorithmic acceleration).
@@ -252,11 +260,7 @@ def alpha_amplification(Aq: np.ndarray, Av: np.ndarray, h: float, rho_inf: float
     Aq, Av = np.asarray(Aq), np.asarray(Av)
     n = Aq.shape[-1]
     eye = np.broadcast_to(np.eye(n), Aq.shape)
-    c = h / (1.0 - am)
-    # q⁺ = q + h q̇ + h²(½ − β − βα_m/(1 − α_m)) a + βhc x̂,   v⁺ = v + h(1 − γ − γα_m/(1 − α_m)) a + γc x̂,
-    # x̂ = (1 − α_f) q̈(q⁺, v⁺) + α_f q̈(q, v),  a⁺ = (x̂ − α_m a)/(1 − α_m)
-    dq_a = h * h * (0.5 - beta - beta * am / (1.0 - am))
-    dv_a = h * (1.0 - gamma - gamma * am / (1.0 - am))
+    c, dq_a, dv_a = _alpha_step(am, gamma, beta, h)  # and x̂ = (1 − α_f) q̈(q⁺, v⁺) + α_f q̈(q, v) here
     lhs = eye - (1.0 - af) * (beta * h * c * Aq + gamma * c * Av)
     # x̂ − (1 − α_f)(βhc Aq + γc Av) x̂ = Aq q + ((1 − α_f)h Aq + Av) v + (1 − α_f)(dq_a Aq + dv_a Av) a
     rhs = np.concatenate([Aq, (1.0 - af) * h * Aq + Av, (1.0 - af) * (dq_a * Aq + dv_a * Av)], axis=-1)
@@ -313,12 +317,11 @@ class GeneralizedAlpha(Integrator):
         f, M, K, D = system.implicit_terms(t, q, v)  # f = M q̈ at the step's start
         carried = ws is not None and ws.a is not None and np.array_equal(ws.q, q) and np.array_equal(ws.v, v)
         a = ws.a if carried else cho_solve(cho_factor(M), f)  # a fresh start: a = q̈ (Cholesky, as the kernel)
-        # With x̂ = (1 − α_m)a⁺ + α_m a the unknown and c = h/(1 − α_m): a⁺ = (x̂ − α_m a)/(1 − α_m),
-        # v⁺ = v + dv0 + γc x̂ and q⁺ = q ⊕ (dq0 + βhc x̂), dv0 and dq0 the parts known at the start.
-        c = h / (1.0 - am)
+        # v⁺ = v + dv0 + γc x̂ and q⁺ = q ⊕ (dq0 + βhc x̂), dv0 and dq0 the parts known at the start
+        c, dq_a, dv_a = _alpha_step(am, gamma, beta, h)
         gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c  # γ', β'
-        dv0 = (h * (1.0 - gamma - gamma * am / (1.0 - am))) * a
-        dq0 = h * v + (h * h * (0.5 - beta - beta * am / (1.0 - am))) * a
+        dv0 = dv_a * a
+        dq0 = h * v + dq_a * a
         system.factor(M, K, D, gp, bp)
         # the linearised solve, for y = γ' x̂ + (1 − α_f) dv0 (the form solve() takes; the D̃ dv0 terms
         # cancel): S y = (1 − α_f) M dv0 + γ' f − γ' K_g (1 − α_f)(dq0 − (β'/γ') dv0)
