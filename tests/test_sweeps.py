@@ -477,3 +477,24 @@ def test_the_schema_knows_the_sweep_table() -> None:
     bad = tomllib.loads(SPEC.replace("[sweep]\n", "[sweep]\nworkers = 2\n"))
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(bad, schema)
+
+
+def test_parameter_sets_must_name_the_same_parameters_and_settings_are_checked_up_front() -> None:
+    """A sample without a parameter the others have would be a column with holes (and a row that
+    reruns without it); bad settings are refused once instead of failing every row."""
+
+    def make_case(**params: float) -> cd.Scene:
+        raise AssertionError("never built")
+
+    with pytest.raises(cd.SweepError, match=r"the same parameters in the same order: \['a'\] and \['a', 'b'\]"):
+        cd.sweep(make_case, [{"a": 1}, {"a": 2, "b": 3}], duration=0.1)
+    for kwargs, message in (
+        ({"max_steps": -1}, "max_steps must be an integer >= 1"),
+        ({"max_steps": "x"}, "max_steps must be an integer >= 1"),
+        ({"dt": 1e-15}, "dt must be >= 1e-12"),
+        ({"dt": float("nan")}, "dt"),
+        ({"save_every": 0}, "save_every must be an integer >= 1"),
+        ({"energy_check": "loud"}, "energy_check must be one of"),
+    ):
+        with pytest.raises(cd.SweepError, match=message):
+            cd.sweep(make_case, {"a": [1]}, duration=0.1, **kwargs)  # type: ignore[arg-type]

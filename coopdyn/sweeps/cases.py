@@ -149,6 +149,11 @@ def expand(params: Any, seeds: Any) -> list[Item]:
             raise SweepError("params is an empty list: no runs to do")
     else:
         _bad_params(params)
+    if any(list(s) != list(sets[0]) for s in sets):  # one column per parameter, each in every row
+        different = next(s for s in sets if list(s) != list(sets[0]))
+        raise SweepError(
+            f"every parameter set must name the same parameters in the same order: {list(sets[0])} and {list(different)}"
+        )
     for s in sets:
         for name in s:
             if not isinstance(name, str) or not name:

@@ -30,6 +30,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from .. import _validate
 from ..errors import SweepError
 from .cases import Item, placeholder, run_chunk
 
@@ -97,9 +98,7 @@ class LocalProcesses:
     pickles = True
 
     def __init__(self, workers: int | None = None) -> None:
-        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-            raise SweepError(f"workers must be a count >= 1, got {workers!r}")
-        self.workers = workers or cpu_count()
+        self.workers = cpu_count() if workers is None else _validate.count(workers, "workers", SweepError, none="every core")
         self.name = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
         method = "fork" if sys.platform.startswith("linux") else "spawn"
         self._context: Any = multiprocessing.get_context(method)
@@ -107,9 +106,9 @@ class LocalProcesses:
         self._pool: cf.ProcessPoolExecutor | None = None
         self._solo: Any = None  #: the process running a suspect alone
 
-    def _new_pool(self, workers: int) -> cf.ProcessPoolExecutor:
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
         self._pool = cf.ProcessPoolExecutor(
-            workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers,)
+            self.workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers,)
         )
         return self._pool
 
@@ -117,7 +116,7 @@ class LocalProcesses:
         todo: deque[list[Item]] = deque(work)
         size = max(len(c) for c in work) if work else 1
         while todo:
-            pool = self._new_pool(self.workers)
+            pool = self._new_pool()
             futures = {pool.submit(run_chunk, payload, c, trajectories, self._markers): c for c in todo}
             todo.clear()
             lost: list[Item] = []

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import _validate
 from .._optional import require
 from .._version import __version__
 from ..errors import SweepError, SweepInterrupted
@@ -105,7 +106,7 @@ def run_spec(
     spec: Any, *, executor: Any = None, workers: int | None = None, chunk_size: int | None = None, progress: bool = True
 ) -> Any:
     """Run a loaded sweep spec (:func:`coopdyn.sweeps.spec.load_spec`) into its folder; the table."""
-    settings = Settings(max_steps=2 * 10**6)
+    settings = Settings()
     job = SpecJob(spec.text, str(spec.path), settings)
     meta = {"source": {"kind": "spec", "file": str(spec.path), "text": spec.text}, "metrics": None}
     return _execute(job, spec.items, meta, executor, workers, chunk_size, spec.folder, spec.trajectories, progress)
@@ -113,19 +114,23 @@ def run_spec(
 
 def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any) -> Settings:
     from ..integrators import INTEGRATORS
+    from ..simulate import ENERGY_CHECKS, MIN_DT
 
+    # the checks simulate() makes, up front: a bad setting refused once, not as a failed row per run
     if duration is not None and (
         isinstance(duration, bool) or not isinstance(duration, int | float) or not 0 <= duration < math.inf
     ):
         raise SweepError(f"duration must be a finite number of seconds >= 0 (or None: each case's own), got {duration!r}")
     if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise SweepError(f"integrator must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
-    if isinstance(dt, bool) or not isinstance(dt, int | float) or not dt > 0 or not math.isfinite(dt):
-        raise SweepError(f"dt must be a positive number of seconds, got {dt!r}")
-    if save_every is not None and (isinstance(save_every, bool) or not isinstance(save_every, int) or save_every < 1):
-        raise SweepError(f"save_every must be a count >= 1 (or None), got {save_every!r}")
-    if energy_check not in ("warn", "raise", "off"):
-        raise SweepError(f"energy_check must be 'warn', 'raise' or 'off', got {energy_check!r}")
+    if _validate.positive(dt, "dt", "s", SweepError) < MIN_DT:
+        raise SweepError(f"dt must be >= {MIN_DT:g} [s], got {dt!r}")
+    if save_every is not None:
+        save_every = _validate.count(save_every, "save_every", SweepError, none="each case's own")
+    if max_steps is not None:
+        max_steps = _validate.count(max_steps, "max_steps", SweepError, none="no limit")
+    if energy_check not in ENERGY_CHECKS:
+        raise SweepError(f"energy_check must be one of {ENERGY_CHECKS}, got {energy_check!r}")
     return Settings(None if duration is None else float(duration), integrator, float(dt), save_every, max_steps, energy_check)
 
 
@@ -143,8 +148,8 @@ def _execute(
     folder = check_folder(out) if out is not None else None
     if trajectories and folder is None:
         raise SweepError("trajectories are saved as files: give out=a folder")
-    if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1):
-        raise SweepError(f"chunk_size must be a count >= 1, got {chunk_size!r}")
+    if chunk_size is not None:
+        chunk_size = _validate.count(chunk_size, "chunk_size", SweepError, none="chosen from the runs and workers")
     runner = engine(executor, workers)
     try:
         payload: Any = job
@@ -172,14 +177,15 @@ def _execute(
             "trajectories": traj_folder is not None,
         }
         rows: dict[int, dict[str, Any]] = {}
+        others: Counter[str] = Counter()  # the runs that did not complete, by status (the bar's postfix)
         bar = _bar(len(items), runner.name) if progress else None
         wall0 = time.perf_counter()
         try:
             for done in runner.run(payload, chunks(items, size), traj_folder):
                 for row in done:
                     rows[row["run"]] = row
+                others.update(r["status"] for r in done if r["status"] != "completed")
                 if bar is not None:
-                    others = Counter(r["status"] for r in rows.values() if r["status"] != "completed")
                     if others:
                         bar.set_postfix(others, refresh=False)
                     bar.update(len(done))
