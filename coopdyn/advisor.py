@@ -16,6 +16,7 @@ spot what each of the three models costs:
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ from .simulate import simulate
 
 MODE_SEPARATION = 5.0  #: a mode this many times above the bandwidth is taken as not excited
 MODELS = ("rigid", "quasi-static", "elastic")
-EXPLICIT_LIMIT = 2.785  #: rk4's stability limit on |λ|·dt (imaginary axis)
+EXPLICIT_LIMIT = 2.0 * math.sqrt(2.0)  #: rk4's stability limit on |λ|·dt on the imaginary axis (undamped modes)
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ class ModelCost:
     states: int  #: nq + nv
     lowest_mode_hz: float | None  #: its lowest elastic natural frequency [Hz] (None: rigid)
     fastest_mode_hz: float | None  #: its highest [Hz]
-    max_dt_rk4: float | None  #: rk4's stability limit 2.785/ω_max [s]
+    max_dt_rk4: float | None  #: rk4's stability limit 2√2/ω_max [s] (the modes are undamped)
     integrator: str  #: what the measurement ran
     cpu_per_second: float  #: CPU time per simulated second at the chosen dt [s/s], no controller
 
@@ -119,6 +120,8 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"advise_model takes a coopdyn.Scene, got {type(scene).__name__}")
+    if scene.constraints:
+        raise SimulationError("advise_model takes an elastic scene and derives the rigid limit itself; this one is rigid already")
     bandwidth = _validate.positive(bandwidth, "bandwidth", "Hz", SimulationError)
     dt = _validate.positive(dt, "dt", "s", SimulationError)
     measure = _validate.positive(measure, "measure", "s", SimulationError)

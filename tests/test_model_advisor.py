@@ -66,3 +66,15 @@ def test_stiff_grasps_on_a_rigid_box_need_only_the_rigid_model() -> None:
         cd.advise_model(cd.Scene([], box, links), bandwidth=-1.0)
     with pytest.raises(cd.SimulationError, match="bandwidth must be finite"):
         cd.advise_model(cd.Scene([], box, links), bandwidth=float("nan"))
+
+
+def test_advise_model_refuses_a_rigid_scene_and_its_rk4_limit_is_rk4s() -> None:
+    """The advisor derives the rigid limit itself, so a rigid scene is refused by name; its rk4
+    limit on the undamped modes is where rk4's stability function leaves the unit disc."""
+    from coopdyn.advisor import EXPLICIT_LIMIT
+    from coopdyn.integrators import RK4
+
+    with pytest.raises(cd.SimulationError, match="this one is rigid already"):
+        cd.advise_model(cd.rigid_limit(cd.scenes.linear_book()))
+    R = np.abs(RK4().stability_function(np.array([0.999, 1.001]) * EXPLICIT_LIMIT * 1j))
+    assert R[0] <= 1.0 < R[1]

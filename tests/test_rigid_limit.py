@@ -145,3 +145,18 @@ def test_rigid_limit_refusals() -> None:
         cd.rigid_limit(linear_book(), baumgarte="stiff")
     with pytest.raises(cd.SceneError, match="rigid_limit takes"):
         cd.rigid_limit("scene")  # type: ignore[arg-type]
+
+
+def test_the_rigid_limit_of_a_held_beam_keeps_each_grasp_at_its_node() -> None:
+    """A beam's grasps are placed in its reference frame: the rigid limit must put each rigid grasp
+    where the elastic one held the beam (it once put both on the middle node)."""
+    import pinocchio as pin
+
+    scene = cd.scenes.held_beam()
+    rigid = cd.rigid_limit(scene)
+    d0, d1 = scene.model.createData(), rigid.model.createData()
+    pin.framesForwardKinematics(scene.model, d0, scene.q0)
+    pin.framesForwardKinematics(rigid.model, d1, rigid.q0)
+    for elastic, stiff in zip(scene.links, rigid.links, strict=True):
+        gap = d0.oMf[elastic.tip_frame].translation - d1.oMf[stiff.grasp_frame].translation
+        assert np.linalg.norm(gap) < 1e-9

@@ -64,7 +64,7 @@ def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> 
         preload = np.linalg.norm(pin.log6(oMT.actInv(oMG)).vector)
         if preload > 1e-9:
             dropped.append(f"{lk.name} ({preload:.3g})")
-        grasp = data.oMi[model.frames[lk.grasp_frame].parentJoint].actInv(oMT)
+        grasp = data.oMf[scene.object_frame].actInv(oMT)  # Scene reads a grasp in the object frame (a beam's reference node)
         specs.append(
             dataclasses.replace(
                 ic,
