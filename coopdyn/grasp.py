@@ -55,10 +55,11 @@ def split(G: np.ndarray, wrenches: np.ndarray) -> WrenchSplit:
 
 def squeeze_directions(points: np.ndarray) -> np.ndarray:
     """Unit vectors (N, 3) from each grasp point towards the centroid: the direction of a
-    compressive (positive) internal force on the object at that grasp."""
+    compressive (positive) internal force on the object at that grasp. Points (n, N, 3) give
+    (n, N, 3), sample by sample."""
     P = np.asarray(points, dtype=float)
-    d = P.mean(axis=0) - P
-    n = np.linalg.norm(d, axis=1, keepdims=True)
+    d = P.mean(axis=-2, keepdims=True) - P
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
     if np.any(n < 1e-9):
         raise SceneError("grasp points coincide with their centroid: no squeeze direction")
     return d / n
@@ -84,12 +85,8 @@ def squeeze_forces(points: np.ndarray, wrenches: np.ndarray) -> np.ndarray:
     if P.ndim != 3 or P.shape[2] != 3 or W.shape != (*P.shape[:2], 6):
         raise SceneError(f"need points (n, N, 3) and wrenches (n, N, 6), got {P.shape} and {W.shape}")
     n_grasps = P.shape[1]
-    c = P.mean(axis=1, keepdims=True)
-    r = P - c
-    d = -r
-    norm = np.linalg.norm(d, axis=2, keepdims=True)
-    if np.any(norm < 1e-9):
-        raise SceneError("grasp points coincide with their centroid: no squeeze direction")
+    inward = squeeze_directions(P)
+    r = P - P.mean(axis=1, keepdims=True)
     f, m = W[..., :3], W[..., 3:]
     resultant_f = f.sum(axis=1)  # G f, about the centroid
     resultant_m = (m + np.cross(r, f)).sum(axis=1)
@@ -97,4 +94,4 @@ def squeeze_forces(points: np.ndarray, wrenches: np.ndarray) -> np.ndarray:
     y_f = resultant_f / n_grasps
     y_m = np.linalg.solve(A, resultant_m[..., None])[..., 0]
     moving_f = y_f[:, None, :] - np.cross(r, y_m[:, None, :])  # the force part of G⁺ G f
-    return np.einsum("sij,sij->si", f - moving_f, d / norm)
+    return np.einsum("sij,sij->si", f - moving_f, inward)

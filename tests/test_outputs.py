@@ -136,3 +136,13 @@ def test_scene_file_errors_name_the_file_key_and_line(tmp_path: Path, text: str,
 def test_missing_scene_file(tmp_path: Path) -> None:
     with pytest.raises(SceneFileError, match=r"scene file not found: .*nope.toml"):
         load(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize("fps", [0.0, -5.0, float("nan"), "30"])
+def test_a_bad_frame_rate_is_refused_before_any_viewer_starts(tmp_path: Path, book: cd.Scene, fps: object) -> None:
+    from coopdyn.viz.viewer import view
+
+    res = cd.simulate(book, 0.05, integrator="rk4", dt=1e-3)
+    for show in (lambda: view(res, fps=fps, loops=1), lambda: export_html(res, tmp_path / "a.html", fps=fps)):  # type: ignore[arg-type]
+        with pytest.raises(cd.ViewerError, match="fps"):
+            show()

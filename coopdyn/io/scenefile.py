@@ -368,7 +368,6 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
 
     On a divergence or Ctrl-C the trajectory so far is written (``trajectory.npz``/``.csv`` and
     ``diagnosis.txt``) and the error is re-raised with those paths in its ``saved`` attribute."""
-    import numpy as np
 
     from ..errors import DivergenceError, SimulationInterrupted, StepBudgetError
     from ..outputs import check_folder, save_partial, write_outputs
@@ -422,8 +421,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
         f"wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}",
     ]
     if loaded.task is not None:
-        desired = np.array([loaded.task(t).position for t in res.t])
-        err = np.linalg.norm(res.object_position() - desired, axis=1)
+        err = res.tracking_error(loaded.task)
         summary.append(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
     if len(loaded.scene.links) > 1:
         summary.append(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")

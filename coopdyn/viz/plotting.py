@@ -117,10 +117,11 @@ def cooperative_figure(result: Result, reference: Any = None, path: str | os.Pat
     fig, axes = plt.subplots(4, 1, figsize=(11, 11), sharex=True, layout="constrained")
     obj = result.object_position()
     start = obj[0]
+    wanted = [reference(float(s)) for s in t] if reference is not None else []  # one pass over the reference
     for k, c in enumerate("xyz"):
         axes[0].plot(t, (obj[:, k] - start[k]) * 1e3, color=AXIS_COLOURS[c], lw=1.4, label=f"object {c}")
-        if reference is not None:
-            desired = np.array([reference(s).position[k] for s in t])
+        if wanted:
+            desired = np.array([w.position[k] for w in wanted])
             axes[0].plot(t, (desired - start[k]) * 1e3, "--", color=AXIS_COLOURS[c], lw=1, label=f"desired {c}")
     axes[0].set_ylabel("displacement [mm]")
     axes[0].set_title("Object position, from its start [mm]", loc="left", fontsize=10)
@@ -134,8 +135,8 @@ def cooperative_figure(result: Result, reference: Any = None, path: str | os.Pat
     sq = result.squeeze()
     for i, lk in enumerate(result.scene.links):
         axes[2].plot(t, sq[:, i], JOINT_STYLES[i % 2], color=colour[lk.name], lw=1.4, label=lk.name)  # equal ones stay visible
-    if reference is not None:
-        axes[2].plot(t, [reference(s).squeeze for s in t], "k--", lw=1, label="commanded")
+    if wanted:
+        axes[2].plot(t, [w.squeeze for w in wanted], "k--", lw=1, label="commanded")
     axes[2].set_ylabel("squeeze [N]")
     axes[2].set_title("Internal (squeeze) force at each grasp, positive = compression [N]", loc="left", fontsize=10)
     v_names = result.scene.coordinates()[1]

@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._signals import sigterm_as_interrupt
+from .._validate import positive
 from ..errors import ViewerError
 from ..model.arm import load_arm
 from ..model.scene import Scene
@@ -371,8 +372,6 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     meshcat = _meshcat()
     from meshcat.animation import Animation
 
-    from .._validate import positive
-
     fps = positive(fps, "fps", "frames per second", ViewerError)
     window = RecordingWindow()
     vis = meshcat.Visualizer(window=window)
@@ -425,6 +424,7 @@ def view(
     scene) and stops it however the viewing ends (Ctrl-C, SIGTERM, an error, or this process
     dying)."""
     meshcat = _meshcat()
+    fps = positive(fps, "fps", "frames per second", ViewerError)  # before a server starts
     host = check_host(host)
     server = None
     try:
