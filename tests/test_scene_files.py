@@ -192,6 +192,25 @@ def test_the_shipped_schema_is_the_code_s_and_every_example_fits_it() -> None:
     assert not validator.is_valid(wrong)
 
 
+def test_the_loader_and_the_schema_accept_the_same_lists_and_strings(tmp_path: Path) -> None:
+    """facing_arms takes a stiffness per tool axis (a list) and joint_damping = "urdf" (a string):
+    the loader builds the scene and the schema validates the file — they read what a parameter
+    takes from one place."""
+    text = (EXAMPLES / "two_pandas.toml").read_text(encoding="utf-8")
+    doc = tomllib.loads(text)
+    doc["scene"].update({"stiffness": [1e4, 1e4, 2e4], "joint_damping": "urdf"})
+    assert jsonschema.Draft202012Validator(scene_file_schema()).is_valid(doc)
+    path = tmp_path / "lists.toml"
+    first = text.index("\nstiffness = ")  # the [scene] table's
+    path.write_text(
+        text[:first] + '\nstiffness = [1e4, 1e4, 2e4]\njoint_damping = "urdf"\n#' + text[first + 1 :], encoding="utf-8"
+    )
+    scene = load(path).scene
+    assert np.allclose(np.diag(scene.links[0].element.K)[:3], [1e4, 1e4, 2e4])
+    doc["scene"]["joint_damping"] = [1, 2]  # a list where only a number or a string goes
+    assert not jsonschema.Draft202012Validator(scene_file_schema()).is_valid(doc)
+
+
 def test_scene_files_describe_arms_objects_and_interconnections() -> None:
     ur5 = load(EXAMPLES / "two_ur5s.toml").scene
     assert [a.name for a in ur5.arms] == ["left", "right"] and ur5.nq == 2 * 6 + 7

@@ -125,6 +125,33 @@ def _check_type(f: _File, table: str, key: str, value: Any, kind: Any) -> Any:
     return value
 
 
+@dataclass(frozen=True)
+class Accepts:
+    """What a keyword parameter of a builder, controller or task takes in a scene file: the type
+    of its default (None: anything, the callee checks it), and whether a list or a string also
+    does (its annotation says ``Sequence``/``Any`` or ``str``, e.g. ``facing_arms``'
+    ``stiffness: float | Sequence[float]`` and ``joint_damping: float | str``). The loader and
+    the JSON Schema (:mod:`coopdyn.io.schema`) both read it from here."""
+
+    scalar: type | None
+    lists: bool
+    strings: bool
+
+
+def accepts(parameter: inspect.Parameter) -> Accepts:
+    """What ``parameter`` takes (see :class:`Accepts`), from its default and annotation."""
+    default, annotation = parameter.default, str(parameter.annotation)
+    lists = "Sequence" in annotation or "Any" in annotation
+    scalar: type | None = None
+    if isinstance(default, bool):
+        scalar = bool
+    elif isinstance(default, int | float):
+        scalar = type(default)
+    elif isinstance(default, str):
+        scalar = str
+    return Accepts(scalar, lists, scalar is not str and "str" in annotation.replace("Sequence[str]", ""))
+
+
 def _params(
     f: _File, table: str, target: Callable[..., Any], values: Mapping[str, Any], skip: tuple[str, ...] = ()
 ) -> dict[str, Any]:
@@ -136,16 +163,11 @@ def _params(
     for key, value in values.items():
         if key not in valid and not var_kw:
             raise f.error(f"unknown key; valid keys: {sorted(valid)}", table, key)
-        default = valid[key].default if key in valid else inspect.Parameter.empty
-        annotation = str(valid[key].annotation) if key in valid else ""
-        if isinstance(value, list) and ("Sequence" in annotation or "Any" in annotation):
-            pass  # a list where the parameter takes one (e.g. facing_arms' stiffness per axis): the callee checks it
-        elif isinstance(default, bool):
-            value = _check_type(f, table, key, value, bool)
-        elif isinstance(default, int | float) and default is not None:
-            value = _check_type(f, table, key, value, float if isinstance(default, float) else int)
-        elif isinstance(default, str):
-            value = _check_type(f, table, key, value, str)
+        takes = accepts(valid[key]) if key in valid else Accepts(None, False, False)
+        if (isinstance(value, list) and takes.lists) or (isinstance(value, str) and takes.strings):
+            pass  # a list or a string where the parameter takes one: the callee checks it
+        elif takes.scalar is not None:
+            value = _check_type(f, table, key, value, takes.scalar)
         elif var_kw and isinstance(value, int | float) and not isinstance(value, bool):
             value = _check_type(f, table, key, value, float)
         out[key] = value

@@ -17,6 +17,7 @@ from typing import Any
 from ..integrators import INTEGRATORS
 from ..model import description as d
 from . import scenefile
+from .scenefile import accepts
 
 NUMBER: dict[str, Any] = {"type": "number"}
 NUMBERS: dict[str, Any] = {"type": "array", "items": NUMBER}
@@ -128,17 +129,14 @@ def _section() -> dict[str, Any]:
     return {"oneOf": shapes, "description": d.KINDS["section"]}
 
 
-def _parameter(default: Any) -> dict[str, Any]:
-    """The schema of a keyword parameter, from its default's type (as the loader checks it)."""
-    if isinstance(default, bool):
-        return {"type": "boolean"}
-    if isinstance(default, int):
-        return {"type": "integer"}
-    if isinstance(default, float):
-        return NUMBER
-    if isinstance(default, str):
-        return {"type": "string"}
-    return {}  # a list, a table or None: checked by the function it goes to
+def _parameter(parameter: inspect.Parameter) -> dict[str, Any]:
+    """The schema of a keyword parameter: what the loader accepts (:func:`coopdyn.io.scenefile.accepts`)."""
+    takes = accepts(parameter)
+    scalar = {bool: {"type": "boolean"}, int: {"type": "integer"}, float: NUMBER, str: {"type": "string"}}.get(takes.scalar)  # type: ignore[arg-type]
+    if scalar is None:
+        return {}  # anything: checked by the function it goes to
+    also = [{"type": "array"}] * takes.lists + [{"type": "string"}] * takes.strings  # the callee checks their contents
+    return {"anyOf": [scalar, *also]} if also else scalar
 
 
 def _signature_table(target: Callable[..., Any], skip: tuple[str, ...], tag: str, value: str) -> dict[str, Any]:
@@ -151,7 +149,7 @@ def _signature_table(target: Callable[..., Any], skip: tuple[str, ...], tag: str
             properties[name] = {}
             required.append(name)
         else:
-            properties[name] = {**_parameter(p.default), "description": f"default: {json.dumps(_plain(p.default))}"}
+            properties[name] = {**_parameter(p), "description": f"default: {json.dumps(_plain(p.default))}"}
     return {"type": "object", "properties": properties, "required": required, "additionalProperties": False}
 
 
