@@ -120,8 +120,7 @@ class ConstrainedDynamics(PythonDynamics):
             raise KernelError("the readouts of a scene with rigid grasps need the torques along the trajectory")
         model, data = self.model, self.data
         for k in range(len(Q)):
-            lam = self.constraint_wrenches(Q[k], V[k], TAU[k])
-            pin.forwardKinematics(model, data, Q[k])
+            lam = self.constraint_wrenches(Q[k], V[k], TAU[k])  # leaves Q[k]'s kinematics in data
             for j, i in enumerate(self._constrained):
                 lk = self.scene.links[i]
                 oMG = pin.updateFramePlacement(model, data, lk.grasp_frame)

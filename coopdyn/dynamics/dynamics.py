@@ -269,6 +269,8 @@ class PythonDynamics(Dynamics):
             K_t = np.zeros((model.nv, model.nv))
             D_t = np.diag(self._damping)
         for i, (t_id, g_id, element) in enumerate(self._frames):
+            if element.constraint is not None:  # no force law: the constraint solver's λ (dynamics.constrained)
+                continue
             T_M_G, Jr = self._relative(t_id, g_id)
             ev = element.evaluate(T_M_G, Jr @ v, matrices)
             Q += Jr.T @ ev.G_f_G
