@@ -90,14 +90,14 @@ def _modes(scene: Scene) -> np.ndarray:
     return _frequencies(K, M)
 
 
-def _cost(name: str, scene: Scene, dt: float, t_measure: float) -> ModelCost:
+def _cost(name: str, scene: Scene, dt: float, t_measure: float, omega: np.ndarray) -> ModelCost:
+    """What one model costs to simulate (measured) and its modes ``omega`` [rad/s] (none for the rigid one)."""
     integrator = "rk4" if name == "rigid" else "implicit_euler"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a measurement, not a run to trust
         start = time.process_time()
         simulate(scene, t_measure, integrator=integrator, dt=dt, save_every=max(1, round(t_measure / dt)), energy_check="off")
         cpu = (time.process_time() - start) / t_measure
-    omega = np.zeros(0) if name == "rigid" else _modes(scene)
     return ModelCost(
         name,
         scene.nq + scene.nv,
@@ -153,7 +153,8 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     models = {"rigid": rigid, "quasi-static": qs, "elastic": scene}
     if not isinstance(scene.object, Beam):
         models.pop("elastic")  # a rigid object's elastic system is its massless grasps: quasi-static already
-    costs = tuple(_cost(name, s, dt, measure) for name, s in models.items())
+    modes = {"rigid": np.zeros(0), "quasi-static": grasp}  # computed above; the elastic model's only if it is run
+    costs = tuple(_cost(name, s, dt, measure, modes[name] if name in modes else _modes(s)) for name, s in models.items())
     return ModelAdvice(choice, bandwidth, dt, object_hz, grasp_hz, reason, costs)
 
 
