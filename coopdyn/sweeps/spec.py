@@ -18,7 +18,6 @@ which of its values change from run to run:
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +26,7 @@ import numpy as np
 
 from ..errors import CoopdynError, SweepError
 from ..io import scenefile
-from .cases import COUNTERS, METRICS, Item, _plain, expand
+from .cases import COUNTERS, METRICS, Item, Settings, SpecJob, _plain, expand
 
 SWEEP_KEYS = ("grid", "random", "seeds", "folder", "trajectories", "heatmap")
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice")
@@ -145,19 +144,16 @@ def load_spec(path: str | Path) -> Spec:
             rng = np.random.default_rng(item.seed)
             params.update({name: _plain(_draw(rng, name, dist), name) for name, dist in random.items()})
         items.append(Item(item.run, params, item.seed))
-    first = copy.deepcopy(doc)  # every name reaches a table the file has, and the first run builds
-    for name, value in items[0].params.items():
-        put(first, name, value)
-    try:
-        scenefile.from_document(first, f)
-    except CoopdynError as exc:
-        raise SweepError(f"the first run ({items[0].params}) does not build: {exc}") from exc
     folder = table.get("folder", f"out/{path.stem}-sweep")
     if not isinstance(folder, str) or not folder:
         raise f.error("must be a folder name", "sweep", "folder")
     trajectories = table.get("trajectories", False)
     if not isinstance(trajectories, bool):
         raise f.error("must be true or false", "sweep", "trajectories")
+    try:  # every name reaches a table the file has, and the first run builds (what the heat map names follows)
+        SpecJob(text, str(path), Settings()).case(items[0])
+    except CoopdynError as exc:
+        raise SweepError(f"the first run ({items[0].params}) does not build: {exc}") from exc
     heatmap = table.get("heatmap")
     if heatmap is not None:
         names = list(items[0].params)
@@ -174,8 +170,7 @@ def load_spec(path: str | Path) -> Spec:
                 "xlabel, ylabel (axis names with units)",
                 "sweep.heatmap",
             )
-    if heatmap is not None:
-        numeric = (*METRICS, *COUNTERS, "cpu_s", "wall_s")
+        numeric = (*METRICS, *COUNTERS, "cpu_s", "wall_s")  # the numeric columns (TIMING also has the worker)
         unknown = [v for v in heatmap["values"] if v not in numeric]
         if unknown:
             raise f.error(f"values {unknown}: a spec's runs have the columns {list(numeric)}", "sweep.heatmap", "values")
