@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "examples"))
 from sweep_gains import GAIN, STIFFNESS, make_case
 
 import coopdyn as cd
+from coopdyn.sweeps.cases import TIMING
 
 
 def main() -> None:
@@ -44,7 +45,7 @@ def main() -> None:
     engines = {"serial": "serial", f"processes ({args.workers})": "processes", f"Dask local cluster ({args.workers})": client}
     walls: dict[str, list[float]] = {name: [] for name in engines}
     reference = None
-    skip = ["cpu_s", "wall_s", "worker"]
+    skip = list(TIMING)  # what a rerun does not reproduce
     try:
         for r in range(args.rounds):
             names = list(engines)

@@ -106,6 +106,8 @@ _MAX_STEPS = (
 
 def _sweep(args: argparse.Namespace) -> int:
     from .sweeps import load_spec, rerun, run_spec
+    from .sweeps.cases import RESERVED
+    from .sweeps.table import TABLE_NAME
 
     if args.rerun:
         table, run = args.rerun
@@ -134,8 +136,7 @@ def _sweep(args: argparse.Namespace) -> int:
         + ", ".join(f"{n} {status}" for status, n in counts.items())
     )
     done = table[table["status"] == "completed"]
-    params = set(meta["params"])
-    skip = {"run", "seed", "t_reached_s", "n_steps", "n_rhs", "dt_s", "duration_s", "save_every", "cpu_s", "wall_s", *params}
+    skip = {*RESERVED, *meta["params"]}  # the metrics' ranges, not the bookkeeping's
     for name in table.columns:
         if name not in skip and len(done) and table[name].dtype.kind == "f":
             col = done[name]
@@ -146,7 +147,7 @@ def _sweep(args: argparse.Namespace) -> int:
         print(f"  run {row['run']} ({values}): {row['status']}: {row['message']}")
     if len(others) > 10:
         print(f"  … and {len(others) - 10} more runs that did not complete (status and message in the table)")
-    print(f"  wrote {spec.folder / 'table.parquet'}")
+    print(f"  wrote {spec.folder / TABLE_NAME}")
     missing = [v for v in (spec.heatmap or {}).get("values", []) if v not in table.columns or not table[v].notna().any()]
     if spec.heatmap and missing:
         print(f"  no heat map: no completed run has {', '.join(missing)}")
@@ -159,7 +160,7 @@ def _sweep(args: argparse.Namespace) -> int:
             table, h["x"], h["y"], h["values"], png, title=spec.path.name, xlabel=h.get("xlabel"), ylabel=h.get("ylabel")
         )
         print(f"  wrote {png}")
-    print(f"  `coopdyn sweep --rerun {spec.folder / 'table.parquet'} RUN` runs a row again and compares it bit for bit")
+    print(f"  `coopdyn sweep --rerun {spec.folder / TABLE_NAME} RUN` runs a row again and compares it bit for bit")
     return 0
 
 
