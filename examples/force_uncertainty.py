@@ -35,11 +35,9 @@ def scene(ratio: float, e: float) -> cd.Scene:
     return cd.Scene([], box, links)
 
 
-def forces(s: cd.Scene, q: np.ndarray, tau: np.ndarray | None = None) -> np.ndarray:
-    """Both grasps' forces on the box (2, 3) [N] at rest in q."""
-    n = np.zeros((1, s.nv))
-    res = cd.Result(s, np.zeros(1), q[None], n, np.zeros((1, 0)), "statics", 1.0, 0, 0.0)
-    return res.wrenches()[0, :, :3]
+def forces(s: cd.Scene, q: np.ndarray) -> np.ndarray:
+    """Both grasps' forces on the box (2, 3) [N] at rest in q (world axes)."""
+    return cd.Dynamics(s).readouts(q[None], np.zeros((1, s.nv))).object_wrench[0, :, :3]
 
 
 def main(out: str = OUT) -> dict[str, np.ndarray]:
