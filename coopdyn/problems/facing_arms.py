@@ -64,6 +64,27 @@ def facing_arms(
         n_arms: number of arms, ≥ 1.
         tip_frame: tool frame of the robot (default: the robot's known tool frame).
     """
+    arms, box, links, _ = _facing(
+        robot, box_mass, box_size, separation, height, stiffness, rotational_ratio, damping, joint_damping, n_arms, tip_frame
+    )
+    return Scene(arms, box, links, gravity=gravity)
+
+
+def _facing(
+    robot: str,
+    box_mass: float,
+    box_size: Any,
+    separation: float | None,
+    height: float | None,
+    stiffness: float | Sequence[float],
+    rotational_ratio: float,
+    damping: float,
+    joint_damping: float | str,
+    n_arms: int,
+    tip_frame: str | None,
+) -> tuple[list[Arm], RigidObject, list[Interconnection], float]:
+    """What :func:`facing_arms` builds its scene from: the arms, the box, the interconnections,
+    and the height of the box's centre [m]."""
     from ..model.ik import solve_ik
 
     if isinstance(n_arms, bool) or not isinstance(n_arms, int) or not 1 <= n_arms <= MAX_ARMS:
@@ -94,7 +115,7 @@ def facing_arms(
     q0 = solve_ik(template, bases[0] * local_target)
     arms = [template.replace(name=n, base=b, q0=q0) for n, b in zip(names, bases, strict=True)]
     links = [Interconnection(a.name, stiffness=K, damping=D) for a in arms]
-    return Scene(arms, box, links, gravity=gravity)
+    return arms, box, links, h
 
 
 def object_start(scene: Scene) -> np.ndarray:
@@ -132,18 +153,11 @@ def held_beam(
 
     section = Section.rectangle(0.03, 0.003, E=70e9, rho=2700.0) if section is None else section
     length = _validate.positive(length, "length", "m")
-    base = facing_arms(
-        robot,
-        box_mass=1.0,
-        box_size=(0.03, length, 0.003),
-        separation=length + 0.8,
-        stiffness=stiffness,
-        rotational_ratio=rotational_ratio,
-        damping=damping,
-        gravity=gravity,
+    # the arms and grasps of facing_arms around a box of the beam's size, without building that scene
+    arms, _, links, h = _facing(
+        robot, 1.0, (0.03, length, 0.003), length + 0.8, None, stiffness, rotational_ratio, damping, 0.0, 2, None
     )
-    h = float(object_start(base)[2])
     beam = Beam(
         length, section, n_elements, pose=pin.SE3(pin.utils.rotate("z", np.pi / 2), np.array([0.0, 0.0, h])), damping=beam_damping
     )
-    return Scene(base.arm_specs, beam, base.interconnection_specs, gravity=gravity)
+    return Scene(arms, beam, links, gravity=gravity)
