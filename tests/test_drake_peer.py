@@ -40,6 +40,8 @@ def test_drake_peer_refuses_bad_steps_and_passes_coopdyn_errors_on() -> None:
     """A bad time step is refused up front; a controller that fails inside Drake's loop raises
     its own error instead of passing for a diverged run."""
     scene = scenes.facing_arms("panda", stiffness=1e4)
+    with pytest.raises(cd.SimulationError, match=r"takes a coopdyn\.Scene"):
+        DrakeScene("scene", None)  # type: ignore[arg-type]
     for bad in (-1e-3, float("nan"), "1ms"):
         with pytest.raises(cd.SimulationError, match="time_step must be a finite number >= 0"):
             DrakeScene(scene, None, time_step=bad)  # type: ignore[arg-type]

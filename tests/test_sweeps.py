@@ -498,3 +498,8 @@ def test_parameter_sets_must_name_the_same_parameters_and_settings_are_checked_u
     ):
         with pytest.raises(cd.SweepError, match=message):
             cd.sweep(make_case, {"a": [1]}, duration=0.1, **kwargs)  # type: ignore[arg-type]
+
+
+def test_workers_with_an_executor_of_its_own_is_refused() -> None:
+    with pytest.raises(cd.SweepError, match="workers sizes the local processes"):
+        cd.sweep(lambda a: cd.scenes.linear_book(), {"a": [1]}, duration=0.01, executor="serial", workers=2)

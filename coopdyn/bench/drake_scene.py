@@ -58,6 +58,8 @@ class DrakeScene:
     """
 
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None, time_step: float = 0.0) -> None:
+        if not isinstance(scene, Scene):
+            raise SimulationError(f"the Drake peer takes a coopdyn.Scene, got {type(scene).__name__}")
         if not (isinstance(time_step, (int, float)) and np.isfinite(time_step) and time_step >= 0):
             raise SimulationError(f"time_step must be a finite number >= 0 [s], got {time_step!r}")
         drake: Any = require("pydrake.all", "the Drake peer", "coopdyn[peers]")

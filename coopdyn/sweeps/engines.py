@@ -284,6 +284,8 @@ def engine(executor: Any, workers: int | None) -> Serial | LocalProcesses | Exec
     """The engine for ``sweep(executor=…)``."""
     if executor is None or executor == "processes":
         return LocalProcesses(workers)
+    if workers is not None:  # it would size nothing: the executor has its own workers
+        raise SweepError(f"workers sizes the local processes (executor='processes'); executor={executor!r} has its own")
     if executor == "serial":
         return Serial()
     if isinstance(executor, str):
