@@ -7,11 +7,11 @@ For each method, interleaved run by run in one process (medians of ``--repeats``
     on, one sample saved per 10 ms), in each loop;
   * ``kernel``: CPU per step of the kernel calls the method makes, timed from Python on a fixed
     state (each call also pays ~0.5–1 µs of binding overhead, so this overstates the kernel's
-    work): implicit Euler one ``implicit_euler_velocity``; RK4 four ``acceleration``; ROS2, the
-    trapezoid and generalized-α one ``implicit_terms`` + ``factor`` + two ``solve`` + one
-    ``acceleration``;
-    Dormand–Prince six ``acceleration``. The controller is not in this column (the loops
-    include it).
+    work): implicit Euler one ``implicit_euler_velocity``; ROS2, the trapezoid and generalized-α
+    one ``implicit_terms`` + ``factor`` + two ``solve`` + one ``acceleration``; the explicit
+    methods one ``acceleration`` per right-hand side the compiled run made per step (RK4 four,
+    Dormand–Prince its rejected attempts and shortened landing steps included). The controller is
+    not in this column (the loops include it).
 
     .venv/bin/python benchmarks/step_cost.py [--repeats 5] [--seconds 2]
 """
@@ -28,26 +28,30 @@ import coopdyn as cd
 from coopdyn.control import GravityCompensationPD
 
 METHODS = ("symplectic_euler", "rk4", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "dopri5")
+EXPLICIT = ("symplectic_euler", "rk4", "dopri5")
 
 
-def _kernel_work(dyn: cd.Dynamics, method: str, q: np.ndarray, v: np.ndarray, tau: np.ndarray, n: int) -> float:
-    """CPU per step [s] of the kernel calls one step of ``method`` makes, at a fixed state."""
+def _kernel_work(
+    dyn: cd.Dynamics, method: str, q: np.ndarray, v: np.ndarray, tau: np.ndarray, n: int, rhs_per_step: float
+) -> float:
+    """CPU per step [s] of the kernel calls one step of ``method`` makes, at a fixed state
+    (explicit methods: ``rhs_per_step`` right-hand sides)."""
     k = dyn._kernel  # type: ignore[attr-defined]
     kp, kd = np.full(tau.size, 50.0), np.full(tau.size, 5.0)
     t0 = time.process_time()
     for _ in range(n):
         if method == "implicit_euler":
             k.implicit_euler_velocity(q, v, tau, 1e-3, kp, kd, None)
-        elif method in ("rk4", "symplectic_euler", "dopri5"):
-            for _ in range({"rk4": 4, "symplectic_euler": 1, "dopri5": 6}[method]):
-                k.acceleration(q, v, tau, None)
+        elif method in EXPLICIT:
+            k.acceleration(q, v, tau, None)
         else:
             f, M, K, D = k.implicit_terms(q, v, tau, None)
             k.factor(M, K, D, 5e-4, kp, kd, 5e-4**2)
             k.solve(v, f)
             k.acceleration(q, v, tau, None)
             k.solve(v, f)
-    return (time.process_time() - t0) / n
+    per_call = (time.process_time() - t0) / n
+    return per_call * rhs_per_step if method in EXPLICIT else per_call
 
 
 def main() -> None:
@@ -72,7 +76,8 @@ def main() -> None:
                 times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
                 if loop == "compiled":
                     rhs_per_step[method] = res.n_rhs / res.n_steps  # incl. rejected attempts and short landing steps
-            times.setdefault((method, "kernel"), []).append(_kernel_work(dyn, method, scene.q0, v0, tau, 2000))
+            work = _kernel_work(dyn, method, scene.q0, v0, tau, 2000, rhs_per_step[method])
+            times.setdefault((method, "kernel"), []).append(work)
     print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; two Pandas + box, k = 1e4 N/m")
     head = (
         f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}"

@@ -120,7 +120,11 @@ def test_a_divergence_in_the_compiled_loop_is_reported_like_in_python() -> None:
     py, co = errors
     assert str(co) == str(py)
     assert co.result.loop == "compiled" and co.result.status == "diverged"
-    _assert_same(py.result, co.result)
+    # The loops evaluate g(q) by different formulas, equal to round-off (the compiled one reads it
+    # off the kernel's kinematics); the unstable step grows that by ~1e4 before the speed check
+    # stops the run, |q̇| from 0 to ~8e3.
+    assert np.max(np.abs(co.result.v[-1])) > 1e3
+    _assert_same(py.result, co.result, rtol=1e-12 * 1e4)
 
 
 def test_energy_warning_is_the_same_in_both_loops() -> None:

@@ -81,6 +81,20 @@ def test_acceleration_and_dissipation_match_python(name: str) -> None:
             assert nat.last_dissipation == pytest.approx(py.last_dissipation, rel=1e-12, abs=1e-12)
 
 
+@pytest.mark.parametrize("name", ["pandas_damped", "three_pandas", "book"])
+def test_gravity_read_off_the_kinematics_is_pinocchios(name: str) -> None:
+    """The compiled GravityCompensationPD takes g(q) from the kernel's kinematics pass (subtree
+    masses and first moments against each joint axis): Pinocchio's generalized gravity on the
+    actuated joints, revolute (Pandas) and prismatic (book)."""
+    scene = SCENES[name]
+    nat, _ = _pair(scene)
+    data = scene.model.createData()
+    for q, _, _ in _states(scene):
+        g = pin.computeGeneralizedGravity(scene.model, data, q)[scene.actuated]
+        assert np.max(np.abs(g)) > 1.0
+        _close(nat._kernel.gravity(q), g)
+
+
 def test_dissipation_is_counted_where_there_is_damping() -> None:
     """Guards the comparison above against comparing two zeros."""
     scene = SCENES["pandas_damped"]

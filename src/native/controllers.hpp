@@ -11,6 +11,8 @@
 #include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/spatial.hpp>
 
+#include "kernel.hpp"
+
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
 
@@ -32,26 +34,37 @@ struct Controller {
   virtual ~Controller() = default;
   // τ (n_actuated) at (t, q, v).
   virtual void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) = 0;
+  // Whether torque() reads the kernel's kinematics at (q, v) (Kernel::kinematics first).
+  virtual bool reads_kernel() const { return false; }
 };
 
 struct NoTorque : Controller {
   void torque(double, const VectorXd &, const VectorXd &, VectorXd & tau) override { tau.setZero(); }
 };
 
-// τ = g(q) + Kp (q_d ⊖ q) − Kd q̇ on the actuated joints (GravityCompensationPD).
+// τ = g(q) + Kp (q_d ⊖ q) − Kd q̇ on the actuated joints (GravityCompensationPD), g(q) read off
+// the kernel's kinematics pass when its joints allow (Kernel::actuated_gravity), else from
+// Pinocchio's generalized gravity.
 struct GravityPD : Controller {
-  GravityPD(const Model & model, const Eigen::VectorXi & act, VectorXd kp, VectorXd kd, VectorXd q_des)
-    : model(model), data(model), act(act), kp(std::move(kp)), kd(std::move(kd)), q_des(std::move(q_des)),
-      dq(model.nv) {}
+  GravityPD(Kernel & kernel, VectorXd kp, VectorXd kd, VectorXd q_des)
+    : kernel(kernel), model(kernel.model()), data(model), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
+      q_des(std::move(q_des)), dq(model.nv), g(act.size()) {}
+  bool reads_kernel() const override { return kernel.kinematic_gravity(); }
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    const VectorXd & g = pinocchio::computeGeneralizedGravity(model, data, q);
+    if (kernel.kinematic_gravity()) {
+      g = kernel.actuated_gravity();
+    } else {
+      const VectorXd & full = pinocchio::computeGeneralizedGravity(model, data, q);
+      for (Eigen::Index i = 0; i < act.size(); ++i) g[i] = full[act[i]];
+    }
     pinocchio::difference(model, q, q_des, dq);
-    for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] = (g[act[i]] + kp[i] * dq[act[i]]) - kd[i] * v[act[i]];
+    for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] = (g[i] + kp[i] * dq[act[i]]) - kd[i] * v[act[i]];
   }
+  Kernel & kernel;
   const Model & model;
   Data data;
   Eigen::VectorXi act;
-  VectorXd kp, kd, q_des, dq;
+  VectorXd kp, kd, q_des, dq, g;
 };
 
 // τ = M(q)(Kp (q_d − q) − Kd q̇) + h(q, q̇), holding q_d (ComputedTorque with its default reference).

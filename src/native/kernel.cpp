@@ -7,8 +7,11 @@
 //
 // with LOCAL frame Jacobians of each link's frames T and G, and G_f_G,i the wrench its element
 // (element.hpp; one header per element, registered in elements.hpp) puts on G at the relative
-// pose T_M_G and relative twist ξ = Jr q̇. Implicit methods get K̃ = Σ Jrᵀ S_K Jr and
-// D̃ = Σ Jrᵀ S_D Jr + B, and one factorisation of the step matrix S = M + γh D̃ + (γh)² K̃.
+// pose T_M_G and relative twist ξ = Jr q̇. The explicit right-hand side applies each wrench to the
+// joints carrying T and G as external forces of the articulated-body algorithm (Q without forming
+// Jr; one kinematics pass also gives the gravity-compensating controller its g(q)). Implicit
+// methods get K̃ = Σ Jrᵀ S_K Jr and D̃ = Σ Jrᵀ S_D Jr + B, and one factorisation of the step
+// matrix S = M + γh D̃ + (γh)² K̃.
 //
 // The kernel works on the Python-owned pinocchio Model and Data (boost.python lvalues).
 
@@ -49,13 +52,13 @@ std::vector<double> doubles(bp::object seq) {
   return out;
 }
 
-std::unique_ptr<cn::Controller> make_controller(const Kernel & k, const bp::dict & c) {
+std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) {
   const std::string kind = get<std::string>(c, "kind");
   const Model & model = k.model();
   if (kind == "none") return std::make_unique<cn::NoTorque>();
   const Eigen::Index na = k.actuated().size(), nq = model.nq, nv = model.nv;
   if (kind == "gravity_pd")
-    return std::make_unique<cn::GravityPD>(model, k.actuated(), vec(c, "kp", na), vec(c, "kd", na), vec(c, "q_des", nq));
+    return std::make_unique<cn::GravityPD>(k, vec(c, "kp", na), vec(c, "kd", na), vec(c, "q_des", nq));
   if (kind == "computed_torque") {
     const Eigen::VectorXi q_index = get<Eigen::VectorXi>(c, "q_index");
     if (q_index.size() != na || (na && (q_index.minCoeff() < 0 || q_index.maxCoeff() >= nq)))
@@ -207,6 +210,7 @@ BOOST_PYTHON_MODULE(_native) {
          bp::args("self", "q", "v", "tau", "h", "kp", "kd", "wrench"))
     .def("elastic_energies", &Kernel::elastic_energies, bp::args("self"))
     .def("spring_force", &Kernel::spring_force, bp::args("self", "q", "v"))
+    .def("gravity", &Kernel::gravity, bp::args("self", "q"))
     .def("element_states", &Kernel::element_states, bp::args("self", "q", "v"))
     .def("readouts", &Kernel::readouts, bp::args("self", "Q", "V"))
     .def("clear_rotation_alarm", &Kernel::clear_rotation_alarm, bp::args("self"))

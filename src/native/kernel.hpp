@@ -4,6 +4,7 @@
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/spatial.hpp>
 #include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/center-of-mass.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/energy.hpp>
 #include <pinocchio/algorithm/frames.hpp>
@@ -16,6 +17,7 @@
 
 #include "elements.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -82,6 +84,8 @@ public:
       links_.push_back(std::move(lk));
     }
     has_damping_ = !damping_.isZero(0.0);
+    fext_.assign(model_.njoints, pinocchio::Force::Zero());
+    gravity_axes(model_);
     J_G_.setZero(6, nv);
     J_T_.setZero(6, nv);
     SJ_.setZero(6, nv);
@@ -93,26 +97,66 @@ public:
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
     const Vector6 w = object_wrench(wrench);
-    generalized_force(q, v, tau, wrench.is_none() ? nullptr : &w, false);
-    return pinocchio::aba(model_, data_, q, v, tau_full_);
+    kinematics(q, v, false);
+    return forward_dynamics(q, v, tau, wrench.is_none() ? nullptr : &w);
   }
 
   // Q = Σ Jrᵀ G_f_G (nv), the interconnections' generalized force at (q, v).
   VectorXd spring_force(const RefVec & q, const RefVec & v) {
     const VectorXd tau = VectorXd::Zero(actuated_.size());
-    generalized_force(q, v, tau, nullptr, false);
+    kinematics(q, v, true);
+    generalized_force(v, tau, nullptr, false);
     return Q_;
   }
 
+  // g(q) on the actuated joints (n_actuated), as pinocchio::computeGeneralizedGravity.
+  VectorXd gravity(const RefVec & q) {
+    if (!kinematic_gravity()) throw std::invalid_argument("gravity: an actuated joint is not revolute or prismatic");
+    kinematics(q, VectorXd::Zero(model_.nv), false);
+    return actuated_gravity();
+  }
+
   // --- the C++ interface of the compiled step loop (loop.hpp): no Python objects, no wrench ---
+  // Each evaluation is kinematics(q, v, ·), then what reads it (actuated_gravity, for a
+  // controller), then accel, terms or ie_velocity at the same (q, v): one kinematics pass serves
+  // the controller's gravity term and the elements.
   const Model & model() const { return model_; }
   const Eigen::VectorXi & actuated() const { return actuated_; }
-  // q̈ at (q, v, τ) (a reference into the Data, valid until the next call).
-  const VectorXd & accel(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
-    generalized_force(q, v, tau, nullptr, false);
-    return pinocchio::aba(model_, data_, q, v, tau_full_);
+  // Placements at q, and the joint velocities at v (for accel) or the joint Jacobians (for the
+  // implicit terms).
+  void kinematics(const RefVec & q, const RefVec & v, bool jacobians) {
+    check_size(q, model_.nq, "q");
+    check_size(v, model_.nv, "v");
+    if (jacobians)
+      pinocchio::computeJointJacobians(model_, data_, q);
+    else
+      pinocchio::forwardKinematics(model_, data_, q, v);
+    kinematics_ = jacobians ? JACOBIANS : VELOCITIES;
   }
-  // f = M q̈, M, K̃, D̃ at (q, v, τ), left in f_terms(), mass(), stiffness(), damping().
+  // Whether actuated_gravity applies: every actuated joint has one degree of freedom and a
+  // constant motion subspace (revolute, prismatic, helical), as URDF arms have.
+  bool kinematic_gravity() const { return gravity_ok_; }
+  // g(q) on the actuated joints from the placements of the last kinematics(): the subtrees'
+  // masses and first moments, each joint's axis against their weight. (A reference, valid until
+  // the next call.)
+  const VectorXd & actuated_gravity() {
+    if (kinematics_ == NONE) throw std::logic_error("actuated_gravity before kinematics");
+    pinocchio::centerOfMass(model_, data_, pinocchio::POSITION, false);  // mass-weighted: no 0/0
+    const Eigen::Vector3d & g0 = model_.gravity.linear();
+    for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
+      const auto j = gravity_joint_[i];
+      const Eigen::Vector3d g = data_.oMi[j].rotation().transpose() * g0;  // in the joint's frame
+      const pinocchio::Motion & S = gravity_axis_[i];
+      g_act_[i] = -(data_.mass[j] * S.linear().dot(g) + S.angular().dot(data_.com[j].cross(g)));
+    }
+    return g_act_;
+  }
+  // q̈ at (q, v, τ) after kinematics(q, v, false) (a reference into the Data, valid until the next call).
+  const VectorXd & accel(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
+    return forward_dynamics(q, v, tau, nullptr);
+  }
+  // f = M q̈, M, K̃, D̃ at (q, v, τ) after kinematics(q, v, true), left in f_terms(), mass(),
+  // stiffness(), damping().
   void terms(const VectorXd & q, const VectorXd & v, const VectorXd & tau) { implicit_parts(q, v, tau, nullptr); }
   const VectorXd & f_terms() const { return tau_full_; }
   const MatrixXd & mass() const { return data_.M; }
@@ -124,6 +168,7 @@ public:
     k_v = llt_.solve(rhs_);
     k_q = f_q + gh_ * k_v;
   }
+  // After kinematics(q, v, true).
   void ie_velocity(const VectorXd & q, const VectorXd & v, const VectorXd & tau, double h, const VectorXd & kp,
                    const VectorXd & kd, VectorXd & v_new) {
     implicit_parts(q, v, tau, nullptr);
@@ -133,6 +178,7 @@ public:
   }
   // Kinetic + gravity + elastic energy at (q, v) [J], as Dynamics.energy.
   double total_energy(const VectorXd & q, const VectorXd & v, double * motion = nullptr) {
+    kinematics_ = NONE;
     const double kinetic = pinocchio::computeKineticEnergy(model_, data_, q, v);
     const double potential = pinocchio::computePotentialEnergy(model_, data_);
     const VectorXd u = elastic_energies();
@@ -143,6 +189,7 @@ public:
   // (f, M, K̃, D̃): f = Sτ + Q − Bq̇ − b(q, q̇) = M q̈ and the stiffness matrices (without gains).
   bp::tuple implicit_terms(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
     const Vector6 w = object_wrench(wrench);
+    kinematics(q, v, true);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
   }
@@ -191,6 +238,7 @@ public:
   VectorXd implicit_euler_velocity(const RefVec & q, const RefVec & v, const RefVec & tau, double h,
                                    const RefVec & kp, const RefVec & kd, bp::object wrench) {
     const Vector6 w = object_wrench(wrench);
+    kinematics(q, v, true);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
@@ -215,6 +263,7 @@ public:
   bp::list element_states(const RefVec & q, const RefVec & v) {
     check_size(q, model_.nq, "q");
     check_size(v, model_.nv, "v");
+    kinematics_ = NONE;
     pinocchio::forwardKinematics(model_, data_, q, v);
     bp::list out;
     for (const Link & lk : links_) {
@@ -233,6 +282,7 @@ public:
     const Eigen::Index n = Q.rows(), L = static_cast<Eigen::Index>(links_.size());
     if (Q.cols() != model_.nq || V.cols() != model_.nv || V.rows() != n)
       throw std::invalid_argument("readouts: Q must be (n, nq) and V (n, nv)");
+    kinematics_ = NONE;
     MatrixXd E(n, 6 * L), U(n, L), P(n, L), WG(n, 6 * L), WT(n, 6 * L), PG(n, 3 * L), PT(n, 3 * L), PO(n, 3), KP(n, 2);
     for (Eigen::Index k = 0; k < n; ++k) {
       const VectorXd q = Q.row(k).transpose(), v = V.row(k).transpose();
@@ -276,8 +326,9 @@ private:
   }
 
   // Evaluate the element of link `lk` at the kinematics of the last forwardKinematics(q, v)
-  // (updates the placements of T and G in data_.oMf), with ξ from the frame velocities; returns
-  // T_M_G. For readouts — the hot path takes ξ = Jr q̇ in generalized_force.
+  // (updates the placements of T and G in data_.oMf), with ξ = V_G − Ad(T_M_G⁻¹) V_T = Jr q̇ from
+  // the frame velocities; returns T_M_G. For the readouts and forward_dynamics (the implicit
+  // terms, which need Jr itself, take ξ = Jr q̇ in generalized_force).
   SE3 relative(const Link & lk, ElementEval & ev, bool jacobians) {
     const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
     const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
@@ -288,24 +339,51 @@ private:
     return T_M_G;
   }
 
-  // What the implicit methods need at (q, v): tau_full_ = f = Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_
-  // and data_.M = M(q) with both triangles (crba fills the upper one).
+  // q̈ at (q, v, τ) after kinematics(q, v, false): each element's wrench from the frames'
+  // placements and velocities (as the readouts), applied to the joints carrying T and G as
+  // external forces of the articulated-body algorithm; equal to Σ Jrᵀ G_f_G without the Jacobians.
+  const VectorXd & forward_dynamics(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
+    if (kinematics_ != VELOCITIES) throw std::logic_error("accel needs kinematics(q, v, false) first");
+    kinematics_ = NONE;
+    check_size(tau, actuated_.size(), "tau");
+    for (pinocchio::Force & f : fext_) f.setZero();
+    double p_diss = 0.0;
+    for (std::size_t i = 0; i < links_.size(); ++i) {
+      const Link & lk = links_[i];
+      const SE3 T_M_G = relative(lk, ev_, false);
+      const pinocchio::Force f_G(ev_.f);
+      const pinocchio::Frame & G = model_.frames[lk.grasp];
+      const pinocchio::Frame & T = model_.frames[lk.tip];
+      fext_[G.parentJoint] += G.placement.act(f_G);
+      fext_[T.parentJoint] -= T.placement.act(T_M_G.act(f_G));  // action = reaction, in T
+      p_diss += ev_.power;
+      watch_rotation(i);
+    }
+    if (wrench) {
+      const pinocchio::Frame & O = model_.frames[object_frame_];
+      fext_[O.parentJoint] += O.placement.act(pinocchio::Force(local_wrench(*wrench)));
+    }
+    tau_full_.setZero();
+    joint_torques(v, tau, p_diss);
+    return pinocchio::aba(model_, data_, q, v, tau_full_, fext_);
+  }
+
+  // What the implicit methods need at (q, v), after kinematics(q, v, true): tau_full_ = f =
+  // Sτ + Q − Bq̇ − b(q, q̇), K_t_, D_t_ and data_.M = M(q) with both triangles (crba fills the
+  // upper one).
   void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
-    generalized_force(q, v, tau, wrench, true);
+    generalized_force(v, tau, wrench, true);
     tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
     pinocchio::crba(model_, data_, q);
     data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
   }
 
-  // Kinematics at q, then tau_full_ = Sτ + Q − Bq̇ (+ the object wrench); with `matrices`, also
-  // K_t_ = Σ Jrᵀ S_K Jr and D_t_ = Σ Jrᵀ S_D Jr + B.
-  void generalized_force(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench,
-                         bool matrices) {
-    const auto nv = model_.nv;
-    check_size(q, model_.nq, "q");
-    check_size(v, nv, "v");
+  // After kinematics(q, v, true): tau_full_ = Sτ + Q − Bq̇ (+ the object wrench); with
+  // `matrices`, also K_t_ = Σ Jrᵀ S_K Jr and D_t_ = Σ Jrᵀ S_D Jr + B.
+  void generalized_force(const RefVec & v, const RefVec & tau, const Vector6 * wrench, bool matrices) {
+    if (kinematics_ != JACOBIANS) throw std::logic_error("the implicit terms need kinematics(q, v, true) first");
+    kinematics_ = NONE;
     check_size(tau, actuated_.size(), "tau");
-    pinocchio::computeJointJacobians(model_, data_, q);
     Q_.setZero();
     double p_diss = 0.0;
     if (matrices) {
@@ -327,10 +405,7 @@ private:
       lk.element->evaluate(T_M_G, xi, matrices, ev_);
       Q_.noalias() += J_G_.transpose() * ev_.f;
       p_diss += ev_.power;
-      if (ev_.theta > ROTATION_ALARM && rotation_alarm_ < 0) {
-        rotation_alarm_ = static_cast<int>(i);
-        rotation_alarm_angle_ = ev_.theta;
-      }
+      watch_rotation(i);
       if (matrices) {
         SJ_ = ev_.SK.lazyProduct(J_G_);
         K_t_ += J_G_.transpose().lazyProduct(SJ_);
@@ -341,22 +416,69 @@ private:
       }
     }
     if (wrench) {
-      const Vector6 & w = *wrench;
-      const auto & R = pinocchio::updateFramePlacement(model_, data_, object_frame_).rotation();
-      Vector6 local;
-      local.head<3>().noalias() = R.transpose() * w.head<3>();
-      local.tail<3>().noalias() = R.transpose() * w.tail<3>();
       J_G_.setZero();
+      pinocchio::updateFramePlacement(model_, data_, object_frame_);
       pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_G_);
-      Q_.noalias() += J_G_.transpose() * local;
+      Q_.noalias() += J_G_.transpose() * local_wrench(*wrench);
     }
     tau_full_ = Q_;
+    joint_torques(v, tau, p_diss);
+  }
+
+  // A world-axes wrench at the object frame, in the object frame's axes (the placement must be current).
+  Vector6 local_wrench(const Vector6 & w) {
+    const auto & R = pinocchio::updateFramePlacement(model_, data_, object_frame_).rotation();
+    Vector6 local;
+    local.head<3>().noalias() = R.transpose() * w.head<3>();
+    local.tail<3>().noalias() = R.transpose() * w.tail<3>();
+    return local;
+  }
+
+  // tau_full_ += Sτ − Bq̇; last_dissipation_ = p_diss + q̇ᵀBq̇.
+  void joint_torques(const RefVec & v, const RefVec & tau, double p_diss) {
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) tau_full_[actuated_[i]] += tau[i];
     if (has_damping_) {
       tau_full_.array() -= damping_.array() * v.array();
       p_diss += (damping_.array() * v.array().square()).sum();
     }
     last_dissipation_ = p_diss;
+  }
+
+  void watch_rotation(std::size_t link) {
+    if (ev_.theta > ROTATION_ALARM && rotation_alarm_ < 0) {
+      rotation_alarm_ = static_cast<int>(link);
+      rotation_alarm_angle_ = ev_.theta;
+    }
+  }
+
+  // For actuated_gravity: each actuated joint and its (constant) motion subspace; gravity_ok_
+  // when every actuated joint qualifies.
+  void gravity_axes(const Model & model) {
+    static const char * const constant_axis[] = {
+      "JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned", "JointModelRUBX",
+      "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned", "JointModelPX", "JointModelPY",
+      "JointModelPZ", "JointModelPrismaticUnaligned", "JointModelHX", "JointModelHY", "JointModelHZ",
+      "JointModelHelicalUnaligned"};
+    Data tmp(model);
+    pinocchio::forwardKinematics(model, tmp, pinocchio::neutral(model));
+    g_act_.setZero(actuated_.size());
+    gravity_ok_ = true;
+    for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
+      pinocchio::JointIndex joint = 0;
+      for (pinocchio::JointIndex j = 1; j < model.joints.size(); ++j)
+        if (model.joints[j].idx_v() <= actuated_[i] && actuated_[i] < model.joints[j].idx_v() + model.joints[j].nv())
+          joint = j;
+      const std::string kind = joint ? model.joints[joint].shortname() : "";
+      if (!joint || model.joints[joint].nv() != 1 ||
+          std::find(std::begin(constant_axis), std::end(constant_axis), kind) == std::end(constant_axis)) {
+        gravity_ok_ = false;
+        gravity_joint_.clear();
+        gravity_axis_.clear();
+        return;
+      }
+      gravity_joint_.push_back(joint);
+      gravity_axis_.emplace_back(Vector6(tmp.joints[joint].S().matrix().col(0)));
+    }
   }
 
   bp::object model_obj_, data_obj_;  // keep the Python objects alive
@@ -370,6 +492,12 @@ private:
   double last_dissipation_ = 0.0;
   int rotation_alarm_ = -1;
   double rotation_alarm_angle_ = 0.0;
+  enum Kinematics { NONE, VELOCITIES, JACOBIANS } kinematics_ = NONE;  // what data_ holds for the next step
+  std::vector<pinocchio::Force> fext_;
+  bool gravity_ok_ = false;
+  std::vector<pinocchio::JointIndex> gravity_joint_;
+  std::vector<pinocchio::Motion> gravity_axis_;
+  VectorXd g_act_;
   ElementEval ev_;
   Matrix6x J_G_, J_T_, SJ_;
   VectorXd Q_, tau_full_, rhs_;

@@ -196,7 +196,9 @@ public:
 
 private:
   // ---------------------------------------------------------------- the closed loop (System)
-  void torque(double t, const VectorXd & q, const VectorXd & v) {
+  // τ at (t, q, v) into tau_; `kinematics_done`: the kernel's kinematics are at (q, v) already.
+  void torque(double t, const VectorXd & q, const VectorXd & v, bool kinematics_done = false) {
+    if (!kinematics_done && ctrl_->reads_kernel()) k_.kinematics(q, v, false);
     ctrl_->torque(t, q, v, tau_);
     const double sq = tau_.dot(tau_);
     if (!std::isfinite(sq)) {
@@ -228,14 +230,16 @@ private:
   // q̈ into `a`: one counted RHS evaluation, recorded.
   void acceleration(double t, const VectorXd & q, const VectorXd & v, VectorXd & a) {
     ++n_rhs_;
-    torque(t, q, v);
+    k_.kinematics(q, v, false);
+    torque(t, q, v, true);
     a = k_.accel(q, v, tau_);
     record(v);
   }
   void implicit_terms(double t, const VectorXd & q, const VectorXd & v) {
     ++n_rhs_;
     ++n_jac_;
-    torque(t, q, v);
+    k_.kinematics(q, v, true);
+    torque(t, q, v, true);
     k_.terms(q, v, tau_);
     record(v);
   }
@@ -330,7 +334,8 @@ private:
           ++n_rhs_;
           ++n_jac_;
           ++n_factor_;
-          torque(t, q, v);
+          k_.kinematics(q, v, true);
+          torque(t, q, v, true);
           k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new_);
           record(v);
           integrate(q, h * v_new_, q_new_);
@@ -536,7 +541,8 @@ private:
     if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
   }
   void monitor_finish(double t, const VectorXd & q, const VectorXd & v) {
-    torque(t, q, v);
+    k_.kinematics(q, v, false);
+    torque(t, q, v, true);
     k_.accel(q, v, tau_);
     monitor_.close_interval(net_power(v), 0.0, false);
     monitor_check(t, q, v);
