@@ -5,8 +5,8 @@ coopdyn's adaptive methods use the classical controller ``h⁺ = h·min(5, max(0
 (``AdaptiveIntegrator.next_step``). Where the step is limited by stability rather than accuracy —
 Dormand–Prince following the ~290 Hz spring mode of two Pandas at k = 1e6 N/m — it oscillates
 about the limit and many attempts are rejected. Gustafsson's PI controller, as in Hairer's DOPRI5
-(``err^(-(1/5 - 0.75β))·err_prev^β``, β = 0.04, no growth right after a rejection), damps that
-oscillation. Prototype in Python through the public Integrator API (the Python loop), on the
+(``err^(-(1/5 - 0.75β))·err_prev^β`` after an accepted step, β = 0.04; the classical shrink
+after a rejected one), damps that oscillation. Prototype in Python through the public Integrator API (the Python loop), on the
 benchmark's Panda case (1 s, undamped interconnections, gravity compensation + PD, perturbed
 start), force error against the benchmark's reference; right-hand sides counted, not timed.
 
@@ -14,6 +14,8 @@ start), force error against the benchmark's reference; right-hand sides counted,
 """
 
 from __future__ import annotations
+
+import math
 
 import coopdyn as cd
 from coopdyn.bench.cases import panda_case
@@ -24,7 +26,8 @@ BETA = 0.04
 
 
 class PIDormandPrince(DormandPrince):
-    """Dormand–Prince with Hairer's PI step-size controller (β = 0.04)."""
+    """Dormand–Prince with Hairer's PI step-size controller (β = 0.04). The controller's memory
+    lives on the instance: one instance per run."""
 
     def __init__(self, rtol: float) -> None:
         super().__init__(rtol=rtol)
@@ -32,7 +35,7 @@ class PIDormandPrince(DormandPrince):
 
     def next_step(self, h: float, error: float) -> float:
         if not error <= 1.0:  # rejected (or NaN): shrink, never grow
-            return h * max(0.2, 0.9 * error ** (-0.2)) if error == error else 0.2 * h
+            return 0.2 * h if math.isnan(error) else h * max(0.2, 0.9 * error ** (-0.2))
         factor = 0.9 * max(error, 1e-10) ** (-(0.2 - 0.75 * BETA)) * self.previous**BETA
         self.previous = max(error, 1e-4)
         return h * min(5.0, max(0.2, factor))

@@ -95,6 +95,79 @@ def test_gravity_read_off_the_kinematics_is_pinocchios(name: str) -> None:
         _close(nat._kernel.gravity(q), g)
 
 
+def _every_joint_kind_arm() -> tuple[pin.Model, np.ndarray, int, int, int]:
+    """A chain with every joint kind ``Kernel.gravity`` takes (unaligned, unbounded, helical,
+    prismatic; a side branch), random placements and inertias, and a free-flying object with a
+    tip–grasp pair and an object frame: (model, actuated, tip, grasp, object frame)."""
+    rng = np.random.default_rng(0)
+
+    def placement() -> pin.SE3:
+        return pin.SE3(pin.exp3(rng.normal(size=3)), 0.3 * rng.normal(size=3))
+
+    def inertia() -> pin.Inertia:
+        return pin.Inertia(rng.uniform(0.5, 2.0), 0.2 * rng.normal(size=3), np.diag(rng.uniform(0.01, 0.1, 3)))
+
+    def axis() -> np.ndarray:
+        a = rng.normal(size=3)
+        return a / np.linalg.norm(a)
+
+    kinds = [
+        pin.JointModelRevoluteUnaligned(axis()),
+        pin.JointModelRUBX(),
+        pin.JointModelRevoluteUnboundedUnaligned(),
+        pin.JointModelHelicalUnaligned(axis(), 0.3),
+        pin.JointModelPrismaticUnaligned(axis()),
+        pin.JointModelHZ(0.1),
+        pin.JointModelRY(),
+        pin.JointModelPX(),
+    ]
+    model, parent = pin.Model(), 0
+    for i, kind in enumerate(kinds):
+        parent = model.addJoint(parent, kind, placement(), f"j{i}")
+        model.appendBodyToJoint(parent, inertia(), placement())
+        if i == 2:
+            branch = model.addJoint(parent, pin.JointModelRZ(), placement(), "branch")
+            model.appendBodyToJoint(branch, inertia(), pin.SE3.Identity())
+    obj = model.addJoint(0, pin.JointModelFreeFlyer(), placement(), "object")
+    model.appendBodyToJoint(obj, inertia(), pin.SE3.Identity())
+    tip = model.addFrame(pin.Frame("tip", parent, 0, placement(), pin.FrameType.OP_FRAME))
+    grasp = model.addFrame(pin.Frame("grasp", obj, 0, placement(), pin.FrameType.OP_FRAME))
+    frame = model.addFrame(pin.Frame("object_frame", obj, 0, placement(), pin.FrameType.OP_FRAME))
+    actuated = np.array([model.joints[j].idx_v for j in range(1, model.njoints) if model.names[j] != "object"], dtype=np.int32)
+    return model, actuated, tip, grasp, frame
+
+
+def test_gravity_and_external_forces_are_right_for_every_joint_kind() -> None:
+    """On every joint kind the kinematic g(q) takes, it is Pinocchio's generalized gravity; and the
+    right-hand side with the element's wrench as ABA's external forces is M⁻¹ f of the implicit
+    terms, which map the same wrench through the frame Jacobians (with an object wrench too)."""
+    model, actuated, tip, grasp, frame = _every_joint_kind_arm()
+    K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
+    kernel = backend.kernel_module().Kernel(
+        model, model.createData(), [("se3", tip, grasp, (K, D))], np.zeros(model.nv), actuated, frame
+    )
+    rng, data = np.random.default_rng(1), model.createData()
+    for _ in range(10):
+        q = pin.integrate(model, pin.neutral(model), rng.normal(size=model.nv))
+        v, tau = rng.normal(size=model.nv), rng.normal(size=actuated.size)
+        g = pin.computeGeneralizedGravity(model, data, q)[actuated]
+        _close(kernel.gravity(q), g)
+        for w in (None, rng.normal(size=6)):
+            f, M, _, _ = kernel.implicit_terms(q, v, tau, w)
+            _close(kernel.acceleration(q, v, tau, w), np.linalg.solve(M, f))
+
+
+def test_gravity_refuses_joints_it_cannot_read() -> None:
+    """A spherical actuated joint has three degrees of freedom: the kernel says what it takes (the
+    compiled GravityCompensationPD then uses Pinocchio's RNEA)."""
+    model = pin.Model()
+    j = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    model.appendBodyToJoint(j, pin.Inertia.FromSphere(1.0, 0.1), pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])))
+    kernel = backend.kernel_module().Kernel(model, model.createData(), [], np.zeros(3), np.arange(3, dtype=np.int32), 0)
+    with pytest.raises(ValueError, match="revolute, prismatic or helical"):
+        kernel.gravity(pin.neutral(model))
+
+
 def test_dissipation_is_counted_where_there_is_damping() -> None:
     """Guards the comparison above against comparing two zeros."""
     scene = SCENES["pandas_damped"]

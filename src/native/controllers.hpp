@@ -1,6 +1,8 @@
 // The built-in controllers in C++ for the compiled step loop (loop.hpp): the same laws, in the
 // same operation order, as their Python definitions (coopdyn/control.py, coopdyn/cooperative.py,
-// coopdyn/problems/linear_book.py), tested equal to round-off (tests/test_compiled_loop.py).
+// coopdyn/problems/linear_book.py), tested equal to round-off (tests/test_compiled_loop.py) —
+// except GravityPD's g(q), read off the kernel's kinematics pass (Kernel::actuated_gravity,
+// equal to Pinocchio's RNEA to round-off, tests/test_native.py).
 #pragma once
 
 #include <pinocchio/algorithm/crba.hpp>

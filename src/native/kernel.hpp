@@ -111,7 +111,10 @@ public:
 
   // g(q) on the actuated joints (n_actuated), as pinocchio::computeGeneralizedGravity.
   VectorXd gravity(const RefVec & q) {
-    if (!kinematic_gravity()) throw std::invalid_argument("gravity: an actuated joint is not revolute or prismatic");
+    if (!kinematic_gravity())
+      throw std::invalid_argument(
+        "gravity: every actuated joint must be revolute, prismatic or helical (one degree of freedom, a constant "
+        "axis) in a model without mimic joints");
     kinematics(q, VectorXd::Zero(model_.nv), false);
     return actuated_gravity();
   }
@@ -134,7 +137,8 @@ public:
     kinematics_ = jacobians ? JACOBIANS : VELOCITIES;
   }
   // Whether actuated_gravity applies: every actuated joint has one degree of freedom and a
-  // constant motion subspace (revolute, prismatic, helical), as URDF arms have.
+  // constant motion subspace (revolute, prismatic, helical), as URDF arms have, and no joint
+  // mimics another.
   bool kinematic_gravity() const { return gravity_ok_; }
   // g(q) on the actuated joints from the placements of the last kinematics(): the subtrees'
   // masses and first moments, each joint's axis against their weight. (A reference, valid until
@@ -142,12 +146,12 @@ public:
   const VectorXd & actuated_gravity() {
     if (kinematics_ == NONE) throw std::logic_error("actuated_gravity before kinematics");
     pinocchio::centerOfMass(model_, data_, pinocchio::POSITION, false);  // mass-weighted: no 0/0
-    const Eigen::Vector3d & g0 = model_.gravity.linear();
+    const Eigen::Vector3d & o_g = model_.gravity.linear();
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
       const auto j = gravity_joint_[i];
-      const Eigen::Vector3d g = data_.oMi[j].rotation().transpose() * g0;  // in the joint's frame
-      const pinocchio::Motion & S = gravity_axis_[i];
-      g_act_[i] = -(data_.mass[j] * S.linear().dot(g) + S.angular().dot(data_.com[j].cross(g)));
+      const Eigen::Vector3d j_g = data_.oMi[j].rotation().transpose() * o_g;
+      const pinocchio::Motion & S = gravity_axis_[i];  // in joint j's frame, as data_.com[j]
+      g_act_[i] = -(data_.mass[j] * S.linear().dot(j_g) + S.angular().dot(data_.com[j].cross(j_g)));
     }
     return g_act_;
   }
@@ -351,17 +355,17 @@ private:
     for (std::size_t i = 0; i < links_.size(); ++i) {
       const Link & lk = links_[i];
       const SE3 T_M_G = relative(lk, ev_, false);
-      const pinocchio::Force f_G(ev_.f);
-      const pinocchio::Frame & G = model_.frames[lk.grasp];
-      const pinocchio::Frame & T = model_.frames[lk.tip];
-      fext_[G.parentJoint] += G.placement.act(f_G);
-      fext_[T.parentJoint] -= T.placement.act(T_M_G.act(f_G));  // action = reaction, in T
+      const pinocchio::Force G_f_G(ev_.f);
+      const pinocchio::Frame & grasp = model_.frames[lk.grasp];
+      const pinocchio::Frame & tip = model_.frames[lk.tip];
+      fext_[grasp.parentJoint] += grasp.placement.act(G_f_G);     // placement: jMG
+      fext_[tip.parentJoint] -= tip.placement.act(T_M_G.act(G_f_G));  // action = reaction, in T
       p_diss += ev_.power;
       watch_rotation(i);
     }
     if (wrench) {
-      const pinocchio::Frame & O = model_.frames[object_frame_];
-      fext_[O.parentJoint] += O.placement.act(pinocchio::Force(local_wrench(*wrench)));
+      const pinocchio::Frame & object = model_.frames[object_frame_];
+      fext_[object.parentJoint] += object.placement.act(pinocchio::Force(local_wrench(*wrench)));
     }
     tau_full_.setZero();
     joint_torques(v, tau, p_diss);
@@ -416,16 +420,16 @@ private:
       }
     }
     if (wrench) {
+      const Vector6 local = local_wrench(*wrench);
       J_G_.setZero();
-      pinocchio::updateFramePlacement(model_, data_, object_frame_);
       pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_G_);
-      Q_.noalias() += J_G_.transpose() * local_wrench(*wrench);
+      Q_.noalias() += J_G_.transpose() * local;
     }
     tau_full_ = Q_;
     joint_torques(v, tau, p_diss);
   }
 
-  // A world-axes wrench at the object frame, in the object frame's axes (the placement must be current).
+  // A world-axes wrench at the object frame, in the object frame's axes (updates its placement).
   Vector6 local_wrench(const Vector6 & w) {
     const auto & R = pinocchio::updateFramePlacement(model_, data_, object_frame_).rotation();
     Vector6 local;
@@ -452,7 +456,8 @@ private:
   }
 
   // For actuated_gravity: each actuated joint and its (constant) motion subspace; gravity_ok_
-  // when every actuated joint qualifies.
+  // when every actuated joint qualifies and no joint mimics another (a mimic joint's weight
+  // would act through joints this formula does not see).
   void gravity_axes(const Model & model) {
     static const char * const constant_axis[] = {
       "JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned", "JointModelRUBX",
@@ -462,7 +467,8 @@ private:
     Data tmp(model);
     pinocchio::forwardKinematics(model, tmp, pinocchio::neutral(model));
     g_act_.setZero(actuated_.size());
-    gravity_ok_ = true;
+    gravity_ok_ = model.mimicking_joints.empty();
+    if (!gravity_ok_) return;
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
       pinocchio::JointIndex joint = 0;
       for (pinocchio::JointIndex j = 1; j < model.joints.size(); ++j)

@@ -1,8 +1,9 @@
 // The compiled step loop: coopdyn.simulate's loop (coopdyn/simulate.py), its built-in integrators
 // (coopdyn/integrators/) and energy monitor (coopdyn/monitor.py) in C++, for runs whose every
-// piece is built in. The same operations in the same order as the Python loop, tested equal to
-// round-off (tests/test_compiled_loop.py). It runs in chunks of steps with the GIL released;
-// Python (coopdyn/compiled.py) turns what a chunk reports into samples, warnings and errors.
+// piece is built in. The same operations in the same order as the Python loop (but for the
+// controllers' note in controllers.hpp), tested equal to round-off (tests/test_compiled_loop.py).
+// It runs in chunks of steps with the GIL released; Python (coopdyn/compiled.py) turns what a
+// chunk reports into samples, warnings and errors.
 #pragma once
 
 #include "controllers.hpp"
