@@ -87,6 +87,18 @@ def test_open_loop_drives_on_the_book_case(book: cd.Scene, method: object) -> No
     _assert_same(py, co)
 
 
+def test_gravity_compensation_outside_a_right_hand_side(book: cd.Scene) -> None:
+    """The compiled GravityCompensationPD reads g(q) off the kernel's kinematics. The exponential
+    step asks for torques at its predictor states without evaluating the dynamics, so the loop
+    must run that pass itself (else the kernel refuses: no kinematics): the Python loop's torques
+    and states. (On the book's vertical sliders g is constant; a q-dependent g read outside a
+    right-hand side — each run's last sample — is compared on the Pandas above.)"""
+    ctrl = GravityCompensationPD(book, 50.0, 5.0)
+    py, co = _both(book, 0.5, controller=ctrl, integrator="exponential", dt=1e-3, v0=np.full(book.nv, 0.1), save_every=7)
+    assert co.status == "completed" and np.min(np.abs(co.tau)) > 50.0  # gravity is most of the torque here
+    _assert_same(py, co)
+
+
 def test_python_pieces_run_in_the_python_loop(pandas: cd.Scene) -> None:
     """A Python controller, a subclass of a built-in method, an object wrench: the Python loop,
     chosen automatically; loop='compiled' says which piece is Python."""
