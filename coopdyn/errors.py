@@ -68,7 +68,12 @@ class StepMatrixError(_CarriesResult, SimulationError):
 
 class SweepError(CoopdynError, ValueError):
     """A sweep was asked something invalid (its parameters, executor or spec), or its table cannot
-    be read; a single run that fails is a row of the table, never this error."""
+    be read or written; a single run that fails is a row of the table, never this error. When the
+    runs finished but the table could not be written, ``table`` holds it."""
+
+    def __init__(self, message: str, *, table: object = None) -> None:
+        super().__init__(message)
+        self.table = table
 
 
 class SweepInterrupted(KeyboardInterrupt):

@@ -80,6 +80,11 @@ def test_expand_grid_samples_and_seeds() -> None:
         ({"a": [1]}, 0, "seeds must be a count >= 1"),
         ({"a": [1]}, [1, -2], "integers >= 0"),
         ({"a": [1]}, 1.5, "seeds must be a count"),
+        ({"a": [1.0, "x"]}, None, r"mixes kinds of value \(number, str\)"),
+        ({"a": [True, 2]}, None, r"mixes kinds of value \(bool, number\)"),
+        ({"a": [10**30]}, None, "does not fit a table's 64-bit integers"),
+        ({"a": range(10**4), "b": range(10**4)}, None, "a grid of 1e\\+08 combinations"),
+        ({"a": [1]}, 10**12, "1e\\+12 runs: more than one sweep holds"),
     ],
 )
 def test_bad_parameters_are_refused(params: object, seeds: object, match: str) -> None:
@@ -106,6 +111,17 @@ def test_sweep_arguments_are_checked_before_anything_runs(tmp_path: Path) -> Non
         cd.sweep(make_case, None, duration=0.1, trajectories=True)
     with pytest.raises(cd.SweepError, match="executor must be"):
         cd.sweep(make_case, None, duration=0.1, executor=42)
+    with pytest.raises(cd.SweepError, match="executor must be"):
+        cd.sweep(make_case, None, duration=0.1, executor=np.array(["serial", "processes"]))
+    with pytest.raises(cd.SweepError, match="progress must be True or False, got 'no'"):
+        cd.sweep(make_case, None, duration=0.1, progress="no")
+    with pytest.raises(cd.SweepError, match="trajectories must be True or False"):
+        cd.sweep(make_case, None, duration=0.1, out=tmp_path, trajectories="yes")
+    for call in (lambda: load(3), lambda: load_spec(3), lambda: rerun(3, 1), lambda: load_spec("a\0b.toml")):
+        with pytest.raises(cd.SweepError, match="must be a path"):
+            call()
+    with pytest.raises(cd.SweepError, match=r"run_spec takes a spec from coopdyn\.sweeps\.load_spec"):
+        cd.sweeps.run_spec("spec.toml")
     import threading
 
     lock = threading.Lock()
@@ -498,6 +514,42 @@ def test_parameter_sets_must_name_the_same_parameters_and_settings_are_checked_u
     ):
         with pytest.raises(cd.SweepError, match=message):
             cd.sweep(make_case, {"a": [1]}, duration=0.1, **kwargs)  # type: ignore[arg-type]
+
+
+def test_a_table_parquet_cannot_store_still_reaches_the_user(tmp_path: Path) -> None:
+    """Every run finished; a metric Parquet cannot store (an integer beyond 64 bits) makes saving
+    fail with a SweepError that says why and carries the whole table."""
+    book = cd.scenes.linear_book()
+    with pytest.raises(cd.SweepError, match="cannot be stored as Parquet") as info:
+        cd.sweep(
+            lambda k: cd.Case(book, duration=0.01), {"k": [1, 2]}, metrics=lambda r, c: {"huge": 10**30},
+            executor="serial", out=tmp_path, progress=False,
+        )  # fmt: skip
+    assert list(info.value.table["status"]) == ["completed", "completed"]
+    assert not (tmp_path / "table.parquet").exists()
+
+
+def test_a_bad_step_is_a_failed_row_saying_so() -> None:
+    """dt = 0 or NaN in a case: that row fails with the check's message (not a division by zero)."""
+    book = cd.scenes.linear_book()
+    table = cd.sweep(
+        lambda dt: cd.Case(book, duration=0.01, dt=dt), {"dt": [0.0, float("nan"), 1e-3]}, executor="serial", progress=False
+    )
+    assert list(table["status"]) == ["failed", "failed", "completed"]
+    assert list(table["message"][:2]) == ["SweepError: dt must be > 0 [s], got 0.0", "SweepError: dt must be finite, got nan"]
+
+
+def test_heatmap_refuses_what_it_cannot_draw() -> None:
+    from coopdyn.viz.plotting import sweep_heatmap
+
+    table = pd.DataFrame({"k": [1.0, 2.0], "g": [1, 1], "status": ["completed"] * 2, "m": [1.0, 2.0], "name": ["a", "b"]})
+    for values, match in (([], "at least one metric"), (None, "at least one metric"), ("name", "'name' is not numeric")):
+        with pytest.raises(cd.SweepError, match=match):
+            sweep_heatmap(table, "k", "g", values)
+    with pytest.raises(cd.SweepError, match="no rows to draw"):
+        sweep_heatmap(table.iloc[:0], "k", "g", "m")
+    with pytest.raises(cd.SweepError, match="takes a sweep table"):
+        sweep_heatmap([1, 2], "k", "g", "m")
 
 
 def test_workers_with_an_executor_of_its_own_is_refused() -> None:

@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import positive
 from .._version import __version__
-from ..errors import DivergenceError, StepBudgetError, SweepError
+from ..errors import CoopdynError, DivergenceError, StepBudgetError, SweepError
 from ..model.scene import Scene
 from ..simulate import simulate
 
@@ -103,6 +104,10 @@ class Item:
     seed: int | None
 
 
+#: the most runs one sweep takes (its items and its table are held in memory)
+MAX_RUNS = 10**7
+
+
 def _plain(value: Any, name: str, what: str = "parameter") -> Any:
     """A parameter (or metric) value as a plain number, string, bool or list of them (what a table stores)."""
     if isinstance(value, np.generic):
@@ -142,6 +147,10 @@ def expand(params: Any, seeds: Any) -> list[Item]:
             if not v:
                 raise SweepError(f"parameter {name!r} has no values")
             values.append(v)
+        if math.prod(map(len, values)) > MAX_RUNS:
+            raise SweepError(
+                f"a grid of {math.prod(map(len, values)):.3g} combinations: more than one sweep holds ({MAX_RUNS:.0e})"
+            )
         sets = [dict(zip(names, combo, strict=True)) for combo in itertools.product(*values)]
     elif isinstance(params, Sequence) and not isinstance(params, str | bytes):
         sets = [dict(p) if isinstance(p, Mapping) else _bad_params(p) for p in params]
@@ -154,17 +163,33 @@ def expand(params: Any, seeds: Any) -> list[Item]:
         raise SweepError(
             f"every parameter set must name the same parameters in the same order: {list(sets[0])} and {list(different)}"
         )
-    for s in sets:
-        for name in s:
-            if not isinstance(name, str) or not name:
-                raise SweepError(f"parameter names must be non-empty strings, got {name!r}")
-            if name in RESERVED:
-                raise SweepError(f"parameter name {name!r} is a column of every row; rename it (reserved: {sorted(RESERVED)})")
+    for name in sets[0]:
+        if not isinstance(name, str) or not name:
+            raise SweepError(f"parameter names must be non-empty strings, got {name!r}")
+        if name in RESERVED:
+            raise SweepError(f"parameter name {name!r} is a column of every row; rename it (reserved: {sorted(RESERVED)})")
+    plain = [{k: _plain(v, k) for k, v in p.items()} for p in sets]
+    for name in sets[0]:
+        _one_kind([p[name] for p in plain], name)
     seed_list = _seeds(seeds)
-    items: list[Item] = []
-    for p, s in itertools.product(sets, seed_list):
-        items.append(Item(len(items), {k: _plain(v, k) for k, v in p.items()}, s))
-    return items
+    if len(plain) * len(seed_list) > MAX_RUNS:
+        raise SweepError(
+            f"{len(plain)} parameter sets × {len(seed_list)} seeds = {len(plain) * len(seed_list):.3g} runs: more than "
+            f"one sweep holds ({MAX_RUNS:.0e}); split it"
+        )
+    return [Item(i, p, seed) for i, (p, seed) in enumerate(itertools.product(plain, seed_list))]
+
+
+def _one_kind(values: list[Any], name: str) -> None:
+    """A table column holds one kind of value (numbers, strings, bools or lists; None for a gap),
+    and integers a Parquet column can store."""
+    kinds = {"number" if isinstance(v, int | float) and not isinstance(v, bool) else type(v).__name__ for v in values}
+    kinds.discard("NoneType")
+    if len(kinds) > 1:
+        raise SweepError(f"parameter {name!r} mixes kinds of value ({', '.join(sorted(kinds))}); a table column holds one")
+    big = next((v for v in values if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 2**63), None)
+    if big is not None:
+        raise SweepError(f"parameter {name!r}: {big} does not fit a table's 64-bit integers; give it as a float")
 
 
 def _bad_params(value: Any) -> dict[str, Any]:
@@ -174,7 +199,7 @@ def _bad_params(value: Any) -> dict[str, Any]:
     )
 
 
-def _seeds(seeds: Any) -> list[int | None]:
+def _seeds(seeds: Any) -> Sequence[int | None]:
     if seeds is None:
         return [None]
     if isinstance(seeds, bool):
@@ -182,7 +207,7 @@ def _seeds(seeds: Any) -> list[int | None]:
     if isinstance(seeds, int | np.integer):
         if seeds < 1:
             raise SweepError(f"seeds must be a count >= 1 or a list of integers, got {seeds}")
-        return list(range(int(seeds)))
+        return range(int(seeds))  # not a list: a huge count is refused by its length
     if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes):
         out = list(seeds)
         if not out or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0 for s in out):
@@ -299,10 +324,13 @@ def default_metrics(result: Any, case: Case) -> tuple[dict[str, float], list[str
 
 
 def _where(exc: BaseException) -> str:
-    """`` (at file.py:12 in fn)``: the innermost frame outside coopdyn, or the innermost one."""
+    """`` (at file.py:12 in fn)``: the innermost frame outside coopdyn, or the innermost one; nothing
+    for coopdyn's own error about the case (its message says what)."""
     frames = traceback.extract_tb(exc.__traceback__)
     package = str(Path(__file__).resolve().parent.parent)
     outside = [f for f in frames if not str(Path(f.filename).resolve()).startswith(package)]
+    if not outside and isinstance(exc, CoopdynError):
+        return ""
     frame = (outside or frames)[-1] if frames else None
     return f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""
 
@@ -323,10 +351,11 @@ def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> 
             duration = case.duration if case.duration is not None else s.duration
             if duration is None:
                 raise SweepError("no duration: give sweep(..., duration=…) or Case(duration=…)")
-            dt = case.dt if case.dt is not None else s.dt
-            save_every = case.save_every or s.save_every or max(1, round(1e-3 / dt))
+            dt = positive(case.dt if case.dt is not None else s.dt, "dt", "s", SweepError)  # before 1e-3 / dt
+            save_every = next((n for n in (case.save_every, s.save_every) if n is not None), max(1, round(1e-3 / dt)))
             integrator = case.integrator or s.integrator
-            row.update(integrator=integrator, dt_s=float(dt), duration_s=float(duration), save_every=int(save_every))
+            name = integrator if isinstance(integrator, str) else repr(integrator)  # the table stores text
+            row.update(integrator=name, dt_s=float(dt), duration_s=float(duration), save_every=int(save_every))
             try:
                 result = simulate(
                     case.scene,

@@ -282,12 +282,13 @@ class Executor:
 
 def engine(executor: Any, workers: int | None) -> Serial | LocalProcesses | Executor:
     """The engine for ``sweep(executor=…)``."""
-    if executor is None or executor == "processes":
+    name = executor if isinstance(executor, str) else None  # `==` on an array or a Series is not a bool
+    if executor is None or name == "processes":
         return LocalProcesses(workers)
     if workers is not None:  # it would size nothing: the executor has its own workers
         raise SweepError(f"workers sizes the local processes (executor='processes'); executor={executor!r} has its own")
-    if executor == "serial":
+    if name == "serial":
         return Serial()
-    if isinstance(executor, str):
+    if name is not None:
         raise SweepError(f"unknown executor {executor!r}: give 'processes' (default), 'serial', an Executor or a Dask Client")
     return Executor(executor)

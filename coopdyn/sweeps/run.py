@@ -26,6 +26,7 @@ from ..outputs import check_folder
 from . import table as tables
 from .cases import TIMING, Item, PythonJob, Settings, SpecJob, expand, placeholder, run_item, signature_check, versions
 from .engines import Executor, LocalProcesses, Serial, chunks, engine
+from .spec import Spec
 
 MAX_CHUNK = 64  #: the most runs per task with the automatic chunk size
 PAYLOAD_WARN_BYTES = 10 << 20  #: a job bigger than this is sent to every worker: say so
@@ -106,6 +107,8 @@ def run_spec(
     spec: Any, *, executor: Any = None, workers: int | None = None, chunk_size: int | None = None, progress: bool = True
 ) -> Any:
     """Run a loaded sweep spec (:func:`coopdyn.sweeps.spec.load_spec`) into its folder; the table."""
+    if not isinstance(spec, Spec):
+        raise SweepError(f"run_spec takes a spec from coopdyn.sweeps.load_spec(path), got {type(spec).__name__}")
     settings = Settings()
     job = SpecJob(spec.text, str(spec.path), settings)
     meta = {"source": {"kind": "spec", "file": str(spec.path), "text": spec.text}, "metrics": None}
@@ -145,6 +148,9 @@ def _execute(
     trajectories: bool,
     progress: bool,
 ) -> Any:
+    for flag, value in (("trajectories", trajectories), ("progress", progress)):
+        if not isinstance(value, bool):
+            raise SweepError(f"{flag} must be True or False, got {value!r}")
     folder = check_folder(out) if out is not None else None
     if trajectories and folder is None:
         raise SweepError("trajectories are saved as files: give out=a folder")

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate
 from ..errors import CoopdynError, SweepError
 from ..io import scenefile
 from .cases import COUNTERS, METRICS, Item, Settings, SpecJob, _plain, expand
@@ -106,7 +107,7 @@ def _draw(rng: np.random.Generator, name: str, dist: Any) -> Any:
 def load_spec(path: str | Path) -> Spec:
     """Read a sweep spec; check its ``[sweep]`` table and that its first run builds (so that a
     misspelt key fails now, naming its line, not once per run)."""
-    path = Path(path)
+    path = _validate.path(path, "a sweep spec", SweepError)
     text = scenefile._read_text(path)
     doc = scenefile.parse(text, path)
     f = scenefile._File(path, text)

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .. import _validate
 from .._optional import require
 from ..errors import SweepError
 from .cases import COUNTERS, SETTINGS, STATUS, TIMING, VERSIONS
@@ -49,7 +50,14 @@ def save(table: Any, path: str | os.PathLike[str]) -> Path:
     pq = require("pyarrow.parquet", "saving a sweep table (Parquet)", "pyarrow")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    try:
+        arrow = pa.Table.from_pandas(table, preserve_index=False)
+    except (pa.ArrowException, OverflowError, TypeError, ValueError) as exc:  # e.g. a metric column of mixed kinds
+        raise SweepError(
+            f"the sweep table cannot be stored as Parquet ({type(exc).__name__}: {exc}); give each metric one kind of "
+            "value (numbers, strings or bools) and integers below 2**63. The table is in this exception's .table",
+            table=table,
+        ) from exc
     metadata = dict(arrow.schema.metadata or {})
     metadata[META_KEY] = json.dumps(table.attrs.get("coopdyn.sweep", {}), allow_nan=False).encode()
     arrow = arrow.replace_schema_metadata(metadata)
@@ -66,7 +74,7 @@ def load(path: str | os.PathLike[str]) -> Any:
     """A sweep table saved by :func:`coopdyn.sweep` (a ``table.parquet``, or the folder holding
     it), with its description in ``attrs["coopdyn.sweep"]``."""
     pq = require("pyarrow.parquet", "reading a sweep table (Parquet)", "pyarrow")
-    path = Path(path)
+    path = _validate.path(path, "a sweep table", SweepError)
     if path.is_dir():
         path = path / TABLE_NAME
     if not path.is_file():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -205,12 +206,20 @@ def sweep_heatmap(
     from matplotlib.colors import LogNorm
 
     plt = _pyplot()
-    values = [values] if isinstance(values, str) else list(values)
+    if not hasattr(table, "columns") or not hasattr(table, "groupby"):
+        raise SweepError(f"sweep_heatmap takes a sweep table (a pandas DataFrame), got {type(table).__name__}")
+    values = [values] if isinstance(values, str) else list(values) if isinstance(values, Iterable) else []
+    if not values:
+        raise SweepError("sweep_heatmap needs the name of at least one metric column in values")
     for name in (x, y, *values):
         if name not in table.columns:
             raise SweepError(f"the table has no column {name!r}; columns: {list(table.columns)}")
-    xs = list(dict.fromkeys(_tick(v) for v in table[x]))
-    ys = list(dict.fromkeys(_tick(v) for v in table[y]))
+    if not len(table):
+        raise SweepError("the sweep table has no rows to draw")
+    tx, ty = table[x].map(_tick), table[y].map(_tick)  # the cells, once for every metric
+    xs, ys = list(dict.fromkeys(tx)), list(dict.fromkeys(ty))
+    cells = table.groupby([tx, ty], sort=False).indices  # (x tick, y tick) → row positions
+    completed = (table["status"] == "completed").to_numpy()
     fig, axes = plt.subplots(
         1,
         len(values),
@@ -223,14 +232,19 @@ def sweep_heatmap(
         label, scale = column_label(name)
         grid = np.full((len(ys), len(xs)), np.nan)
         notes = [["" for _ in xs] for _ in ys]
+        try:
+            column = table[name].to_numpy(dtype=float, na_value=np.nan)
+        except (TypeError, ValueError) as exc:
+            raise SweepError(f"column {name!r} is not numeric: a heat map draws numbers") from exc
+        statuses = table["status"].to_numpy()
         for i, yv in enumerate(ys):
             for j, xv in enumerate(xs):
-                cell = table[(table[x].map(_tick) == xv) & (table[y].map(_tick) == yv)]
-                ok = cell[cell["status"] == "completed"]
+                rows = cells.get((xv, yv), np.empty(0, dtype=int))
+                ok = rows[completed[rows]]
                 if len(ok):
-                    grid[i, j] = float(np.mean(ok[name].astype(float))) * scale
-                if len(ok) < len(cell):
-                    notes[i][j] = ", ".join(sorted(set(cell["status"]) - {"completed"}))
+                    grid[i, j] = float(np.mean(column[ok])) * scale
+                if len(ok) < len(rows):
+                    notes[i][j] = ", ".join(sorted(set(statuses[rows]) - {"completed"}))
         finite = grid[np.isfinite(grid)]
         log = finite.size > 1 and finite.min() > 0 and finite.max() > 20 * finite.min()
         norm = LogNorm(finite.min(), finite.max()) if log else None
