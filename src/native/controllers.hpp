@@ -50,23 +50,24 @@ struct NoTorque : Controller {
 struct GravityPD : Controller {
   GravityPD(Kernel & kernel, VectorXd kp, VectorXd kd, VectorXd q_des)
     : kernel(kernel), model(kernel.model()), data(model), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
-      q_des(std::move(q_des)), dq(model.nv), g(act.size()) {}
+      q_des(std::move(q_des)), dq(model.nv), g_rnea(act.size()) {}
   bool reads_kernel() const override { return kernel.kinematic_gravity(); }
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    if (kernel.kinematic_gravity()) {
-      g = kernel.actuated_gravity();
-    } else {
-      const VectorXd & full = pinocchio::computeGeneralizedGravity(model, data, q);
-      for (Eigen::Index i = 0; i < act.size(); ++i) g[i] = full[act[i]];
-    }
+    const VectorXd & g = kernel.kinematic_gravity() ? kernel.actuated_gravity() : rnea_gravity(q);
     pinocchio::difference(model, q, q_des, dq);
     for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] = (g[i] + kp[i] * dq[act[i]]) - kd[i] * v[act[i]];
+  }
+  // g(q) on the actuated joints by Pinocchio's RNEA, for joints actuated_gravity does not take.
+  const VectorXd & rnea_gravity(const VectorXd & q) {
+    const VectorXd & full = pinocchio::computeGeneralizedGravity(model, data, q);
+    for (Eigen::Index i = 0; i < act.size(); ++i) g_rnea[i] = full[act[i]];
+    return g_rnea;
   }
   Kernel & kernel;
   const Model & model;
   Data data;
   Eigen::VectorXi act;
-  VectorXd kp, kd, q_des, dq, g;
+  VectorXd kp, kd, q_des, dq, g_rnea;
 };
 
 // τ = M(q)(Kp (q_d − q) − Kd q̇) + h(q, q̇), holding q_d (ComputedTorque with its default reference).

@@ -197,6 +197,12 @@ public:
 
 private:
   // ---------------------------------------------------------------- the closed loop (System)
+  // The kernel's kinematics at (q, v) (with the joint Jacobians for the implicit terms), then τ
+  // into tau_: what every evaluation starts with (Kernel's protocol).
+  void kinematics_and_torque(double t, const VectorXd & q, const VectorXd & v, bool jacobians) {
+    k_.kinematics(q, v, jacobians);
+    torque(t, q, v, true);
+  }
   // τ at (t, q, v) into tau_; `kinematics_done`: the kernel's kinematics are at (q, v) already.
   void torque(double t, const VectorXd & q, const VectorXd & v, bool kinematics_done = false) {
     if (!kinematics_done && ctrl_->reads_kernel()) k_.kinematics(q, v, false);
@@ -231,16 +237,14 @@ private:
   // q̈ into `a`: one counted RHS evaluation, recorded.
   void acceleration(double t, const VectorXd & q, const VectorXd & v, VectorXd & a) {
     ++n_rhs_;
-    k_.kinematics(q, v, false);
-    torque(t, q, v, true);
+    kinematics_and_torque(t, q, v, false);
     a = k_.accel(q, v, tau_);
     record(v);
   }
   void implicit_terms(double t, const VectorXd & q, const VectorXd & v) {
     ++n_rhs_;
     ++n_jac_;
-    k_.kinematics(q, v, true);
-    torque(t, q, v, true);
+    kinematics_and_torque(t, q, v, true);
     k_.terms(q, v, tau_);
     record(v);
   }
@@ -335,8 +339,7 @@ private:
           ++n_rhs_;
           ++n_jac_;
           ++n_factor_;
-          k_.kinematics(q, v, true);
-          torque(t, q, v, true);
+          kinematics_and_torque(t, q, v, true);
           k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new_);
           record(v);
           integrate(q, h * v_new_, q_new_);
@@ -542,8 +545,7 @@ private:
     if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
   }
   void monitor_finish(double t, const VectorXd & q, const VectorXd & v) {
-    k_.kinematics(q, v, false);
-    torque(t, q, v, true);
+    kinematics_and_torque(t, q, v, false);
     k_.accel(q, v, tau_);
     monitor_.close_interval(net_power(v), 0.0, false);
     monitor_check(t, q, v);
