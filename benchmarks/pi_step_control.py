@@ -15,8 +15,6 @@ start), force error against the benchmark's reference; right-hand sides counted,
 
 from __future__ import annotations
 
-import math
-
 import coopdyn as cd
 from coopdyn.bench.cases import panda_case
 from coopdyn.bench.measure import errors_against
@@ -34,8 +32,8 @@ class PIDormandPrince(DormandPrince):
         self.previous = 1e-4  # the last accepted step's error norm (Hairer's facold)
 
     def next_step(self, h: float, error: float) -> float:
-        if not error <= 1.0:  # rejected (or NaN): shrink, never grow
-            return 0.2 * h if math.isnan(error) else h * max(0.2, 0.9 * error ** (-0.2))
+        if not error <= 1.0:  # rejected (or NaN): the classical controller's shrink
+            return super().next_step(h, error)
         factor = 0.9 * max(error, 1e-10) ** (-(0.2 - 0.75 * BETA)) * self.previous**BETA
         self.previous = max(error, 1e-4)
         return h * min(5.0, max(0.2, factor))

@@ -42,9 +42,24 @@ def test_drake_peer_refuses_bad_steps_and_passes_coopdyn_errors_on() -> None:
     scene = scenes.facing_arms("panda", stiffness=1e4)
     with pytest.raises(cd.SimulationError, match=r"takes a coopdyn\.Scene"):
         DrakeScene("scene", None)  # type: ignore[arg-type]
-    for bad in (-1e-3, float("nan"), "1ms"):
-        with pytest.raises(cd.SimulationError, match="time_step must be a finite number >= 0"):
+    for bad, match in (
+        (-1e-3, "time_step must be >= 0"),
+        (float("nan"), "must be finite"),
+        ("1ms", "numeric"),
+        (True, "numeric"),
+    ):
+        with pytest.raises(cd.SimulationError, match=match):
             DrakeScene(scene, None, time_step=bad)  # type: ignore[arg-type]
+    peer, q0, v0 = DrakeScene(scene, None, time_step=1e-3), scene.q0, np.zeros(scene.nv)
+    for args, match in (
+        ((q0[:3], v0, 0.02, 0.01), r"q0 must have shape \(21,\)"),
+        ((np.full(scene.nq, np.nan), v0, 0.02, 0.01), "q0 must be finite"),
+        ((q0, v0, 0.0, 0.01), r"t_final must be > 0 \[s\]"),
+        ((q0, v0, 0.02, float("nan")), "output_interval must be finite"),
+        ((q0, v0, 0.02, 0.01, None, -1.0), "accuracy must be > 0"),
+    ):
+        with pytest.raises(cd.SimulationError, match=match):
+            peer.run(*args)  # type: ignore[arg-type]
 
     def failing(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         if t > 2e-3:

@@ -10,7 +10,8 @@ import pytest
 import coopdyn as cd
 from coopdyn.closed_loop import System
 from coopdyn.control import GravityCompensationPD
-from coopdyn.integrators import INTEGRATORS, Exponential, get_integrator
+from coopdyn.errors import StepMatrixError
+from coopdyn.integrators import INTEGRATORS, Exponential, GeneralizedAlpha, get_integrator
 from coopdyn.reference import Drive, linear_book_exact
 
 pytestmark = pytest.mark.filterwarnings("ignore::coopdyn.EnergyBalanceWarning")  # coarse steps on purpose
@@ -263,13 +264,23 @@ def test_trapezoid_keeps_the_energy_that_ros2_dissipates(pandas: cd.Scene) -> No
 
 def test_generalized_alpha_at_rho_inf_1_is_newmark_average_acceleration() -> None:
     """ρ∞ = 1: the principal root is the trapezoid's Cayley map, which never damps (|R(iω)| = 1)."""
-    from coopdyn.integrators import GeneralizedAlpha
 
     z = np.concatenate([1j * np.logspace(-3, 6, 40), -np.logspace(-3, 4, 40) + 3j, -np.logspace(-2, 3, 20) * (1 + 1j)])
     assert np.allclose(GeneralizedAlpha(1.0).stability_function(z), (1 + z / 2) / (1 - z / 2), rtol=1e-9, atol=1e-9)
     assert np.allclose(np.abs(GeneralizedAlpha(1.0).stability_function(1j * np.logspace(-3, 6, 40))), 1.0, atol=1e-9)
     with pytest.raises(cd.SimulationError, match=r"rho_inf must be a number in \[0, 1\], got -0.1"):
         GeneralizedAlpha(-0.1)
+    with pytest.raises(cd.SimulationError, match=r"rho_inf must be a number in \[0, 1\], got 1000000000"):
+        GeneralizedAlpha(rho_inf=10**400)
+
+
+def test_generalized_alpha_refuses_a_zero_step_and_a_state_that_is_not_finite(book: cd.Scene) -> None:
+    system = System(cd.Dynamics(book), None)
+    q, v = book.q0, np.zeros(book.nv)
+    with pytest.raises(cd.SimulationError, match=r"needs a step h > 0, got 0\.0"):
+        GeneralizedAlpha().step(system, 0.0, q, v, 0.0)
+    with pytest.raises(StepMatrixError, match="not finite"):
+        GeneralizedAlpha().step(system, 0.0, np.full_like(q, np.nan), v, 1e-3)
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 1.0])
@@ -277,7 +288,6 @@ def test_generalized_alpha_is_second_order_stable_and_rho_inf_is_its_limit(rho: 
     """On the mode with eigenvalues z, z̄ the principal root is e^z to third order (a second-order
     method); the step's spectral radius never exceeds 1 on lightly damped oscillators of any
     frequency (unconditionally stable) and tends to ρ∞ at high frequency."""
-    from coopdyn.integrators import GeneralizedAlpha
 
     method = GeneralizedAlpha(rho)
     small = np.array([1e-2j, -1e-2 + 1e-2j, 2e-2j])
@@ -296,7 +306,6 @@ def test_generalized_alpha_spectral_radius_is_that_of_its_real_step(book: cd.Sce
     matrix one step applies to (q, v, a), built column by column from the integrator's own
     step, has the spectral radius ``spectral_radius(A, h)`` predicts; advise finds it stable at
     any step."""
-    from coopdyn.integrators import GeneralizedAlpha
 
     A = cd.stability.linearize(book)
     n = book.nv
@@ -323,7 +332,6 @@ def test_generalized_alpha_keeps_the_energy_and_rho_inf_removes_only_high_freque
     """Undamped Pandas + box, τ = 0, perturbed: at ρ∞ = 1 the energy error is second order (÷4 per
     halving of dt) and far below ROS2's dissipation; ρ∞ = 0.9 at 1 ms stays within a few times
     the non-dissipative method's error (its damping is third order in ωh on resolved modes)."""
-    from coopdyn.integrators import GeneralizedAlpha
 
     v0 = np.random.default_rng(11).normal(size=pandas.nv) * 0.2
     drift = {}

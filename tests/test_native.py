@@ -272,6 +272,17 @@ def test_what_the_kernel_refuses_reaches_the_user_as_a_coopdyn_error(pandas: cd.
 
 
 @pytest.mark.parametrize("name", ["native", "python"])
+def test_factor_coefficients_that_are_not_real_numbers_are_refused_on_both_backends(pandas: cd.Scene, name: str) -> None:
+    dyn = Dynamics(pandas, backend=name)
+    _, M, K, D = dyn.implicit_terms(pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated))
+    gains = np.full(pandas.n_actuated, 10.0)
+    for gh, gh2 in (("x", None), ([], None), (1e-3, 1j), (10**400, None)):
+        with pytest.raises(KernelError, match="gh and gh2 must be real numbers"):
+            dyn.factor(M, K, D, gh, gains, gains, gh2)  # type: ignore[arg-type]
+    dyn.factor(M, K, D, np.float32(1e-3), gains, gains)  # a numpy float is a real number
+
+
+@pytest.mark.parametrize("name", ["native", "python"])
 def test_a_step_matrix_that_is_not_positive_definite_raises_on_both_backends(pandas: cd.Scene, name: str) -> None:
     dyn = Dynamics(pandas, backend=name)
     q, v, tau = pandas.q0, np.zeros(pandas.nv), np.zeros(pandas.n_actuated)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .. import _validate
 from .._optional import require
 from ..errors import CoopdynError, SimulationError
 from ..model.scene import Scene
@@ -60,8 +61,9 @@ class DrakeScene:
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None, time_step: float = 0.0) -> None:
         if not isinstance(scene, Scene):
             raise SimulationError(f"the Drake peer takes a coopdyn.Scene, got {type(scene).__name__}")
-        if not (isinstance(time_step, (int, float)) and np.isfinite(time_step) and time_step >= 0):
-            raise SimulationError(f"time_step must be a finite number >= 0 [s], got {time_step!r}")
+        time_step = _validate.number(time_step, "time_step", "s", SimulationError)
+        if time_step < 0:
+            raise SimulationError(f"time_step must be >= 0 [s] (0: a continuous plant), got {time_step!r}")
         drake: Any = require("pydrake.all", "the Drake peer", "coopdyn[peers]")
         self.drake, self.scene, self.controller = drake, scene, controller
         model = scene.model
@@ -253,6 +255,12 @@ class DrakeScene:
         convention), the CPU seconds of the simulation and the number of steps Drake took. A
         discrete plant steps at its time_step; a continuous one uses ``integrator`` (one of
         :data:`CONTINUOUS`) at the target ``accuracy``. Stops early at a non-finite state."""
+        model = self.scene.model
+        q0 = _validate.finite_array(q0, "q0", (model.nq,), SimulationError)
+        v0 = _validate.finite_array(v0, "v0", (model.nv,), SimulationError)
+        t_final = _validate.positive(t_final, "t_final", "s", SimulationError)
+        output_interval = _validate.positive(output_interval, "output_interval", "s", SimulationError)
+        accuracy = _validate.positive(accuracy, "accuracy", "1", SimulationError)
         drake, plant = self.drake, self.plant
         diagram = self._diagram()
         context = diagram.CreateDefaultContext()

@@ -35,6 +35,18 @@ LOCAL = pin.ReferenceFrame.LOCAL
 ROTATION_ALARM = 0.9 * math.pi
 
 
+def step_coefficients(gh: Any, gh2: Any) -> tuple[float, float]:
+    """``(gh, gh2)`` of :meth:`Dynamics.factor` as floats, ``gh2 = gh²`` when None; a
+    KernelError for anything that is not a real number (non-finite ones make S not finite)."""
+    try:
+        if isinstance(gh, complex) or isinstance(gh2, complex):
+            raise TypeError("complex")
+        g = float(gh)
+        return g, g * g if gh2 is None else float(gh2)
+    except (TypeError, ValueError, OverflowError):
+        raise KernelError(f"factor: gh and gh2 must be real numbers, got {repr(gh)[:40]} and {repr(gh2)[:40]}") from None
+
+
 class Energy(NamedTuple):
     """Energies of one state [J]."""
 
@@ -106,6 +118,9 @@ class Dynamics:
         self._has_damping = bool(np.any(self._damping))
         self.actuated_index = scene.actuated_index
         self._frames = [(lk.tip_frame, lk.grasp_frame, lk.element) for lk in scene.elements]
+        # (link index, T, G, element) of the elements with a force law; a constraint has none (the
+        # constraint solver's λ, dynamics.constrained)
+        self._forces = [(i, *link) for i, link in enumerate(self._frames) if link[2].constraint is None]
 
     # -- the interface (implemented by both backends) --------------------------------------------
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
@@ -268,9 +283,7 @@ class PythonDynamics(Dynamics):
         if matrices:
             K_t = np.zeros((model.nv, model.nv))
             D_t = np.diag(self._damping)
-        for i, (t_id, g_id, element) in enumerate(self._frames):
-            if element.constraint is not None:  # no force law: the constraint solver's λ (dynamics.constrained)
-                continue
+        for i, t_id, g_id, element in self._forces:
             T_M_G, Jr = self._relative(t_id, g_id)
             ev = element.evaluate(T_M_G, Jr @ v, matrices)
             Q += Jr.T @ ev.G_f_G
@@ -313,9 +326,10 @@ class PythonDynamics(Dynamics):
     def factor(
         self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
     ) -> None:
+        gh, gh2 = step_coefficients(gh, gh2)
         K_g, D_g = K.copy(), D.copy()
         self.add_joint_gains(K_g, D_g, kp, kd)
-        S = M + gh * D_g + (gh * gh if gh2 is None else gh2) * K_g
+        S = M + gh * D_g + gh2 * K_g
         if not np.all(np.isfinite(S)):  # numpy's Cholesky "succeeds" on NaN
             self._step = None
             raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite")

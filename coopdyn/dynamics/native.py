@@ -15,7 +15,7 @@ from ..errors import CoopdynError, KernelError
 from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
-from .dynamics import Dynamics, Readouts
+from .dynamics import Dynamics, Readouts, step_coefficients
 
 
 def _kernel_error(exc: Exception, what: str) -> KernelError:
@@ -67,7 +67,7 @@ class NativeDynamics(Dynamics):
     def factor(
         self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
     ) -> None:
-        gh2 = gh * gh if gh2 is None else gh2
+        gh, gh2 = step_coefficients(gh, gh2)
         self._call("factor(M, K, D, gh, kp, kd, gh2)", self._kernel.factor, M, K, D, gh, kp, kd, gh2)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
+from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
 
@@ -53,8 +54,6 @@ class LinearlyImplicitEuler(Integrator):
 
     def __init__(self, jacobian_every: int = 1) -> None:
         if isinstance(jacobian_every, bool) or not isinstance(jacobian_every, int) or jacobian_every < 1:
-            from ..errors import SimulationError
-
             raise SimulationError(f"jacobian_every must be an integer >= 1, got {jacobian_every!r}")
         self.jacobian_every = jacobian_every
 
@@ -172,11 +171,12 @@ class AdaptiveROS2(AdaptiveIntegrator):
 
 def _check_rho(rho_inf: object) -> float:
     """ρ∞ as a float, or a SimulationError naming the bad value."""
-    rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
+    try:  # float() of a huge int overflows
+        rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
+    except OverflowError:
+        rho = math.nan
     if not 0.0 <= rho <= 1.0:
-        from ..errors import SimulationError
-
-        raise SimulationError(f"rho_inf must be a number in [0, 1], got {rho_inf!r}")
+        raise SimulationError(f"rho_inf must be a number in [0, 1], got {repr(rho_inf)[:40]}")
     return rho
 
 
@@ -314,22 +314,25 @@ class GeneralizedAlpha(Integrator):
         self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
     ) -> tuple[np.ndarray, np.ndarray]:
         am, af, gamma, beta = self.alpha_m, self.alpha_f, self.gamma, self.beta
+        if not h > 0.0:
+            raise SimulationError(f"generalized_alpha needs a step h > 0, got {h!r}")
         f, M, K, D = system.implicit_terms(t, q, v)  # f = M q̈ at the step's start
-        carried = ws is not None and ws.a is not None and np.array_equal(ws.q, q) and np.array_equal(ws.v, v)
-        a = ws.a if carried else cho_solve(cho_factor(M), f)  # a fresh start: a = q̈ (Cholesky, as the kernel)
         # v⁺ = v + dv0 + γc x̂ and q⁺ = q ⊕ (dq0 + βhc x̂), dv0 and dq0 the parts known at the start
         c, dq_a, dv_a = _alpha_step(am, gamma, beta, h)
         gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c  # γ', β'
+        system.factor(M, K, D, gp, bp)  # first: a state that is not finite is a StepMatrixError
+        # the loop hands back the arrays this step returned: same objects, same state (as FSAL)
+        carried = ws is not None and ws.a is not None and ws.q is q and ws.v is v
+        a = ws.a if carried else cho_solve(cho_factor(M), f)  # a fresh start: a = q̈ (Cholesky, as the kernel)
         dv0 = dv_a * a
         dq0 = h * v + dq_a * a
-        system.factor(M, K, D, gp, bp)
         # the linearised solve, for y = γ' x̂ + (1 − α_f) dv0 (the form solve() takes; the D̃ dv0 terms
         # cancel): S y = (1 − α_f) M dv0 + γ' f − γ' K_g (1 − α_f)(dq0 − (β'/γ') dv0)
         _, y = system.solve((1.0 - af) * (dq0 - (bp / gp) * dv0), (1.0 - af) * (M @ dv0) + gp * f)
         xh = (y - (1.0 - af) * dv0) / gp
         q1, v1 = system.integrate(q, dq0 + (beta * h * c) * xh), v + dv0 + (gamma * c) * xh
         # one Newton correction: the residual M((1 − α_f) q̈(q⁺, v⁺) + α_f q̈ − x̂) with S as its Jacobian
-        r = (1.0 - af) * (M @ system.acceleration(t + h, q1, v1)) + af * f - M @ xh
+        r = M @ ((1.0 - af) * system.acceleration(t + h, q1, v1) - xh) + af * f
         _, dx = system.solve(np.zeros_like(v), r)
         xh = xh + dx
         q1, v1 = system.integrate(q, dq0 + (beta * h * c) * xh), v + dv0 + (gamma * c) * xh

@@ -436,10 +436,9 @@ private:
         integrate(q, alpha_dq0_ + (b * h * c) * xh_, qs_);
         vs_ = v + alpha_dv0_ + (g * c) * xh_;
         acceleration(t + h, qs_, vs_, tmp_);  // the Newton correction's residual
+        tmp_ = (1.0 - af) * tmp_ - xh_;
         kv2_.noalias() = M_ * tmp_;
-        kv2_ *= (1.0 - af);
         kv2_ += af * f1_;
-        kv2_.noalias() -= M_ * xh_;
         kq1_.setZero(v.size());
         k_.solve_into(kq1_, kv2_, kq2_, kv1_);
         xh_ += kv1_;
