@@ -2,7 +2,9 @@
 the code a worker runs for each (:func:`run_chunk`), which turns any outcome into a row.
 
 A worker receives a *job* — the user's ``make_case`` function, or a scene-file spec's text —
-once per process (:func:`run_chunk` keeps it by its hash) and a chunk of items (run number,
+once per process where the engine allows (local processes: when the process starts; Dask: one
+broadcast; another executor: with every chunk, :func:`run_chunk` unpacking it once by its hash)
+and chunks of items (run number,
 parameters, seed). It builds each case itself, so no scene, Pinocchio ``Data`` or compiled
 kernel ever crosses a process boundary: the kernel is built lazily, in the worker, by the first
 simulation of each scene.
@@ -410,11 +412,14 @@ def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> 
 
 
 _JOBS: dict[str, Any] = {}  #: jobs a worker process has unpacked, by the hash of their bytes
+_LAST_JOB: list[Any] = []  #: [the last payload object, its job]: no hash for a payload seen before
 
 
 def _job(payload: bytes | PythonJob | SpecJob) -> Any:
     if not isinstance(payload, bytes):
         return payload  # in-process: the job itself
+    if _LAST_JOB and _LAST_JOB[0] is payload:  # a local worker's chunks share one payload object
+        return _LAST_JOB[1]
     key = hashlib.sha256(payload).hexdigest()
     if key not in _JOBS:
         import cloudpickle
@@ -422,6 +427,7 @@ def _job(payload: bytes | PythonJob | SpecJob) -> Any:
         if len(_JOBS) > 8:
             _JOBS.clear()
         _JOBS[key] = cloudpickle.loads(payload)
+    _LAST_JOB[:] = [payload, _JOBS[key]]
     return _JOBS[key]
 
 

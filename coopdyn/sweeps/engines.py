@@ -72,13 +72,24 @@ class Serial:
         pass
 
 
-def _worker_init(markers: str) -> None:
+_PAYLOAD: Any = None  #: a local worker's job, handed over once when its process starts
+
+
+def _worker_init(markers: str, payload: Any = None) -> None:
     """A local worker: Ctrl-C is the parent's to handle (it stops the pool); a fatal signal writes
-    the Python stack to ``markers/<pid>.fault`` for the crashed row's message."""
+    the Python stack to ``markers/<pid>.fault`` for the crashed row's message; ``payload`` is the
+    job every chunk of this process runs (inherited under fork, pickled once under spawn)."""
+    global _PAYLOAD
+    _PAYLOAD = payload
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     import faulthandler
 
     faulthandler.enable(file=open(Path(markers) / f"{os.getpid()}.fault", "w"))
+
+
+def _local_chunk(items: list[Item], trajectories: str | None, markers: str) -> Rows:
+    """A local worker's task: ``items`` of the job it was started with."""
+    return run_chunk(_PAYLOAD, items, trajectories, markers)
 
 
 def _alone(payload: Any, item: Item, trajectories: str | None, markers: str, conn: Any) -> None:
@@ -106,9 +117,9 @@ class LocalProcesses:
         self._pool: cf.ProcessPoolExecutor | None = None
         self._solo: Any = None  #: the process running a suspect alone
 
-    def _new_pool(self) -> cf.ProcessPoolExecutor:
+    def _new_pool(self, payload: Any) -> cf.ProcessPoolExecutor:
         self._pool = cf.ProcessPoolExecutor(
-            self.workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers,)
+            self.workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers, payload)
         )
         return self._pool
 
@@ -116,8 +127,8 @@ class LocalProcesses:
         todo: deque[list[Item]] = deque(work)
         size = max(len(c) for c in work) if work else 1
         while todo:
-            pool = self._new_pool()
-            futures = {pool.submit(run_chunk, payload, c, trajectories, self._markers): c for c in todo}
+            pool = self._new_pool(payload)  # the job once per process, not once per chunk
+            futures = {pool.submit(_local_chunk, c, trajectories, self._markers): c for c in todo}
             todo.clear()
             lost: list[Item] = []
             for future in cf.as_completed(futures):
@@ -244,6 +255,8 @@ class Executor:
         self._futures: dict[cf.Future[Rows], list[Item]] = {}  #: submitted, not yet collected
 
     def run(self, payload: Any, work: Sequence[list[Item]], trajectories: str | None) -> Iterator[Rows]:
+        if self.client is not None:  # on Dask: the job to every worker once, each chunk refers to it
+            payload = self.client.scatter(payload, broadcast=True)
         futures = self._futures = {self.executor.submit(run_chunk, payload, c, trajectories): c for c in work}
         while futures:
             done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
