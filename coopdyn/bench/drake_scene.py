@@ -117,6 +117,7 @@ class DrakeScene:
             vd.append(joint.velocity_start())
         self._qi, self._qd, self._vi, self._vd = (np.array(x, dtype=int) for x in (qi, qd, vi, vd))
         self._free: tuple[int, int, int, int] | None = None  # (pin idx_q, pin idx_v, drake q start, drake v start)
+        self._R: np.ndarray | None = None  # the free body's rotation at the last to_pinocchio state
         if self._free_body is not None:
             jm = model.joints[free_joint]
             self._free = (
@@ -148,7 +149,8 @@ class DrakeScene:
         return x
 
     def to_pinocchio(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pinocchio's q (nq,) and v (nv,) from Drake's state x (nq + nv,)."""
+        """Pinocchio's q (nq,) and v (nv,) from Drake's state x (nq + nv,); the free body's
+        rotation is kept for :meth:`generalized_force` at this state."""
         model, nq = self.scene.model, self.plant.num_positions()
         q, v = np.zeros(model.nq), np.zeros(model.nv)
         q[self._qi] = x[self._qd]
@@ -158,14 +160,15 @@ class DrakeScene:
             qw, qx, qy, qz = x[qa : qa + 4] / np.linalg.norm(x[qa : qa + 4])
             q[iq : iq + 3] = x[qa + 4 : qa + 7]
             q[iq + 3 : iq + 7] = [qx, qy, qz, qw]
-            R = _rotation(qw, qx, qy, qz)
+            R = self._R = _rotation(qw, qx, qy, qz)
             v[iv : iv + 3] = R.T @ x[nq + va + 3 : nq + va + 6]
             v[iv + 3 : iv + 6] = R.T @ x[nq + va : nq + va + 3]
         return q, v
 
-    def generalized_force(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def generalized_force(self, t: float, q: np.ndarray, v: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         """The interconnections' and the controller's generalized force (nv,) [N, N·m] at time t [s]
-        and Pinocchio's (q, v), in Drake's velocity coordinates."""
+        and Pinocchio's (q, v), in Drake's velocity coordinates (``R``: the free body's rotation at
+        q, when known)."""
         Q = self._dynamics.generalized_spring_force(q, v)  # joint damping is Drake's own
         if self.controller is not None:
             Q[self._actuated] += np.asarray(self.controller(t, q, v), dtype=float)
@@ -173,7 +176,7 @@ class DrakeScene:
         out[self._vd] = Q[self._vi]
         if self._free is not None:
             iq, iv, _, va = self._free
-            R = _rotation(q[iq + 6], *q[iq + 3 : iq + 6])
+            R = _rotation(q[iq + 6], *q[iq + 3 : iq + 6]) if R is None else R
             out[va : va + 3] = R @ Q[iv + 3 : iv + 6]  # Q·v = (R Q_ang)·ω_W + (R Q_lin)·v_W
             out[va + 3 : va + 6] = R @ Q[iv : iv + 3]
         return out
@@ -193,7 +196,7 @@ class DrakeScene:
 
             def calc(self, context: Any, output: Any) -> None:
                 q, v = peer.to_pinocchio(self.x.Eval(context))
-                output.SetFromVector(peer.generalized_force(context.get_time(), q, v))
+                output.SetFromVector(peer.generalized_force(context.get_time(), q, v, peer._R))
 
         builder = drake.DiagramBuilder()
         builder.AddSystem(plant)
