@@ -15,6 +15,7 @@
 #include <eigenpy/eigenpy.hpp>
 #include <boost/python.hpp>
 
+#include "aba.hpp"
 #include "elements.hpp"
 
 #include <algorithm>
@@ -65,7 +66,7 @@ public:
   Kernel(bp::object model_obj, bp::object data_obj, bp::list links, const RefVec & damping,
          const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame)
     : model_obj_(model_obj), data_obj_(data_obj),
-      model_(bp::extract<const Model &>(model_obj)), data_(bp::extract<Data &>(data_obj)),
+      model_(bp::extract<const Model &>(model_obj)), data_(bp::extract<Data &>(data_obj)), aba_(model_),
       damping_(damping), actuated_(actuated), object_frame_(object_frame) {
     const auto nv = model_.nv;
     check_size(damping, nv, "damping");
@@ -98,7 +99,7 @@ public:
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
     const Vector6 w = object_wrench(wrench);
     kinematics(q, v, false);
-    return forward_dynamics(q, v, tau, wrench.is_none() ? nullptr : &w);
+    return forward_dynamics(v, tau, wrench.is_none() ? nullptr : &w);
   }
 
   // Q = Σ Jrᵀ G_f_G (nv), the interconnections' generalized force at (q, v).
@@ -157,7 +158,7 @@ public:
   }
   // q̈ at (q, v, τ) after kinematics(q, v, false) (a reference into the Data, valid until the next call).
   const VectorXd & accel(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
-    return forward_dynamics(q, v, tau, nullptr);
+    return forward_dynamics(v, tau, nullptr);
   }
   // f = M q̈, M, K̃, D̃ at (q, v, τ) after kinematics(q, v, true), left in f_terms(), mass(),
   // stiffness(), damping().
@@ -346,7 +347,7 @@ private:
   // q̈ at (q, v, τ) after kinematics(q, v, false): each element's wrench from the frames'
   // placements and velocities (as the readouts), applied to the joints carrying T and G as
   // external forces of the articulated-body algorithm; equal to Σ Jrᵀ G_f_G without the Jacobians.
-  const VectorXd & forward_dynamics(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
+  const VectorXd & forward_dynamics(const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
     if (kinematics_ != VELOCITIES) throw std::logic_error("accel needs kinematics(q, v, false) first");
     kinematics_ = NONE;
     check_size(tau, actuated_.size(), "tau");
@@ -369,7 +370,7 @@ private:
     }
     tau_full_.setZero();
     joint_torques(v, tau, p_diss);
-    return pinocchio::aba(model_, data_, q, v, tau_full_, fext_);
+    return aba_.accelerations(model_, data_, tau_full_, fext_);
   }
 
   // What the implicit methods need at (q, v), after kinematics(q, v, true): tau_full_ = f =
@@ -490,6 +491,7 @@ private:
   bp::object model_obj_, data_obj_;  // keep the Python objects alive
   const Model & model_;
   Data & data_;
+  ArticulatedBody aba_;
   std::vector<Link> links_;
   VectorXd damping_;
   Eigen::VectorXi actuated_;
@@ -499,7 +501,7 @@ private:
   int rotation_alarm_ = -1;
   double rotation_alarm_angle_ = 0.0;
   enum Kinematics { NONE, VELOCITIES, JACOBIANS } kinematics_ = NONE;  // what data_ holds for the next step
-  std::vector<pinocchio::Force> fext_;
+  ForceList fext_;
   bool gravity_ok_ = false;
   std::vector<pinocchio::JointIndex> gravity_joint_;
   std::vector<pinocchio::Motion> gravity_axis_;
