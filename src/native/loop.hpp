@@ -98,8 +98,11 @@ public:
     tau_.setZero(na_);
     neutral_ = pinocchio::neutral(model_);
     for (pinocchio::JointIndex j = 1; j < model_.joints.size(); ++j)
-      if (model_.joints[j].nv() > 1) chart_.emplace_back(model_.joints[j].idx_v(), model_.joints[j].nv());
-    if (!chart_.empty()) dI_.setZero(nv, nv);
+      if (model_.joints[j].nv() > 1)
+        chart_.push_back({model_.joints[j].idx_v(), model_.joints[j].nv(),
+                          model_.joints[j].shortname() == "JointModelFreeFlyer"});
+    other_charts_ = std::any_of(chart_.begin(), chart_.end(), [](const Chart & c) { return !c.free_flyer; });
+    if (other_charts_) dI_.setZero(nv, nv);
     // the output grid
     if (adaptive_) {
       for (long k = every_; k < n_steps_; k += every_) outputs_.push_back(std::min(double(k) * dt_, t_final_));
@@ -253,13 +256,18 @@ private:
     k_.factor(M, K, D, gh, kp_, kd_, gh2);
   }
   void integrate(const VectorXd & q, const VectorXd & dq, VectorXd & out) { pinocchio::integrate(model_, q, dq, out); }
-  // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks.
+  // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks (a free flyer's block is Jexp6(δ),
+  // which pinocchio::dIntegrate computes for it; the other joints' blocks come from dIntegrate).
   void chart_velocity(const VectorXd & q0, const VectorXd & delta, const VectorXd & v, VectorXd & out) {
     out = v;
     if (chart_.empty()) return;
-    pinocchio::dIntegrate(model_, q0, delta, dI_, pinocchio::ARG1);
-    for (const auto & [i0, n] : chart_) {
-      if (n == 6)  // free flyer: fixed size, no allocation
+    if (other_charts_) pinocchio::dIntegrate(model_, q0, delta, dI_, pinocchio::ARG1);
+    for (const auto & [i0, n, free_flyer] : chart_) {
+      if (free_flyer) {  // fixed size, no allocation
+        Eigen::Matrix<double, 6, 6> J;
+        pinocchio::Jexp6<pinocchio::SETTO>(pinocchio::Motion(Vector6(delta.segment<6>(i0))), J);
+        out.segment<6>(i0) = J.partialPivLu().solve(v.segment<6>(i0));
+      } else if (n == 6)
         out.segment<6>(i0) = Eigen::Matrix<double, 6, 6>(dI_.block<6, 6>(i0, i0)).partialPivLu().solve(v.segment<6>(i0));
       else if (n == 3)
         out.segment<3>(i0) = Eigen::Matrix3d(dI_.block<3, 3>(i0, i0)).partialPivLu().solve(v.segment<3>(i0));
@@ -669,7 +677,12 @@ private:
   Eigen::Index na_ = 0;
   Eigen::VectorXi act_;
   VectorXd neutral_;
-  std::vector<std::pair<Eigen::Index, Eigen::Index>> chart_;
+  struct Chart {
+    Eigen::Index i0, n;  // the joint's velocity block
+    bool free_flyer;
+  };
+  std::vector<Chart> chart_;  // the joints with more than one degree of freedom
+  bool other_charts_ = false;  // one of them is not a free flyer: chart_velocity needs dIntegrate
   MatrixXd dI_;
   std::vector<double> outputs_;
   std::size_t j_out_ = 0;
