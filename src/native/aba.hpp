@@ -6,9 +6,9 @@
 // accelerations in world gravity (data.a) and the joint forces (data.f), which q̈ does not need.
 // ArticulatedBody runs only the rest, with the same operations in the same order, so q̈ is
 // Pinocchio's to the last bit (tested against pinocchio.aba in tests/test_native.py):
-//   pass 1: the bias acceleration c + v × v_J, the articulated inertia started from the body's
-//           constant spatial inertia matrix, the bias force v ×* I v − f_ext;
-//   pass 2 (leaves to root): Pinocchio's backward step;
+//   pass 1: the articulated inertia started from the body's constant spatial inertia matrix,
+//           the bias force v ×* I v − f_ext (these need no joint type: a plain loop);
+//   pass 2 (leaves to root): the bias acceleration c + v × v_J, then Pinocchio's backward step;
 //   pass 3 (root to leaves): the accelerations and q̈.
 #pragma once
 
@@ -27,23 +27,8 @@ namespace aba_detail {
 using pinocchio::Data;
 using pinocchio::Model;
 
-struct BiasStep : pinocchio::fusion::JointUnaryVisitorBase<BiasStep> {
-  typedef boost::fusion::vector<const Model &, Data &, const Matrix6List &, const ForceList &> ArgsType;
-
-  template <typename JointModel>
-  static void algo(const pinocchio::JointModelBase<JointModel> & jmodel,
-                   pinocchio::JointDataBase<typename JointModel::JointDataDerived> & jdata, const Model & model,
-                   Data & data, const Matrix6List & inertia_matrices, const ForceList & fext) {
-    const auto i = jmodel.id();
-    data.a_gf[i] = jdata.c() + (data.v[i] ^ jdata.v());
-    data.Yaba[i] = inertia_matrices[i];
-    data.h[i] = model.inertias[i] * data.v[i];
-    data.f[i] = data.v[i].cross(data.h[i]);
-    data.f[i] -= fext[i];
-  }
-};
-
-// pinocchio::impl::AbaLocalConventionBackwardStep.
+// pinocchio::impl::AbaLocalConventionBackwardStep, after the bias acceleration of pass 1 (which
+// needs the joint's type, as this step does).
 struct BackwardStep : pinocchio::fusion::JointUnaryVisitorBase<BackwardStep> {
   typedef boost::fusion::vector<const Model &, Data &> ArgsType;
 
@@ -53,6 +38,7 @@ struct BackwardStep : pinocchio::fusion::JointUnaryVisitorBase<BackwardStep> {
                    Data & data) {
     const auto i = jmodel.id();
     const auto parent = model.parents[i];
+    data.a_gf[i] = jdata.c() + (data.v[i] ^ jdata.v());
     Data::Matrix6 & Ia = data.Yaba[i];
     jmodel.jointVelocitySelector(data.u) -= jdata.S().transpose() * data.f[i];
     jmodel.calc_aba(jdata.derived(), jmodel.jointVelocitySelector(model.armature), Ia, parent > 0);
@@ -99,8 +85,12 @@ public:
     data.a_gf[0] = -model.gravity;
     data.u = tau;
     const auto n = static_cast<pinocchio::JointIndex>(model.njoints);
-    for (pinocchio::JointIndex i = 1; i < n; ++i)
-      BiasStep::run(model.joints[i], data.joints[i], BiasStep::ArgsType(model, data, inertia_matrices_, fext));
+    for (pinocchio::JointIndex i = 1; i < n; ++i) {  // pass 1 but for the bias acceleration
+      data.Yaba[i] = inertia_matrices_[i];
+      data.h[i] = model.inertias[i] * data.v[i];
+      data.f[i] = data.v[i].cross(data.h[i]);
+      data.f[i] -= fext[i];
+    }
     for (pinocchio::JointIndex i = n - 1; i > 0; --i)
       BackwardStep::run(model.joints[i], data.joints[i], BackwardStep::ArgsType(model, data));
     for (pinocchio::JointIndex i = 1; i < n; ++i)
