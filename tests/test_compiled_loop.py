@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,6 +97,51 @@ def test_gravity_compensation_outside_a_right_hand_side(book: cd.Scene) -> None:
     ctrl = GravityCompensationPD(book, 50.0, 5.0)
     py, co = _both(book, 0.5, controller=ctrl, integrator="exponential", dt=1e-3, v0=np.full(book.nv, 0.1), save_every=7)
     assert co.status == "completed" and np.min(np.abs(co.tau)) > 50.0  # gravity is most of the torque here
+    _assert_same(py, co)
+
+
+_PLANAR_ARM = """<?xml version="1.0"?>
+<robot name="planar_arm">
+  <link name="base"/>
+  <link name="carriage">
+    <inertial><origin xyz="0.05 0.02 0.1"/><mass value="3.0"/>
+      <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.04"/></inertial>
+  </link>
+  <joint name="plane" type="planar">
+    <parent link="base"/><child link="carriage"/>
+    <origin xyz="0 0 0.5" rpy="1.5707963267948966 0 0"/><axis xyz="0 0 1"/>
+  </joint>
+  <link name="forearm">
+    <inertial><origin xyz="0.15 0 0"/><mass value="1.0"/>
+      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>
+  </link>
+  <joint name="elbow" type="revolute">
+    <parent link="carriage"/><child link="forearm"/>
+    <origin xyz="0.1 0 0.2"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="100" velocity="10"/>
+  </joint>
+  <link name="tip"/>
+  <joint name="tip_joint" type="fixed"><parent link="forearm"/><child link="tip"/><origin xyz="0.3 0 0"/></joint>
+</robot>
+"""
+
+
+def test_gravity_compensation_on_a_joint_the_kinematic_gravity_does_not_take(tmp_path: Path) -> None:
+    """An arm on a planar joint (three degrees of freedom, a configuration-dependent motion
+    subspace): the kernel cannot read g(q) off its kinematics pass, so the compiled
+    GravityCompensationPD takes it from Pinocchio's RNEA — and gives the Python loop's run."""
+    urdf = tmp_path / "planar_arm.urdf"
+    urdf.write_text(_PLANAR_ARM)
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[0.4, 0.0, 0.6])
+    stiffness = cd.diagonal([1e3] * 3, [10.0] * 3)
+    scene = cd.Scene([cd.Arm("a", str(urdf), tip_frame="tip")], box, [cd.Interconnection("a", stiffness=stiffness)])
+    nat = cd.Dynamics(scene, backend="native")
+    with pytest.raises(ValueError, match="revolute, prismatic or helical"):
+        nat._kernel.gravity(scene.q0)  # type: ignore[attr-defined]
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.1
+    ctrl = GravityCompensationPD(scene, 20.0, 2.0)
+    py, co = _both(scene, 0.2, controller=ctrl, integrator="rk4", dt=1e-3, v0=v0, save_every=5)
+    assert np.max(np.abs(co.tau)) > 10.0  # gravity is most of the torque
     _assert_same(py, co)
 
 
