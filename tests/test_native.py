@@ -95,10 +95,12 @@ def test_gravity_read_off_the_kinematics_is_pinocchios(name: str) -> None:
         _close(nat._kernel.gravity(q), g)
 
 
-def _every_joint_kind_arm() -> tuple[pin.Model, np.ndarray, int, int, int]:
+def _every_joint_kind_arm(multi_dof: bool = False) -> tuple[pin.Model, np.ndarray, int, int, int]:
     """A chain with every joint kind ``Kernel.gravity`` takes (unaligned, unbounded, helical,
     prismatic; a side branch), random placements and inertias, and a free-flying object with a
-    tip–grasp pair and an object frame: (model, actuated, tip, grasp, object frame)."""
+    tip–grasp pair and an object frame: (model, actuated, tip, grasp, object frame). With
+    ``multi_dof``, also the joints of more than one degree of freedom (spherical, ZYX, planar,
+    translation, universal, a composite) and a rotor armature on every joint."""
     rng = np.random.default_rng(0)
 
     def placement() -> pin.SE3:
@@ -121,6 +123,17 @@ def _every_joint_kind_arm() -> tuple[pin.Model, np.ndarray, int, int, int]:
         pin.JointModelRY(),
         pin.JointModelPX(),
     ]
+    if multi_dof:
+        composite = pin.JointModelComposite(pin.JointModelRX())
+        composite.addJoint(pin.JointModelPY(), placement())
+        kinds += [
+            pin.JointModelSpherical(),
+            pin.JointModelSphericalZYX(),
+            pin.JointModelPlanar(),
+            pin.JointModelTranslation(),
+            pin.JointModelUniversal(axis(), axis()),
+            composite,
+        ]
     model, parent = pin.Model(), 0
     for i, kind in enumerate(kinds):
         parent = model.addJoint(parent, kind, placement(), f"j{i}")
@@ -134,6 +147,8 @@ def _every_joint_kind_arm() -> tuple[pin.Model, np.ndarray, int, int, int]:
     grasp = model.addFrame(pin.Frame("grasp", obj, 0, placement(), pin.FrameType.OP_FRAME))
     frame = model.addFrame(pin.Frame("object_frame", obj, 0, placement(), pin.FrameType.OP_FRAME))
     actuated = np.array([model.joints[j].idx_v for j in range(1, model.njoints) if model.names[j] != "object"], dtype=np.int32)
+    if multi_dof:
+        model.armature = rng.uniform(0.0, 0.05, model.nv)
     return model, actuated, tip, grasp, frame
 
 
@@ -160,9 +175,9 @@ def test_gravity_and_external_forces_are_right_for_every_joint_kind() -> None:
 def test_the_articulated_body_pass_is_pinocchios_aba() -> None:
     """The kernel's articulated-body pass, which starts from its kinematics pass instead of
     redoing it, gives pinocchio.aba's q̈ for the same joint torques and the same external forces
-    (the element's wrench on the joints carrying G and T), on every joint kind: the same operations
-    in the same order, so the same bits."""
-    model, actuated, tip, grasp, frame = _every_joint_kind_arm()
+    (the element's wrench on the joints carrying G and T), on every joint kind, with rotor armature:
+    the same operations in the same order, so the same bits."""
+    model, actuated, tip, grasp, frame = _every_joint_kind_arm(multi_dof=True)
     K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
     kernel = backend.kernel_module().Kernel(
         model, model.createData(), [("se3", tip, grasp, (K, D))], np.zeros(model.nv), actuated, frame

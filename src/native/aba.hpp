@@ -71,6 +71,7 @@ struct ForwardStep : pinocchio::fusion::JointUnaryVisitorBase<ForwardStep> {
 
 class ArticulatedBody {
 public:
+  // The model's inertias are read here once (a scene's model does not change after it is built).
   explicit ArticulatedBody(const pinocchio::Model & model) {
     for (const auto & inertia : model.inertias) inertia_matrices_.push_back(inertia.matrix());
   }

@@ -53,7 +53,7 @@ struct GravityPD : Controller {
       q_des(std::move(q_des)), dq(model.nv), g_rnea(act.size()) {}
   bool reads_kernel() const override { return kernel.kinematic_gravity(); }
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    const VectorXd & g = kernel.kinematic_gravity() ? kernel.actuated_gravity() : rnea_gravity(q);
+    const VectorXd & g = kernel.kinematic_gravity() ? kernel.actuated_gravity(q) : rnea_gravity(q);
     pinocchio::difference(model, q, q_des, dq);
     for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] = (g[i] + kp[i] * dq[act[i]]) - kd[i] * v[act[i]];
   }

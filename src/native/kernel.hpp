@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -117,7 +118,7 @@ public:
         "gravity: every actuated joint must be revolute, prismatic or helical (one degree of freedom, a constant "
         "axis) in a model without mimic joints");
     kinematics(q, VectorXd::Zero(model_.nv), false);
-    return actuated_gravity();
+    return actuated_gravity(q);
   }
 
   // --- the C++ interface of the compiled step loop (loop.hpp): no Python objects, no wrench ---
@@ -136,16 +137,20 @@ public:
     else
       pinocchio::forwardKinematics(model_, data_, q, v);
     kinematics_ = jacobians ? JACOBIANS : VELOCITIES;
+    kinematics_q_ = q;
   }
   // Whether actuated_gravity applies: every actuated joint has one degree of freedom and a
   // constant motion subspace (revolute, prismatic, helical), as URDF arms have, and no joint
   // mimics another.
   bool kinematic_gravity() const { return gravity_ok_; }
-  // g(q) on the actuated joints from the placements of the last kinematics(): the subtrees'
-  // masses and first moments, each joint's axis against their weight. (A reference, valid until
-  // the next call.)
-  const VectorXd & actuated_gravity() {
+  // g(q) on the actuated joints from the placements of the last kinematics(), which must have
+  // been at this q: the subtrees' masses and first moments, each joint's axis against their
+  // weight. (A reference, valid until the next call.)
+  const VectorXd & actuated_gravity(const VectorXd & q) {
     if (kinematics_ == NONE) throw std::logic_error("actuated_gravity before kinematics");
+    if (q.size() != kinematics_q_.size() ||
+        std::memcmp(q.data(), kinematics_q_.data(), sizeof(double) * static_cast<std::size_t>(q.size())) != 0)
+      throw std::logic_error("actuated_gravity at another q than the last kinematics pass");  // bits: NaN is NaN
     pinocchio::centerOfMass(model_, data_, pinocchio::POSITION, false);  // mass-weighted: no 0/0
     const Eigen::Vector3d & o_g = model_.gravity.linear();
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
@@ -501,6 +506,7 @@ private:
   int rotation_alarm_ = -1;
   double rotation_alarm_angle_ = 0.0;
   enum Kinematics { NONE, VELOCITIES, JACOBIANS } kinematics_ = NONE;  // what data_ holds for the next step
+  VectorXd kinematics_q_;  // the q of the last kinematics()
   ForceList fext_;
   bool gravity_ok_ = false;
   std::vector<pinocchio::JointIndex> gravity_joint_;
