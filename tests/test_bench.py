@@ -61,3 +61,20 @@ def test_peer_comparison_on_the_panda_scene() -> None:
         assert max(v for k, v in result["checks"].items() if k.endswith("(Drake)")) < 1e-12
         assert {"drake discrete", "drake runge_kutta3"} <= {r.method for r in result["rows"]}
         assert "MuJoCo, Drake and Exudyn" in table or "MuJoCo and Drake" in table
+
+
+def test_benchmarks_hold_blas_to_one_thread() -> None:
+    """Inside ``single_threaded_blas`` every BLAS library numpy and scipy loaded runs one thread
+    (an idle pool's spinning would be charged to the next timed run), and the limit is lifted after."""
+    from threadpoolctl import threadpool_info
+
+    from coopdyn.bench import single_threaded_blas
+
+    def blas_threads() -> list[int]:
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    before = blas_threads()
+    assert before
+    with single_threaded_blas():
+        assert set(blas_threads()) == {1}
+    assert blas_threads() == before

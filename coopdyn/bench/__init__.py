@@ -7,7 +7,9 @@ compares with a reference of a *different* method, and writes a table (CSV) and 
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +30,20 @@ from .report import (
 from .stability import is_stable_at, measure_stable_dt
 
 
+@contextlib.contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """BLAS (OpenBLAS, under numpy and scipy) on one thread while benchmarks run (threadpoolctl).
+
+    Every matrix a benchmark multiplies or factorises is small (at most 41 × 41), where a BLAS
+    thread pool gains nothing; and an idle OpenBLAS worker keeps spinning for a while after each
+    call, CPU time that ``time.process_time`` charges to whichever run comes next, at random.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 def run_peer_comparison(
     out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True
 ) -> dict[str, Any]:
@@ -45,7 +61,8 @@ def run_peer_comparison(
     require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=1 if quick else 5, progress=progress)
+    with single_threaded_blas():
+        result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=1 if quick else 5, progress=progress)
     files = {
         "rows": write_csv(result["rows"], out_dir / "peers.csv"),
         "chart": plot_work_precision(result["rows"], out_dir / "peers.png"),
@@ -78,11 +95,12 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
         "generalized_alpha",
         "exponential",
     ]
-    rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
-    rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
-    stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)
-    timing = rhs_timing(200 if quick else 2000)
-    implicit_cost = _implicit_cost([1e4, 1e7] if quick else [1e4, 1e5, 1e6, 1e7], 0.2 if quick else 1.0)
+    with single_threaded_blas():
+        rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
+        rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
+        stab = stability_sweep(stiffnesses + ([] if quick else [1e7]), progress=progress, quick=quick)
+        timing = rhs_timing(200 if quick else 2000)
+        implicit_cost = _implicit_cost([1e4, 1e7] if quick else [1e4, 1e5, 1e6, 1e7], 0.2 if quick else 1.0)
     files = {
         "rows": write_csv(rows, out_dir / "work_precision.csv"),
         "stability": write_csv(stab, out_dir / "stability.csv"),
@@ -113,6 +131,7 @@ __all__ = [
     "rhs_timing",
     "run_benchmarks",
     "run_peer_comparison",
+    "single_threaded_blas",
     "stability_sweep",
     "work_precision",
 ]
