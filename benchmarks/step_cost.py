@@ -55,32 +55,6 @@ def _kernel_work(
     return per_call * rhs_per_step if method in EXPLICIT else per_call
 
 
-def _measure(
-    repeats: int,
-    seconds: float,
-    scene: cd.Scene,
-    ctrl: GravityCompensationPD,
-    v0: np.ndarray,
-    dyn: cd.Dynamics,
-    tau: np.ndarray,
-    times: dict[tuple[str, str], list[float]],
-    rhs_per_step: dict[str, float],
-) -> None:
-    """Fill ``times`` and ``rhs_per_step``: every method in each loop, and the kernel's work, run by run."""
-    for _ in range(repeats):
-        for method in METHODS:
-            dt = 2.5e-4 if method == "symplectic_euler" else 5e-4 if method == "rk4" else 1e-3
-            for loop in ("compiled", "python"):
-                res = cd.simulate(
-                    scene, seconds, controller=ctrl, integrator=method, dt=dt, v0=v0, save_every=round(0.01 / dt), loop=loop
-                )
-                times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
-                if loop == "compiled":
-                    rhs_per_step[method] = res.n_rhs / res.n_steps  # incl. rejected attempts and short landing steps
-            work = _kernel_work(dyn, method, scene.q0, v0, tau, 2000, rhs_per_step[method])
-            times.setdefault((method, "kernel"), []).append(work)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=5)
@@ -94,7 +68,25 @@ def main() -> None:
     times: dict[tuple[str, str], list[float]] = {}
     rhs_per_step: dict[str, float] = {}
     with single_threaded_blas():
-        _measure(args.repeats, args.seconds, scene, ctrl, v0, dyn, tau, times, rhs_per_step)
+        for _ in range(args.repeats):
+            for method in METHODS:
+                dt = 2.5e-4 if method == "symplectic_euler" else 5e-4 if method == "rk4" else 1e-3
+                for loop in ("compiled", "python"):
+                    res = cd.simulate(
+                        scene,
+                        args.seconds,
+                        controller=ctrl,
+                        integrator=method,
+                        dt=dt,
+                        v0=v0,
+                        save_every=round(0.01 / dt),
+                        loop=loop,
+                    )
+                    times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
+                    if loop == "compiled":
+                        rhs_per_step[method] = res.n_rhs / res.n_steps  # incl. rejected attempts and short landing steps
+                work = _kernel_work(dyn, method, scene.q0, v0, tau, 2000, rhs_per_step[method])
+                times.setdefault((method, "kernel"), []).append(work)
     print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; two Pandas + box, k = 1e4 N/m")
     head = (
         f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}"

@@ -63,18 +63,19 @@ def test_peer_comparison_on_the_panda_scene() -> None:
         assert "MuJoCo, Drake and Exudyn" in table or "MuJoCo and Drake" in table
 
 
-def test_benchmarks_hold_blas_to_one_thread() -> None:
-    """Inside ``single_threaded_blas`` every BLAS library numpy and scipy loaded runs one thread
-    (an idle pool's spinning would be charged to the next timed run), and the limit is lifted after."""
-    from threadpoolctl import threadpool_info
+def test_single_threaded_blas_limits_then_restores() -> None:
+    """Inside ``single_threaded_blas`` (what the benchmarks time under) every BLAS library numpy and
+    scipy loaded runs one thread (an idle pool's spinning would be charged to the next timed run);
+    the limit in force before is restored after."""
+    from threadpoolctl import threadpool_info, threadpool_limits
 
     from coopdyn.bench import single_threaded_blas
 
-    def blas_threads() -> list[int]:
-        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    def blas_threads() -> set[int]:
+        return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
 
-    before = blas_threads()
-    assert before
-    with single_threaded_blas():
-        assert set(blas_threads()) == {1}
-    assert blas_threads() == before
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads() == {2}
+        with single_threaded_blas():
+            assert blas_threads() == {1}
+        assert blas_threads() == {2}

@@ -7,15 +7,13 @@ compares with a reference of a *different* method, and writes a table (CSV) and 
 
 from __future__ import annotations
 
-import contextlib
 import os
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from ..dynamics.backend import resolve
 from .cases import Case, Row, linear_case, panda_case
-from .measure import _implicit_cost, peer_rows, rhs_timing, stability_sweep, work_precision
+from .measure import _implicit_cost, peer_rows, rhs_timing, single_threaded_blas, stability_sweep, work_precision
 from .report import (
     format_implicit_cost,
     format_peers,
@@ -28,20 +26,6 @@ from .report import (
     write_csv,
 )
 from .stability import is_stable_at, measure_stable_dt
-
-
-@contextlib.contextmanager
-def single_threaded_blas() -> Iterator[None]:
-    """BLAS (OpenBLAS, under numpy and scipy) on one thread while benchmarks run (threadpoolctl).
-
-    Every matrix a benchmark multiplies or factorises is small (at most 41 × 41), where a BLAS
-    thread pool gains nothing; and an idle OpenBLAS worker keeps spinning for a while after each
-    call, CPU time that ``time.process_time`` charges to whichever run comes next, at random.
-    """
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
-        yield
 
 
 def run_peer_comparison(

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import statistics
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from typing import Any
 
@@ -25,6 +26,21 @@ from ..simulate import simulate
 from ..stability import advise
 from .cases import OUTPUT_INTERVAL, Case, Row, _forces
 from .stability import measure_stable_dt
+
+
+@contextlib.contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """BLAS (OpenBLAS, under numpy and scipy) on one thread while benchmarks run (threadpoolctl).
+
+    Every matrix a benchmark multiplies or factorises is small (a scene's nv, or the linear case's
+    exponential blocks), where a BLAS thread pool gains nothing; and an idle OpenBLAS worker keeps
+    spinning for a while after each call, CPU time that ``time.process_time`` charges to whichever
+    run comes next, at random.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 def _settings(method: str, quick: bool, linear: bool) -> list[tuple[str, float, float]]:

@@ -1,11 +1,13 @@
 // The articulated-body algorithm after a forwardKinematics(q, v) pass (Featherstone's ABA in
-// Pinocchio's local convention, pinocchio/src/algorithm/aba.hxx, abaLocalConvention with fext).
+// Pinocchio's local convention: abaLocalConvention with fext in pinocchio/src/algorithm/aba.hxx,
+// as of Pinocchio 4.1.0; re-check these steps against it when the pin version moves).
 //
 // pinocchio::aba recomputes what forwardKinematics(q, v) has just left in the Data — each
 // joint's data (calc), liMi and the body velocities — and, after the accelerations, the body
 // accelerations in world gravity (data.a) and the joint forces (data.f), which q̈ does not need.
 // ArticulatedBody runs only the rest, with the same operations in the same order, so q̈ is
-// Pinocchio's to the last bit (tested against pinocchio.aba in tests/test_native.py):
+// Pinocchio's to the last bit where this extension and the pin wheels are compiled alike (x86-64:
+// tested against pinocchio.aba in tests/test_native.py):
 //   pass 1: the articulated inertia started from the body's constant spatial inertia matrix,
 //           the bias force v ×* I v − f_ext (these need no joint type: a plain loop);
 //   pass 2 (leaves to root): the bias acceleration c + v × v_J, then Pinocchio's backward step;
@@ -27,8 +29,9 @@ namespace aba_detail {
 using pinocchio::Data;
 using pinocchio::Model;
 
-// pinocchio::impl::AbaLocalConventionBackwardStep, after the bias acceleration of pass 1 (which
-// needs the joint's type, as this step does).
+// Pass 1's bias acceleration c + v × v_J (moved here: it needs the joint's type, as this step
+// does, and only this joint's backward step reads it before pass 3), then
+// pinocchio::impl::AbaLocalConventionBackwardStep.
 struct BackwardStep : pinocchio::fusion::JointUnaryVisitorBase<BackwardStep> {
   typedef boost::fusion::vector<const Model &, Data &> ArgsType;
 
@@ -71,7 +74,8 @@ struct ForwardStep : pinocchio::fusion::JointUnaryVisitorBase<ForwardStep> {
 
 class ArticulatedBody {
 public:
-  // The model's inertias are read here once (a scene's model does not change after it is built).
+  // The model's inertias are read here once (as in the rest of the Kernel, a scene's model does not
+  // change after it is built; pass 1's momenta read the same inertias from the model).
   explicit ArticulatedBody(const pinocchio::Model & model) {
     for (const auto & inertia : model.inertias) inertia_matrices_.push_back(inertia.matrix());
   }

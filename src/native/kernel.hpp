@@ -3,7 +3,6 @@
 
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/spatial.hpp>
-#include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/center-of-mass.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/energy.hpp>
@@ -147,10 +146,7 @@ public:
   // been at this q: the subtrees' masses and first moments, each joint's axis against their
   // weight. (A reference, valid until the next call.)
   const VectorXd & actuated_gravity(const VectorXd & q) {
-    if (kinematics_ == NONE) throw std::logic_error("actuated_gravity before kinematics");
-    if (q.size() != kinematics_q_.size() ||
-        std::memcmp(q.data(), kinematics_q_.data(), sizeof(double) * static_cast<std::size_t>(q.size())) != 0)
-      throw std::logic_error("actuated_gravity at another q than the last kinematics pass");  // bits: NaN is NaN
+    check_kinematics_at(q, "actuated_gravity");
     pinocchio::centerOfMass(model_, data_, pinocchio::POSITION, false);  // mass-weighted: no 0/0
     const Eigen::Vector3d & o_g = model_.gravity.linear();
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
@@ -163,11 +159,15 @@ public:
   }
   // q̈ at (q, v, τ) after kinematics(q, v, false) (a reference into the Data, valid until the next call).
   const VectorXd & accel(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
+    check_kinematics_at(q, "accel");
     return forward_dynamics(v, tau, nullptr);
   }
   // f = M q̈, M, K̃, D̃ at (q, v, τ) after kinematics(q, v, true), left in f_terms(), mass(),
   // stiffness(), damping().
-  void terms(const VectorXd & q, const VectorXd & v, const VectorXd & tau) { implicit_parts(q, v, tau, nullptr); }
+  void terms(const VectorXd & q, const VectorXd & v, const VectorXd & tau) {
+    check_kinematics_at(q, "terms");
+    implicit_parts(q, v, tau, nullptr);
+  }
   const VectorXd & f_terms() const { return tau_full_; }
   const MatrixXd & mass() const { return data_.M; }
   const MatrixXd & stiffness() const { return K_t_; }
@@ -181,6 +181,7 @@ public:
   // After kinematics(q, v, true).
   void ie_velocity(const VectorXd & q, const VectorXd & v, const VectorXd & tau, double h, const VectorXd & kp,
                    const VectorXd & kd, VectorXd & v_new) {
+    check_kinematics_at(q, "ie_velocity");
     implicit_parts(q, v, tau, nullptr);
     factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
@@ -452,6 +453,15 @@ private:
       p_diss += (damping_.array() * v.array().square()).sum();
     }
     last_dissipation_ = p_diss;
+  }
+
+  // The loop's protocol (kinematics at q, then what reads it at the same q): a C++ caller that
+  // breaks it is a bug, not a user error. Compared bit for bit, so a NaN q still matches its own pass.
+  void check_kinematics_at(const VectorXd & q, const char * reader) const {
+    if (kinematics_ == NONE) throw std::logic_error(std::string(reader) + " before kinematics");
+    if (q.size() != kinematics_q_.size() ||
+        std::memcmp(q.data(), kinematics_q_.data(), sizeof(double) * static_cast<std::size_t>(q.size())) != 0)
+      throw std::logic_error(std::string(reader) + " at another q than the last kinematics pass");
   }
 
   void watch_rotation(std::size_t link) {

@@ -100,7 +100,7 @@ public:
     for (pinocchio::JointIndex j = 1; j < model_.joints.size(); ++j)
       if (model_.joints[j].nv() > 1)
         chart_.push_back({model_.joints[j].idx_v(), model_.joints[j].nv(),
-                          model_.joints[j].shortname() == "JointModelFreeFlyer"});
+                          boost::get<pinocchio::JointModelFreeFlyer>(&model_.joints[j].toVariant()) != nullptr});
     other_charts_ = std::any_of(chart_.begin(), chart_.end(), [](const Chart & c) { return !c.free_flyer; });
     if (other_charts_) dI_.setZero(nv, nv);
     // the output grid
