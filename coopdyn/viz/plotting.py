@@ -219,7 +219,11 @@ def sweep_heatmap(
     tx, ty = table[x].map(_tick), table[y].map(_tick)  # the cells, once for every metric
     xs, ys = list(dict.fromkeys(tx)), list(dict.fromkeys(ty))
     cells = table.groupby([tx, ty], sort=False).indices  # (x tick, y tick) → row positions
-    completed = (table["status"] == "completed").to_numpy()
+    statuses = table["status"].to_numpy()
+    completed = statuses == "completed"
+    # per cell: its rows, the completed ones, and the other statuses (the same for every metric)
+    cell_rows = [[cells.get((xv, yv), np.empty(0, dtype=int)) for xv in xs] for yv in ys]
+    notes = [[", ".join(sorted(set(statuses[rows]) - {"completed"})) for rows in row] for row in cell_rows]
     fig, axes = plt.subplots(
         1,
         len(values),
@@ -231,20 +235,15 @@ def sweep_heatmap(
     for ax, name in zip(axes[0], values, strict=True):
         label, scale = column_label(name)
         grid = np.full((len(ys), len(xs)), np.nan)
-        notes = [["" for _ in xs] for _ in ys]
         try:
             column = table[name].to_numpy(dtype=float, na_value=np.nan)
         except (TypeError, ValueError) as exc:
             raise SweepError(f"column {name!r} is not numeric: a heat map draws numbers") from exc
-        statuses = table["status"].to_numpy()
-        for i, yv in enumerate(ys):
-            for j, xv in enumerate(xs):
-                rows = cells.get((xv, yv), np.empty(0, dtype=int))
+        for i, row in enumerate(cell_rows):
+            for j, rows in enumerate(row):
                 ok = rows[completed[rows]]
                 if len(ok):
                     grid[i, j] = float(np.mean(column[ok])) * scale
-                if len(ok) < len(rows):
-                    notes[i][j] = ", ".join(sorted(set(statuses[rows]) - {"completed"}))
         finite = grid[np.isfinite(grid)]
         log = finite.size > 1 and finite.min() > 0 and finite.max() > 20 * finite.min()
         norm = LogNorm(finite.min(), finite.max()) if log else None
