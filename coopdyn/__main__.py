@@ -115,8 +115,11 @@ def _sweep(args: argparse.Namespace) -> int:
             number = int(run)
         except ValueError:
             raise SweepError(f"--rerun TABLE RUN: RUN is a run number, got {run!r}") from None
-        report = rerun(table, number)
+        report = rerun(table, number, make_case=args.case, metrics=args.metrics, trust=args.trust)
         return _print_rerun(report)
+    for flag, value in (("--case", args.case), ("--metrics", args.metrics), ("--trust", args.trust or None)):
+        if value is not None:
+            raise SweepError(f"{flag} goes with --rerun TABLE RUN (it names the code that reruns a Python sweep's row)")
     if args.spec is None:
         raise SweepError("give a sweep spec (a scene file with a [sweep] table), or --rerun TABLE RUN")
     for flag, value in (("--workers", args.workers), ("--chunk-size", args.chunk_size)):
@@ -126,7 +129,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.out is not None:
         spec = dataclasses.replace(spec, folder=Path(args.out).resolve())
     with _executor(args) as executor:
-        table = run_spec(spec, executor=executor, workers=args.workers, chunk_size=args.chunk_size)
+        table = run_spec(spec, executor=executor, workers=args.workers, chunk_size=args.chunk_size, resume=args.resume)
     meta = table.attrs["coopdyn.sweep"]
     counts = table["status"].value_counts()
     wall = meta["wall_s"]
@@ -367,7 +370,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--local-cluster", metavar="N", type=int, default=None, help="start a local Dask cluster of N workers and run on it"
     )
     sweep.add_argument("--chunk-size", metavar="N", type=int, default=None, help="runs per task (default: automatic, up to 64)")
+    sweep.add_argument(
+        "--resume",
+        action="store_true",
+        help="finish the sweep that was writing to the folder when it stopped (killed, interrupted): its finished runs are kept",
+    )
     sweep.add_argument("--rerun", nargs=2, metavar=("TABLE", "RUN"), default=None, help="run row RUN of TABLE again and compare")
+    sweep.add_argument(
+        "--case",
+        metavar="WHERE",
+        default=None,
+        help="with --rerun of a Python sweep: its make_case, as MODULE:FUNCTION or FILE.py:FUNCTION (imports/runs that code)",
+    )
+    sweep.add_argument("--metrics", metavar="WHERE", default=None, help="with --rerun: the sweep's metrics function, as --case")
+    sweep.add_argument(
+        "--trust",
+        action="store_true",
+        help="with --rerun: load make_case and metrics from where the table records them (runs code the table names)",
+    )
     sweep.set_defaults(func=_sweep)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)

@@ -1,4 +1,4 @@
-"""Signals (internal): Ctrl-C held while something must not be cut in half; SIGTERM as an interrupt."""
+"""Signals (internal): Ctrl-C held while something must not be cut in half; SIGTERM and SIGHUP as an interrupt."""
 
 from __future__ import annotations
 
@@ -35,17 +35,20 @@ def interrupts_deferred(reraise: bool = True) -> Iterator[None]:
 
 @contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM (a closed terminal, a killed job) raises ``KeyboardInterrupt`` inside the block,
-    like Ctrl-C, so that its ``finally`` clauses run (the viewer stops its server)."""
+    """SIGTERM (a killed job) and SIGHUP (a closed terminal) raise ``KeyboardInterrupt`` inside
+    the block, like Ctrl-C, so that what handles Ctrl-C runs (a partial run or table is saved,
+    the viewer stops its server). A signal already ignored stays ignored (``nohup``)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
+        raise KeyboardInterrupt(f"{signal.Signals(signum).name} received")
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
+    caught = [s for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None and signal.getsignal(s) is not signal.SIG_IGN]
+    previous = {s: signal.signal(s, interrupt) for s in caught}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)

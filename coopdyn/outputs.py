@@ -38,10 +38,13 @@ KNOWN_FILES = frozenset(
         "demo.html",
         "diagnosis.txt",
         "table.parquet",  # a sweep's (coopdyn.sweeps)
+        "table.journal",
         "heatmap.png",
         "trajectories",
     }
 )
+#: the files coopdyn writes in a sweep's ``trajectories/`` folder
+TRAJECTORY_FILE = re.compile(r"run-\d{6,}\.npz")
 
 Writer = Callable[[Path], Any]  #: writes into the given folder; returns the path(s) written
 
@@ -126,6 +129,11 @@ def _refuse_foreign(target: Path) -> None:
         raise OutputError(f"the output folder {target} is a file")
     if target.is_dir():
         foreign = sorted(p.name for p in target.iterdir() if p.name not in KNOWN_FILES)
+        saved = target / "trajectories"
+        if saved.is_symlink() or (saved.exists() and not saved.is_dir()):
+            foreign.append("trajectories (not a folder coopdyn made)")
+        elif saved.is_dir():
+            foreign += sorted(f"trajectories/{p.name}" for p in saved.iterdir() if not TRAJECTORY_FILE.fullmatch(p.name))
         if foreign:
             shown = ", ".join(foreign[:5]) + (", …" if len(foreign) > 5 else "")
             raise OutputError(

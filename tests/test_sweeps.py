@@ -197,10 +197,12 @@ def test_a_row_reruns_bit_for_bit(tmp_path: Path) -> None:
         make_case, GRID, seeds=[4], duration=0.3, metrics=peak_speed, workers=2, out=tmp_path, trajectories=True, progress=False
     )
     for run in (0, 3, 4):  # completed, diverged, failed
-        report = rerun(tmp_path / "table.parquet", run)
+        report = rerun(tmp_path / "table.parquet", run, make_case=make_case, metrics=peak_speed)
         assert report.identical, report.differences
     assert {c for c, _, _ in report.compared} >= {"tracking_error_max_m", "peak_speed", "message", "n_rhs", "seed"}
-    assert main(["sweep", "--rerun", str(tmp_path), "0"]) == 0
+    assert main(["sweep", "--rerun", str(tmp_path), "0", "--trust"]) == 0
+    here = f"{Path(__file__).resolve()}"
+    assert main(["sweep", "--rerun", str(tmp_path), "0", "--case", f"{here}:make_case", "--metrics", f"{here}:peak_speed"]) == 0
     saved = cd.Result.load(tmp_path / "trajectories" / table.loc[0, "trajectory"])  # trajectories reload
     assert saved.t[-1] == 0.3 and np.isclose(float(np.abs(saved.v).max()), table.loc[0, "peak_speed"])
     import pyarrow.parquet as pq
@@ -210,11 +212,11 @@ def test_a_row_reruns_bit_for_bit(tmp_path: Path) -> None:
     column[0] *= 1.0 + 1e-15
     arrow = arrow.set_column(arrow.schema.get_field_index("tracking_error_max_m"), "tracking_error_max_m", [column])
     pq.write_table(arrow, tmp_path / "table.parquet")
-    report = rerun(tmp_path, 0)
+    report = rerun(tmp_path, 0, trust=True)
     assert report.differences == ("tracking_error_max_m",)
-    assert main(["sweep", "--rerun", str(tmp_path), "0"]) == 1
+    assert main(["sweep", "--rerun", str(tmp_path), "0", "--trust"]) == 1
     with pytest.raises(cd.SweepError, match="not 99"):
-        rerun(tmp_path, 99)
+        rerun(tmp_path, 99, trust=True)
     with pytest.raises(cd.SweepError, match="workers must be"):  # refused before the earlier sweep is touched
         cd.sweep(make_case, None, duration=0.1, workers=0, out=tmp_path)
     assert (tmp_path / "table.parquet").is_file() and (tmp_path / "trajectories").is_dir()
@@ -470,7 +472,7 @@ def test_sweep_example(tmp_path: Path) -> None:
     table = module.main(out=str(tmp_path), duration=0.3, executor="serial", stiffness=[1e4], gain=[1000.0, 4000.0])
     assert list(table["status"]) == ["completed", "completed"]
     assert (tmp_path / "heatmap.png").stat().st_size > 10_000
-    assert rerun(tmp_path, 1).identical  # found again from the example's file
+    assert rerun(tmp_path, 1, make_case=f"{ROOT / 'examples' / 'sweep_gains.py'}:make_case").identical
 
 
 def test_the_schema_knows_the_sweep_table() -> None:

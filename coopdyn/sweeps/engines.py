@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import ctypes
 import multiprocessing
 import os
 import shutil
 import signal
 import sys
 import tempfile
+import warnings
 from collections import deque
 from collections.abc import Iterator, Sequence
 from concurrent.futures.process import BrokenProcessPool
@@ -75,13 +77,36 @@ class Serial:
 _PAYLOAD: Any = None  #: a local worker's job, handed over once when its process starts
 
 
-def _worker_init(markers: str, payload: Any = None) -> None:
-    """A local worker: Ctrl-C is the parent's to handle (it stops the pool); a fatal signal writes
-    the Python stack to ``markers/<pid>.fault`` for the crashed row's message; ``payload`` is the
-    job every chunk of this process runs (inherited under fork, pickled once under spawn)."""
+def _die_with_parent(parent: int) -> None:
+    """On Linux, this process is killed when the sweep's process dies, however it dies (kill -9
+    included): no worker runs on for nobody."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # pragma: no cover - a libc without prctl
+        return
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+PR_SET_PDEATHSIG = 1  #: prctl(2): the signal this process gets when its parent dies
+
+
+def _worker_init(markers: str, payload: Any = None, parent: int | None = None) -> None:
+    """A local worker: it dies with the sweep's process; Ctrl-C, SIGTERM and SIGHUP are the
+    parent's to handle (it stops the pool); a fatal signal writes the Python stack to
+    ``markers/<pid>.fault`` for the crashed row's message; ``payload`` is the job every chunk of
+    this process runs (inherited under fork, pickled once under spawn)."""
     global _PAYLOAD
     _PAYLOAD = payload
+    if parent is not None:
+        _die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("SIGTERM", "SIGHUP"):  # under fork the parent's handlers were inherited: back to the defaults
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
     import faulthandler
 
     faulthandler.enable(file=open(Path(markers) / f"{os.getpid()}.fault", "w"))
@@ -92,9 +117,9 @@ def _local_chunk(items: list[Item], trajectories: str | None, markers: str) -> R
     return run_chunk(_PAYLOAD, items, trajectories, markers)
 
 
-def _alone(payload: Any, item: Item, trajectories: str | None, markers: str, conn: Any) -> None:
+def _alone(payload: Any, item: Item, trajectories: str | None, markers: str, conn: Any, parent: int) -> None:
     """A process of its own for one run (a suspect of a crash): its rows back through ``conn``."""
-    _worker_init(markers)
+    _worker_init(markers, parent=parent)
     try:
         conn.send(run_chunk(payload, [item], trajectories, markers))
     finally:
@@ -119,7 +144,7 @@ class LocalProcesses:
 
     def _new_pool(self, payload: Any) -> cf.ProcessPoolExecutor:
         self._pool = cf.ProcessPoolExecutor(
-            self.workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers, payload)
+            self.workers, mp_context=self._context, initializer=_worker_init, initargs=(self._markers, payload, os.getpid())
         )
         return self._pool
 
@@ -167,7 +192,9 @@ class LocalProcesses:
         """Run one suspect in a process of its own: its rows, or a "crashed" row with the exit
         code or signal if it kills that process too."""
         receiver, sender = self._context.Pipe(duplex=False)
-        process = self._context.Process(target=_alone, args=(payload, item, trajectories, self._markers, sender), daemon=True)
+        process = self._context.Process(
+            target=_alone, args=(payload, item, trajectories, self._markers, sender, os.getpid()), daemon=True
+        )
         process.start()
         sender.close()
         self._solo = process
@@ -297,6 +324,14 @@ def engine(executor: Any, workers: int | None) -> Serial | LocalProcesses | Exec
     """The engine for ``sweep(executor=…)``."""
     name = executor if isinstance(executor, str) else None  # `==` on an array or a Series is not a bool
     if executor is None or name == "processes":
+        if multiprocessing.current_process().daemon:  # e.g. inside another pool's worker: it may not start processes
+            warnings.warn(
+                "this sweep runs inside a daemonic process (a worker of a multiprocessing pool?), which may not start "
+                "processes of its own: its runs go one after the other in this process (executor='serial')",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+            return Serial()
         return LocalProcesses(workers)
     if workers is not None:  # it would size nothing: the executor has its own workers
         raise SweepError(f"workers sizes the local processes (executor='processes'); executor={executor!r} has its own")

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime
 import importlib
 import importlib.util
 import inspect
 import math
-import shutil
+import os
 import sys
 import time
 import warnings
@@ -18,14 +19,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .. import _validate
+from .. import _signals, _validate
 from .._optional import require
 from .._version import __version__
 from ..errors import SweepError, SweepInterrupted
-from ..outputs import check_folder
+from ..outputs import TRAJECTORY_FILE, check_folder
 from . import table as tables
 from .cases import TIMING, Item, PythonJob, Settings, SpecJob, expand, placeholder, run_item, signature_check, versions
 from .engines import Executor, LocalProcesses, Serial, chunks, engine
+from .journal import JOURNAL_NAME, Journal, finished_rows, sweep_key
 from .spec import Spec
 
 MAX_CHUNK = 64  #: the most runs per task with the automatic chunk size
@@ -50,6 +52,7 @@ def sweep(
     progress: bool = True,
     max_steps: int | None = 2 * 10**6,
     energy_check: str = "warn",
+    resume: bool = False,
 ) -> Any:
     """Run ``make_case`` for every parameter set (and seed) and collect a table, one row per run.
 
@@ -78,6 +81,12 @@ def sweep(
         trajectories: also save every run's trajectory (``trajectories/run-NNNNNN.npz``).
         progress: a progress bar (runs done, and how many did not complete).
         max_steps, energy_check: as for :func:`coopdyn.simulate`.
+        resume: finish the sweep that was writing to ``out`` when it stopped (killed,
+            interrupted, the machine went down): the rows its journal holds are kept, the
+            others run. The same ``make_case``, parameters, seeds and settings are required.
+
+    Every finished row is journaled in ``out`` as it arrives (``table.journal``), so a sweep
+    stopped in any way loses no finished run.
 
     Returns:
         a pandas DataFrame, one row per run (columns: :mod:`coopdyn.sweeps.table`). A run that
@@ -100,19 +109,26 @@ def sweep(
         "source": {"kind": "python", **_reference(make_case)},
         "metrics": _reference(metrics) if metrics is not None else None,
     }
-    return _execute(job, items, meta, executor, workers, chunk_size, out, trajectories, progress)
+    return _execute(job, items, meta, executor, workers, chunk_size, out, trajectories, progress, resume)
 
 
 def run_spec(
-    spec: Any, *, executor: Any = None, workers: int | None = None, chunk_size: int | None = None, progress: bool = True
+    spec: Any,
+    *,
+    executor: Any = None,
+    workers: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool = True,
+    resume: bool = False,
 ) -> Any:
-    """Run a loaded sweep spec (:func:`coopdyn.sweeps.spec.load_spec`) into its folder; the table."""
+    """Run a loaded sweep spec (:func:`coopdyn.sweeps.spec.load_spec`) into its folder; the table.
+    ``resume``: as for :func:`sweep`."""
     if not isinstance(spec, Spec):
         raise SweepError(f"run_spec takes a spec from coopdyn.sweeps.load_spec(path), got {type(spec).__name__}")
     settings = Settings()
     job = SpecJob(spec.text, str(spec.path), settings)
     meta = {"source": {"kind": "spec", "file": str(spec.path), "text": spec.text}, "metrics": None}
-    return _execute(job, spec.items, meta, executor, workers, chunk_size, spec.folder, spec.trajectories, progress)
+    return _execute(job, spec.items, meta, executor, workers, chunk_size, spec.folder, spec.trajectories, progress, resume)
 
 
 def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any) -> Settings:
@@ -147,29 +163,44 @@ def _execute(
     out: str | Path | None,
     trajectories: bool,
     progress: bool,
+    resume: bool = False,
 ) -> Any:
-    for flag, value in (("trajectories", trajectories), ("progress", progress)):
+    for flag, value in (("trajectories", trajectories), ("progress", progress), ("resume", resume)):
         if not isinstance(value, bool):
             raise SweepError(f"{flag} must be True or False, got {value!r}")
     folder = check_folder(out) if out is not None else None
     if trajectories and folder is None:
         raise SweepError("trajectories are saved as files: give out=a folder")
+    if resume and folder is None:
+        raise SweepError("resume finishes a sweep written to a folder: give out=the folder it was writing to")
     if chunk_size is not None:
         chunk_size = _validate.count(chunk_size, "chunk_size", SweepError, none="chosen from the runs and workers")
+    key = sweep_key(meta | {"settings": dataclasses.asdict(job.settings)}, items)
+    rows: dict[int, dict[str, Any]] = {}
+    if resume and folder is not None:
+        rows = finished_rows(folder, key)
+        if not rows and (folder / tables.TABLE_NAME).is_file() and not (folder / JOURNAL_NAME).is_file():
+            raise SweepError(
+                f"nothing to resume in {folder}: its sweep finished (a table, no journal of unfinished runs); "
+                "run without resume to run it again"
+            )
+    todo = [i for i in items if i.run not in rows]
     runner = engine(executor, workers)
+    journal = None
     try:
         payload: Any = job
         if runner.pickles:
             payload = _pickled(job)
-        size = chunk_size or (1 if isinstance(runner, Serial) else max(1, min(MAX_CHUNK, len(items) // (4 * runner.workers))))
-        if folder is not None:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
-            shutil.rmtree(folder / "trajectories", ignore_errors=True)
-            for name in (tables.TABLE_NAME, "heatmap.png"):
-                (folder / name).unlink(missing_ok=True)
+        size = chunk_size or (1 if isinstance(runner, Serial) else max(1, min(MAX_CHUNK, len(todo) // (4 * runner.workers))))
         traj_folder = None
-        if trajectories and folder is not None:
-            (folder / "trajectories").mkdir(parents=True, exist_ok=True)
-            traj_folder = str(folder / "trajectories")
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            if not resume:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
+                _clear(folder)
+            journal = Journal(folder, key, append=resume)
+            if trajectories:
+                (folder / "trajectories").mkdir(exist_ok=True)
+                traj_folder = str(folder / "trajectories")
         meta = {
             "format": tables.FORMAT,
             "coopdyn": __version__,
@@ -181,34 +212,41 @@ def _execute(
             "executor": runner.name,
             "chunk_size": size,
             "trajectories": traj_folder is not None,
+            **({"resumed_rows": len(rows)} if resume else {}),
         }
-        rows: dict[int, dict[str, Any]] = {}
-        others: Counter[str] = Counter()  # the runs that did not complete, by status (the bar's postfix)
-        bar = _bar(len(items), runner.name) if progress else None
+        others: Counter[str] = Counter(r["status"] for r in rows.values() if r["status"] != "completed")
+        bar = _bar(len(items), runner.name, len(rows)) if progress else None
         wall0 = time.perf_counter()
         try:
-            for done in runner.run(payload, chunks(items, size), traj_folder):
-                for row in done:
-                    rows[row["run"]] = row
-                others.update(r["status"] for r in done if r["status"] != "completed")
-                if bar is not None:
-                    if others:
-                        bar.set_postfix(others, refresh=False)
-                    bar.update(len(done))
+            with _signals.sigterm_as_interrupt():  # a killed job or a closed terminal: as Ctrl-C
+                for done in runner.run(payload, chunks(todo, size), traj_folder) if todo else ():
+                    if journal is not None:
+                        journal.add(done)
+                    for row in done:
+                        rows[row["run"]] = row
+                    others.update(r["status"] for r in done if r["status"] != "completed")
+                    if bar is not None:
+                        if others:
+                            bar.set_postfix(others, refresh=False)
+                        bar.update(len(done))
         except KeyboardInterrupt:
-            runner.abort()
-            missing = [
-                placeholder(i, "not run", "the sweep was interrupted (Ctrl-C) before this run finished")
-                for i in items
-                if i.run not in rows
-            ]
-            meta["wall_s"] = time.perf_counter() - wall0
-            table = tables.frame([*rows.values(), *missing], meta["params"], meta)
-            saved = tables.save(table, folder / tables.TABLE_NAME) if folder is not None else None
+            with _signals.interrupts_deferred(reraise=False):  # a second Ctrl-C cannot cut the table short
+                runner.abort()
+                if journal is not None:
+                    journal.close(remove=False)
+                missing = [
+                    placeholder(i, "not run", "the sweep was interrupted (Ctrl-C) before this run finished")
+                    for i in items
+                    if i.run not in rows
+                ]
+                meta["wall_s"] = time.perf_counter() - wall0
+                table = tables.frame([*rows.values(), *missing], meta["params"], meta)
+                saved = tables.save(table, folder / tables.TABLE_NAME) if folder is not None else None
             raise SweepInterrupted(
                 f"sweep interrupted after {len(rows)} of {len(items)} runs"
                 + (
-                    f"; the table (the others 'not run') is in {saved}"
+                    f"; the table (the others 'not run') is in {saved}; resume=True (`coopdyn sweep SPEC --resume`) "
+                    "runs the rest"
                     if saved
                     else "; the table so far is in this exception's .table"
                 ),
@@ -222,9 +260,27 @@ def _execute(
         table = tables.frame(list(rows.values()), meta["params"], meta)
         if folder is not None:
             tables.save(table, folder / tables.TABLE_NAME)
+            if journal is not None:
+                journal.close(remove=True)
         return table
     finally:
+        if journal is not None:
+            journal.close(remove=False)
         runner.close()
+
+
+def _clear(folder: Path) -> None:
+    """Remove what an earlier sweep wrote in ``folder``: coopdyn's own files only (a file of the
+    user's there was refused by :func:`check_folder` before anything ran)."""
+    for name in (tables.TABLE_NAME, JOURNAL_NAME, "heatmap.png"):
+        (folder / name).unlink(missing_ok=True)
+    saved = folder / "trajectories"
+    if saved.is_dir() and not saved.is_symlink():
+        for path in saved.iterdir():
+            if TRAJECTORY_FILE.fullmatch(path.name) and path.is_file():
+                path.unlink()
+        with contextlib.suppress(OSError):
+            saved.rmdir()  # only when empty
 
 
 def _pickled(job: Any) -> bytes:
@@ -245,10 +301,10 @@ def _pickled(job: Any) -> bytes:
     return data
 
 
-def _bar(total: int, where: str) -> Any:
+def _bar(total: int, where: str, initial: int = 0) -> Any:
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="run", desc=f"sweep ({where})", dynamic_ncols=True, leave=True)
+    return tqdm(total=total, initial=initial, unit="run", desc=f"sweep ({where})", dynamic_ncols=True, leave=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -272,14 +328,15 @@ def _reference(fn: Any) -> dict[str, Any]:
 
 
 def _resolve(ref: dict[str, Any], what: str) -> Callable[..., Any]:
-    """The function a :func:`_reference` names: imported by module, or loaded from its file."""
+    """The function a :func:`_reference` names: imported by module, or loaded from its file.
+    This runs code: only for a reference the user gave, or one they said to trust."""
     if not ref.get("qualname"):
         raise SweepError(
             f"the sweep's {what} ({ref.get('name')}) is a lambda or a nested function, which cannot be found again; "
             "define it at the top level of a module or script to rerun rows"
         )
     module = None
-    if ref["module"] != "__main__":
+    if ref.get("module") and ref["module"] != "__main__":
         try:
             module = importlib.import_module(ref["module"])
         except ImportError:
@@ -300,8 +357,50 @@ def _resolve(ref: dict[str, Any], what: str) -> Callable[..., Any]:
         for part in ref["qualname"].split("."):
             obj = getattr(obj, part)
     except AttributeError:
-        raise SweepError(f"{ref['file'] or ref['module']} defines no {ref['qualname']} any more") from None
+        raise SweepError(f"{ref.get('file') or ref['module']} defines no {ref['qualname']}") from None
+    if not callable(obj):
+        raise SweepError(f"{ref.get('file') or ref['module']}: {ref['qualname']} is not a function")
     return obj
+
+
+def _named(where: str, what: str) -> dict[str, Any]:
+    """A reference to the function ``where`` names: ``module:function`` or ``path/to/file.py:function``."""
+    if not isinstance(where, str) or where.count(":") < 1 or not where.rpartition(":")[2]:
+        raise SweepError(f"{what} is given as MODULE:FUNCTION or FILE.py:FUNCTION, got {where!r}")
+    place, _, qualname = where.rpartition(":")
+    if place.endswith(".py") or "/" in place or os.sep in place:
+        path = _validate.path(place, f"the file of {what}", SweepError).resolve()
+        if not path.is_file():
+            raise SweepError(f"{what}: no file {path}")
+        return {"module": None, "qualname": qualname, "file": str(path), "name": qualname}
+    return {"module": place, "qualname": qualname, "file": None, "name": qualname}
+
+
+def _recorded(ref: dict[str, Any] | None) -> str:
+    """Where a table says a function is defined, as the option that would name it."""
+    if not ref:
+        return "nowhere"
+    if ref.get("file"):
+        return f"{ref['file']}:{ref.get('qualname') or ref.get('name')}"
+    return f"{ref.get('module')}:{ref.get('qualname') or ref.get('name')}"
+
+
+def _function(given: Any, recorded: dict[str, Any] | None, what: str, option: str, trust: bool) -> Callable[..., Any] | None:
+    """The function to rerun with: the one the user gave (a callable or a name), or, with
+    ``trust``, the one the table records; never code a table names on its own say-so."""
+    if callable(given):
+        return given
+    if given is not None:
+        return _resolve(_named(given, what), what)
+    if not recorded:
+        return None
+    if trust:
+        return _resolve(recorded, what)
+    raise SweepError(
+        f"the table says its {what} is {_recorded(recorded)}; a table is data, and coopdyn does not import or run code it "
+        f"names. If you trust that code, name it yourself ({option} {_recorded(recorded)}, or {what}=… in Python), or "
+        "pass --trust (trust=True) to load what the table records"
+    )
 
 
 def _value(value: Any) -> Any:
@@ -343,10 +442,28 @@ class Rerun:
         return not self.differences
 
 
-def rerun(path: str | Path, run: int) -> Rerun:
+def rerun(path: str | Path, run: int, *, make_case: Any = None, metrics: Any = None, trust: bool = False) -> Rerun:
     """Run row ``run`` of a saved sweep table again, in this process, and compare it with the
     stored row column by column (all but the timing columns ``cpu_s``, ``wall_s``, ``worker``
-    and ``trajectory``): the same code and versions give the same bits."""
+    and ``trajectory``): the same code and versions give the same bits.
+
+    A table is data: the module or script it records for ``make_case`` is shown, never imported
+    or run, unless you name the code yourself or say you trust the table. A spec's rows need
+    neither (a scene file's text runs no code).
+
+    Args:
+        path: the table (``table.parquet``) or its folder.
+        run: the row's run number.
+        make_case, metrics: the functions of a Python sweep: callables, or names
+            ``"module:function"`` / ``"path/to/script.py:function"`` (importing the module or
+            running the script's top level).
+        trust: load the functions from where the table records them (runs that code).
+
+    Raises:
+        SweepError: no such row; a Python sweep's row without ``make_case`` and without ``trust``.
+    """
+    if not isinstance(trust, bool):
+        raise SweepError(f"trust must be True or False, got {trust!r}")
     table = tables.load(path)
     meta = table.attrs["coopdyn.sweep"]
     if isinstance(run, bool) or not isinstance(run, int):
@@ -355,14 +472,21 @@ def rerun(path: str | Path, run: int) -> Rerun:
     if match.empty:
         raise SweepError(f"{path} has runs 0..{len(table) - 1}, not {run}")
     stored = match.iloc[0].to_dict()
-    settings = Settings(**meta["settings"])
-    source = meta["source"]
-    if source["kind"] == "spec":
+    try:
+        settings = Settings(**meta["settings"])
+        source = meta["source"]
+        kind = source["kind"]
+    except (KeyError, TypeError) as exc:
+        raise SweepError(f"{path}: its sweep description is damaged ({type(exc).__name__}: {exc})") from exc
+    if kind == "spec":
         job: PythonJob | SpecJob = SpecJob(source["text"], source["file"], settings)
+    elif kind == "python":
+        case_fn = _function(make_case, source, "make_case", "--case", trust)
+        assert case_fn is not None
+        metrics_fn = _function(metrics, meta.get("metrics"), "metrics", "--metrics", trust)
+        job = PythonJob(case_fn, metrics_fn, settings)
     else:
-        make_case = _resolve(source, "make_case")
-        metrics = _resolve(meta["metrics"], "metrics") if meta.get("metrics") else None
-        job = PythonJob(make_case, metrics, settings)
+        raise SweepError(f"{path}: its sweep description is damaged (a source of kind {kind!r})")
     seed = _value(stored.get("seed"))
     item = Item(run, {name: _value(stored[name]) for name in meta["params"]}, None if seed is None else int(seed))
     new = run_item(job, item, None)

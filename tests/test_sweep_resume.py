@@ -1,0 +1,143 @@
+"""A sweep loses no finished run however its process stops (kill -9, SIGTERM, SIGHUP, two
+Ctrl-C): its journal keeps every row, its workers die with it, and ``--resume`` completes a table
+equal, bit for bit, to the table of a run never interrupted."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import coopdyn as cd
+from coopdyn.__main__ import main
+from coopdyn.sweeps import load
+from coopdyn.sweeps.cases import TIMING
+
+SPEC = """
+[scene]
+builder = "linear_book"
+
+[controller]
+type = "book_drives"
+
+[simulation]
+duration = 1.0
+integrator = "rk4"
+dt = 1e-4
+
+[sweep]
+folder = "out"
+
+[sweep.grid]
+"scene.c_p" = [{values}]
+"""
+
+
+def spec_file(tmp_path: Path, n: int) -> Path:
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SPEC.format(values=", ".join(f"{1e4 * (1 + i / n):.6g}" for i in range(n))))
+    return spec
+
+
+def journal_rows(folder: Path) -> list[dict[str, object]]:
+    path = folder / "table.journal"
+    if not path.is_file():
+        return []
+    rows = []
+    for line in path.read_text().split("\n")[1:]:
+        try:
+            rows.append(json.loads(line))
+        except ValueError:
+            continue
+    return rows
+
+
+def reproducible(table: pd.DataFrame) -> pd.DataFrame:
+    return table.drop(columns=[*TIMING, "trajectory"]).reset_index(drop=True)
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie waiting for its (dead) parent's reaper is not running
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def start_and_stop(spec: Path, how: signal.Signals, after: int) -> tuple[subprocess.Popen[str], list[int]]:
+    """Start ``coopdyn sweep`` on two workers, send ``how`` to it once ``after`` rows are done."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "coopdyn", "sweep", str(spec), "--workers", "2", "--chunk-size", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 180
+    while len(journal_rows(spec.parent / "out")) < after and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.communicate()[1][-2000:]
+    workers = [int(str(p.name)) for p in Path("/proc").iterdir() if p.name.isdigit() and _parent(int(p.name)) == proc.pid]
+    proc.send_signal(how)
+    return proc, workers
+
+
+def _parent(pid: int) -> int | None:
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc; workers die with their parent on Linux")
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP])
+def test_a_stopped_sweep_resumes_to_the_uninterrupted_table(tmp_path: Path, how: signal.Signals) -> None:
+    n = 40
+    spec = spec_file(tmp_path, n)
+    proc, workers = start_and_stop(spec, how, after=4)
+    _, err = proc.communicate(timeout=60)
+    out = tmp_path / "out"
+    if how == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+    else:  # as Ctrl-C: the table so far is written, the others "not run"
+        assert proc.returncode == 130, err[-2000:]
+        assert "interrupted after" in err and "--resume" in err
+        assert (load(out)["status"] == "not run").any()
+    deadline = time.monotonic() + 10
+    while any(alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert workers and not any(alive(w) for w in workers)  # the workers died with their parent
+    finished = {r["run"] for r in journal_rows(out)}
+    assert 4 <= len(finished) < n
+    assert main(["sweep", str(spec), "--resume", "--serial"]) == 0
+    resumed = load(out)
+    assert not (out / "table.journal").exists()
+    assert resumed.attrs["coopdyn.sweep"]["resumed_rows"] == len(finished)
+    whole = tmp_path / "whole"
+    whole.mkdir()
+    spec_file(whole, n)
+    assert main(["sweep", str(whole / "spec.toml"), "--serial"]) == 0
+    pd.testing.assert_frame_equal(reproducible(resumed), reproducible(load(whole / "out")), check_exact=True)
+
+
+def test_resume_refuses_another_sweep_and_a_finished_one(tmp_path: Path) -> None:
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    with pytest.raises(cd.SweepError, match="nothing to resume"):
+        cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False, resume=True)
+    (tmp_path / "table.journal").write_text('{"journal": "coopdyn.sweep-journal/1", "key": "another"}\n')
+    with pytest.raises(cd.SweepError, match="journal of another sweep"):
+        cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False, resume=True)
+    with pytest.raises(cd.SweepError, match="give out=the folder"):
+        cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", progress=False, resume=True)
