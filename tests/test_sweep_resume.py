@@ -141,3 +141,68 @@ def test_resume_refuses_another_sweep_and_a_finished_one(tmp_path: Path) -> None
         cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False, resume=True)
     with pytest.raises(cd.SweepError, match="give out=the folder"):
         cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", progress=False, resume=True)
+
+
+def test_no_user_file_is_removed(tmp_path: Path) -> None:
+    """A folder coopdyn writes to is refused when it holds a file coopdyn did not write, in
+    ``trajectories/`` too; the user's file stays."""
+
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    thesis = tmp_path / "trajectories" / "thesis.tex"
+    thesis.parent.mkdir()
+    thesis.write_text("three years of work")
+    with pytest.raises(cd.OutputError, match=r"holds files coopdyn did not write \(trajectories/thesis.tex\)"):
+        cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    with pytest.raises(cd.OutputError, match="trajectories/thesis.tex"):
+        cd.outputs.write_outputs(tmp_path, [("note", lambda folder: (folder / "diagnosis.txt").write_text("x"))])
+    assert thesis.read_text() == "three years of work"
+    thesis.unlink()
+    cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, trajectories=True, progress=False)
+    assert sorted(p.name for p in (tmp_path / "trajectories").iterdir()) == ["run-000000.npz", "run-000001.npz"]
+    cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)  # replaces its own files
+    assert not (tmp_path / "trajectories").exists() and len(load(tmp_path)) == 1
+
+
+def test_a_table_that_cannot_be_written_is_rescued(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import pyarrow.parquet as pq
+
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    real = pq.write_table
+
+    def disk_full(table: object, where: object, **kwargs: object) -> None:
+        if Path(str(where)).parent == tmp_path / "out":
+            raise OSError(28, "No space left on device")
+        real(table, where, **kwargs)
+
+    monkeypatch.setattr(pq, "write_table", disk_full)
+    with pytest.raises(cd.SweepError, match=r"No space left on device.*The table was saved to .*coopdyn-rescue-") as info:
+        cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path / "out", progress=False)
+    rescued = Path(str(info.value).split("saved to ")[1].split(" instead")[0])
+    assert list(load(rescued)["status"]) == ["completed", "completed"] and len(info.value.table) == 2
+    assert len(journal_rows(tmp_path / "out")) == 2  # and the journal still holds both rows
+
+
+def _sweep_in_a_pool_worker(_: int) -> list[str]:
+    import warnings
+
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        table = cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, progress=False)
+    return [*table["status"], *(str(w.message) for w in caught)]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: the test's functions reach the pool's worker")
+def test_a_sweep_inside_a_daemonic_process_runs_serially() -> None:
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        out = pool.map(_sweep_in_a_pool_worker, [0])[0]
+    assert out[:2] == ["completed", "completed"]
+    assert "daemonic process" in out[2] and "executor='serial'" in out[2]

@@ -194,13 +194,16 @@ def _execute(
         size = chunk_size or (1 if isinstance(runner, Serial) else max(1, min(MAX_CHUNK, len(todo) // (4 * runner.workers))))
         traj_folder = None
         if folder is not None:
-            folder.mkdir(parents=True, exist_ok=True)
-            if not resume:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
-                _clear(folder)
-            journal = Journal(folder, key, append=resume)
-            if trajectories:
-                (folder / "trajectories").mkdir(exist_ok=True)
-                traj_folder = str(folder / "trajectories")
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                if not resume:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
+                    _clear(folder)
+                journal = Journal(folder, key, append=resume)
+                if trajectories:
+                    (folder / "trajectories").mkdir(exist_ok=True)
+                    traj_folder = str(folder / "trajectories")
+            except OSError as exc:
+                raise SweepError(f"cannot write the sweep's files to {folder}: {exc.strerror or exc}; nothing ran") from exc
         meta = {
             "format": tables.FORMAT,
             "coopdyn": __version__,

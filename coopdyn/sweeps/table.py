@@ -11,8 +11,10 @@ in ``table.attrs["coopdyn.sweep"]`` and in the Parquet file's metadata.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -65,9 +67,23 @@ def save(table: Any, path: str | os.PathLike[str]) -> Path:
     try:
         pq.write_table(arrow, tmp, compression="zstd")
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk, a folder gone read-only: the rows are not lost
+        raise SweepError(f"cannot write the sweep table to {path} ({exc}). {_rescue(arrow)}", table=table) from exc
     finally:
-        tmp.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
     return path
+
+
+def _rescue(arrow: Any) -> str:
+    """Write the table to a fresh folder in the temporary directory; say where."""
+    pq = require("pyarrow.parquet", "saving a sweep table (Parquet)", "pyarrow")
+    try:
+        rescue = Path(tempfile.mkdtemp(prefix="coopdyn-rescue-")) / TABLE_NAME
+        pq.write_table(arrow, rescue, compression="zstd")
+    except OSError as exc:
+        return f"It could not be saved anywhere else either ({exc}); it is in this exception's .table"
+    return f"The table was saved to {rescue} instead (and is in this exception's .table)"
 
 
 def load(path: str | os.PathLike[str]) -> Any:
