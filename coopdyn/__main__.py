@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ._signals import sigterm_as_interrupt
 from .errors import CoopdynError, SimulationInterrupted, SweepError
 
 
@@ -253,7 +254,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="coopdyn",
         description="Multi-arm cooperating robots holding one object through elastic interconnections.",
-        epilog="`coopdyn COMMAND --help` describes a command. Exit codes: 0 done, 2 an error, 130 interrupted (Ctrl-C).",
+        epilog="`coopdyn COMMAND --help` describes a command. Exit codes: 0 done, 2 an error, 130 interrupted (Ctrl-C, SIGTERM, SIGHUP: what was done so far is saved).",
     )
     parser.add_argument("--version", action="version", version=f"coopdyn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -395,7 +396,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     formatwarning = warnings.formatwarning
     warnings.formatwarning = _cli_warning  # printed warnings speak CLI (restored below: main() is also called in-process)
     try:
-        code = int(args.func(args))
+        with sigterm_as_interrupt():  # a killed job, a closed terminal: as Ctrl-C (a partial run or table is saved)
+            code = int(args.func(args))
         print(f"done in {time.perf_counter() - t0:.1f} s")
     except BrokenPipeError:  # the reader went away (`coopdyn … | head`): nothing more to say, to anyone
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # (Python flushes stdout at exit)

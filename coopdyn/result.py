@@ -27,6 +27,48 @@ from .model.scene import Scene
 
 RESULT_FORMAT = "coopdyn.result/1"  #: what a saved result's ``meta`` says it is
 ARRAYS = ("t", "q", "v", "tau")  #: the fields a saved result keeps as arrays (the others go in ``meta``)
+MAX_LOAD_BYTES = 4e9  #: [bytes] the most a result file's arrays may take in memory, checked before they are read
+
+
+_READ_HEADER = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+_MAX_HEADER = 10_000  #: [bytes] numpy's own limit on an .npy header
+
+
+def _npy_header(f: Any) -> tuple[tuple[int, ...], np.dtype[Any]]:
+    """The shape and dtype of the ``.npy`` stream ``f``, from its header alone."""
+    version = np.lib.format.read_magic(f)
+    if version not in _READ_HEADER:
+        raise ValueError(f"an .npy format version {version} this coopdyn does not read")
+    shape, _, dtype = _READ_HEADER[version](f, max_header_size=_MAX_HEADER)
+    return shape, dtype
+
+
+def read_npz(path: Path, names: tuple[str, ...] | None = None, max_bytes: float = MAX_LOAD_BYTES) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file (those in ``names``, or all), no pickles: their sizes are
+    read from the headers and checked against ``max_bytes`` before anything is decompressed.
+
+    Raises:
+        ValueError: not an npz file, or arrays larger than ``max_bytes`` (the message says so).
+    """
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        members = {n.removesuffix(".npy"): n for n in zf.namelist() if n.endswith(".npy")}
+        wanted = [k for k in members if names is None or k in names]
+        total = 0
+        for key in wanted:
+            with zf.open(members[key]) as f:
+                shape, dtype = _npy_header(f)
+            if dtype.hasobject:
+                raise ValueError(f"{key} holds Python objects, which a result never does")
+            total += int(np.prod(shape, dtype=object)) * dtype.itemsize
+        if total > max_bytes:
+            raise ValueError(
+                f"its arrays would take {total / 1e9:.3g} GB in memory, more than the {max_bytes / 1e9:.3g} GB allowed "
+                "(max_bytes); a result of a long run is better streamed (simulate(..., stream_to=…))"
+            )
+    with np.load(path, allow_pickle=False) as z:
+        return {k: np.asarray(z[k]) for k in wanted}
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,18 +264,19 @@ class Result:
         }
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> Result:
+    def load(cls, path: str | os.PathLike[str], max_bytes: float = MAX_LOAD_BYTES) -> Result:
         """A result saved by :meth:`save` as ``.npz``: the arrays, counters and status, and its
         scene rebuilt from the saved description (its URDFs are read again from where they were
-        — an example-robot-data name, or the absolute path saved)."""
+        — an example-robot-data name, or the absolute path saved). Arrays larger than
+        ``max_bytes`` [bytes] are refused before they are read; non-finite samples are refused
+        by name."""
         path = as_path(path, "path (a .npz file Result.save wrote)", SimulationError)
         if path.suffix != ".npz":
             raise SimulationError(f"{path}: Result.load reads the .npz files Result.save writes (a .csv is a table only)")
         if not path.is_file():
             raise SimulationError(f"no saved result at {path}")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: np.asarray(z[k]) for k in z.files}
+            arrays = read_npz(path, (*ARRAYS, "meta"), max_bytes)
         except Exception as exc:
             raise SimulationError(f"{path} is not a result coopdyn wrote ({type(exc).__name__}: {exc})") from exc
         missing = [k for k in ARRAYS if k not in arrays]
@@ -264,6 +307,13 @@ class Result:
                 raise SimulationError(
                     f"{path}: {key} is {arrays[key].dtype} of shape {arrays[key].shape}; its scene and the {len(t)} samples "
                     f"need floats of shape {shape} (a damaged file?)"
+                )
+        for key in ARRAYS:
+            bad = np.flatnonzero(~np.isfinite(arrays[key].reshape(len(t), -1)).all(axis=1)) if len(t) else []
+            if len(bad):
+                raise SimulationError(
+                    f"{path}: {key} is not finite at {len(bad)} sample(s), the first at index {bad[0]} (NaN or inf: a damaged "
+                    "file, or one not written by coopdyn, which saves finite samples only)"
                 )
         try:
             return cls(scene=scene, t=arrays["t"], q=arrays["q"], v=arrays["v"], tau=arrays["tau"], **meta)
@@ -315,9 +365,10 @@ def _check_meta(meta: dict[str, Any]) -> None:
 
 class SampleFiles:
     """A run's samples streamed to ``.npy`` files in ``folder`` (``t``, ``q``, ``v``, ``tau``)
-    instead of kept in memory: the files are made at their final size up front and filled as
-    the run goes; :meth:`arrays` maps them back read-only. A run that stops early leaves files
-    cut to the samples it made.
+    instead of kept in memory: the files are made at their final size up front, their disk
+    space reserved (so that a disk filling up during the run cannot hit them), and filled as the
+    run goes; :meth:`arrays` maps them back read-only. A run that stops early leaves files cut
+    to the samples it made.
 
     Args:
         folder: a new or empty folder. n: samples the run will save. nq, nv, na: sizes.
@@ -336,11 +387,16 @@ class SampleFiles:
             if need > free:
                 raise OutputError(28, f"streaming needs {need / 1e9:.3g} GB, {self.folder} has {free / 1e9:.3g} GB free")
             shapes = {"t": (n,), "q": (n, nq), "v": (n, nv), "tau": (n, na)}
-            self._files = {k: np.lib.format.open_memmap(self.folder / f"{k}.npy", mode="w+", shape=s) for k, s in shapes.items()}
+            self._files = {k: _reserved_npy(self.folder / f"{k}.npy", s) for k, s in shapes.items()}
         except OSError as exc:
             if isinstance(exc, OutputError):
                 raise
-            raise OutputError(exc.errno, f"cannot stream to {self.folder}: {exc.strerror or exc}", str(self.folder)) from exc
+            with contextlib.suppress(OSError):
+                for name in self.NAMES:
+                    (self.folder / f"{name}.npy").unlink(missing_ok=True)
+            raise OutputError(
+                exc.errno, f"cannot stream to {self.folder}: {exc.strerror or exc} (needs {need / 1e9:.3g} GB)", str(self.folder)
+            ) from exc
         self.size, self.n = n, 0
 
     def append(self, t: Any, q: Any, v: Any, tau: Any) -> None:
@@ -351,14 +407,43 @@ class SampleFiles:
         self.n += m
 
     def arrays(self) -> tuple[np.ndarray, ...]:
-        """(t, q, v, tau), memory-mapped read-only; files longer than what was written are cut."""
+        """(t, q, v, tau), memory-mapped read-only; files longer than what was written are cut
+        in place (their header rewritten, the rest truncated: no new disk space needed)."""
         for name, mm in self._files.items():
             mm.flush()
             if self.n < self.size:
-                path = self.folder / f"{name}.npy"
-                tmp = path.with_name(f".{name}.npy.tmp")
-                with open(tmp, "wb") as f:  # (np.save on a name would append .npy)
-                    np.save(f, np.asarray(mm[: self.n]))
-                os.replace(tmp, path)
+                _cut_npy(self.folder / f"{name}.npy", (self.n, *mm.shape[1:]))
         self._files = {}
         return tuple(np.load(self.folder / f"{k}.npy", mmap_mode="r") for k in self.NAMES)
+
+
+def _reserved_npy(path: Path, shape: tuple[int, ...]) -> np.ndarray:
+    """A float ``.npy`` file of ``shape``, its blocks allocated on disk, memory-mapped for writing.
+    Without the reservation a full disk would end the process with SIGBUS at the first write to
+    a page it cannot back."""
+    mm = np.lib.format.open_memmap(path, mode="w+", dtype=np.float64, shape=shape)
+    size = path.stat().st_size
+    if hasattr(os, "posix_fallocate") and size:
+        fd = os.open(path, os.O_RDWR)
+        try:
+            os.posix_fallocate(fd, 0, size)
+        finally:
+            os.close(fd)
+    return mm
+
+
+def _cut_npy(path: Path, shape: tuple[int, ...]) -> None:
+    """Make the ``.npy`` file at ``path`` hold only its first ``shape[0]`` rows, in place: the
+    header is rewritten at its own length (a shorter shape, padded) and the file truncated."""
+    with open(path, "r+b") as f:
+        version = np.lib.format.read_magic(f)
+        _READ_HEADER[version](f, max_header_size=_MAX_HEADER)
+        offset = f.tell()
+        header = np.lib.format.header_data_from_array_1_0(np.empty((0,), np.float64))
+        header["shape"] = shape
+        text = repr(header).encode("latin1")
+        prefix = 8 + (2 if version == (1, 0) else 4)
+        room = offset - prefix - 1  # the header's length, less its closing newline
+        f.seek(prefix)
+        f.write(text.ljust(room) + b"\n")
+        f.truncate(offset + int(np.prod(shape)) * 8)

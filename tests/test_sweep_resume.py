@@ -206,3 +206,60 @@ def test_a_sweep_inside_a_daemonic_process_runs_serially() -> None:
         out = pool.map(_sweep_in_a_pool_worker, [0])[0]
     assert out[:2] == ["completed", "completed"]
     assert "daemonic process" in out[2] and "executor='serial'" in out[2]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_FSIZE and posix_fallocate")
+def test_a_stream_that_does_not_fit_is_refused_with_an_error_not_a_crash(tmp_path: Path) -> None:
+    """Streaming reserves its disk space up front: a limit it cannot fit ends in an OutputError
+    (not a SIGBUS later), and no half-made files are left."""
+    script = tmp_path / "stream.py"
+    script.write_text(
+        "import resource, signal, sys\n"
+        "import coopdyn as cd\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))\n"
+        "try:\n"
+        f"    cd.simulate(cd.scenes.linear_book(), 10.0, integrator='rk4', dt=1e-4, stream_to={str(tmp_path / 's')!r})\n"
+        "except cd.OutputError as exc:\n"
+        "    print('refused:', exc)\n"
+    )
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "cannot stream to" in run.stdout and "File too large" in run.stdout
+    assert not list((tmp_path / "s").glob("*.npy"))
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> object:
+    """A 1 MB file system of its own (tmpfs; needs root, as CI has)."""
+    where = tmp_path / "disk"
+    where.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(where)]).returncode:
+        pytest.skip("needs permission to mount a small tmpfs")
+    yield where
+    subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+def test_a_disk_filling_up_during_a_streamed_run_cannot_kill_it(small_disk: Path) -> None:
+    """Another program fills the disk while a run streams to it: the run's space was reserved,
+    it finishes with every sample (a memory-mapped file without the reservation dies by SIGBUS)."""
+    script = small_disk.parent / "fill.py"
+    script.write_text(
+        "import numpy as np, coopdyn as cd\n"
+        "drives = cd.scenes.drives_controller(*cd.scenes.book_task())\n"
+        "filled = []\n"
+        "def controller(t, q, v):\n"
+        "    if t > 1.0 and not filled:\n"
+        "        filled.append(1)\n"
+        f"        with open({str(small_disk / 'filler')!r}, 'wb', buffering=0) as f:\n"
+        "            try:\n"
+        "                while True: f.write(b'x' * 4096)\n"
+        "            except OSError as exc: print('disk full:', exc.strerror)\n"
+        "    return drives(t, q, v)\n"
+        f"res = cd.simulate(cd.scenes.linear_book(), 3.0, controller=controller, integrator='rk4', dt=1e-3, "
+        f"stream_to={str(small_disk / 'run')!r})\n"
+        "print('samples', len(res.t), float(res.t[-1]))\n"
+    )
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, (run.returncode, run.stderr[-2000:])
+    assert "disk full: No space left on device" in run.stdout and "samples 3001 3.0" in run.stdout

@@ -72,3 +72,62 @@ def test_a_rerun_takes_the_code_the_user_names(tmp_path: Path, capsys: pytest.Ca
         rerun(table, 0, make_case=f"{here}:nothing_here")
     assert main(["sweep", "x.toml", "--trust"]) == 2
     assert "--trust goes with --rerun" in capsys.readouterr().err
+
+
+def saved_result(tmp_path: Path) -> Path:
+    res = cd.simulate(cd.scenes.linear_book(), 0.01, integrator="rk4", dt=1e-3)
+    return res.save(tmp_path / "r.npz")
+
+
+def test_a_result_bomb_is_refused_before_it_is_decompressed(tmp_path: Path) -> None:
+    """A small file that would expand to gigabytes: refused from its headers."""
+    import numpy as np
+
+    path = saved_result(tmp_path)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["q"] = np.zeros((2**27, 2))  # 2 GiB of zeros: a few MB compressed
+    bomb = tmp_path / "bomb.npz"
+    np.savez_compressed(bomb, **arrays)
+    assert bomb.stat().st_size < 10e6
+    with pytest.raises(cd.SimulationError, match=r"would take 2.15 GB in memory, more than the 1 GB allowed"):
+        cd.Result.load(bomb, max_bytes=1e9)
+    assert cd.Result.load(path).t[-1] == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("key", ["t", "q", "v", "tau"])
+def test_a_result_with_nan_samples_is_refused_by_name(tmp_path: Path, key: str) -> None:
+    import numpy as np
+
+    path = saved_result(tmp_path)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays[key] = arrays[key].copy()
+    arrays[key][3] = np.nan
+    np.savez(path, **arrays)
+    with pytest.raises(cd.SimulationError, match=rf"{key} is not finite at 1 sample\(s\), the first at index 3"):
+        cd.Result.load(path)
+
+
+def test_a_killed_run_from_the_command_line_saves_what_it_made(tmp_path: Path) -> None:
+    """SIGTERM and SIGHUP stop `coopdyn simulate` as Ctrl-C does: the partial run is written."""
+    import signal
+    import subprocess
+    import time
+
+    scene = tmp_path / "long.toml"
+    scene.write_text(
+        '[scene]\nbuilder = "linear_book"\n[controller]\ntype = "book_drives"\n'
+        '[simulation]\nduration = 1000.0\nintegrator = "rk4"\ndt = 1e-5\n[output]\nfolder = "out"\nplot = false\nhtml = false\n'
+    )
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "coopdyn", "simulate", str(scene), "--max-steps", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        time.sleep(4.0)  # past start-up, into the run
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err[-2000:]
+        assert "interrupted at t = " in err and "The run so far was saved to" in err
+        res = cd.Result.load(tmp_path / "out" / "trajectory.npz")
+        assert res.status == "interrupted" and 0 < res.t[-1] < 1000.0

@@ -457,7 +457,7 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
     loaded by :meth:`coopdyn.Result.load`; an older one gets the scene file's scene."""
     import numpy as np
 
-    from ..result import Result
+    from ..result import Result, read_npz
 
     path = Path(path) if path is not None else Path(loaded.output["folder"]) / "trajectory.npz"
     if not path.is_file():
@@ -466,7 +466,7 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
         with np.load(path, allow_pickle=False) as z:
             if "meta" in z.files:
                 return Result.load(path)
-            arrays = {k: np.asarray(z[k]) for k in ("t", "q", "v", "tau", "integrator", "dt")}
+        arrays = read_npz(path, ("t", "q", "v", "tau", "integrator", "dt"))
     except CoopdynError:
         raise
     except Exception as exc:
@@ -480,8 +480,8 @@ def load_result(loaded: Run, path: str | Path | None = None) -> Any:
                 f"{path}: {key} has shape {arrays[key].shape}, the scene of {loaded.path} needs {shape} "
                 "(a trajectory of another scene, or a damaged file)"
             )
-    if arrays["t"].dtype.kind not in "iuf" or not all(np.all(np.isfinite(arrays[k])) for k in ("t", "q", "v")):
-        raise SceneFileError(f"{path}: the trajectory's t, q and v must be finite numbers")
+    if arrays["t"].dtype.kind not in "iuf" or not all(np.all(np.isfinite(arrays[k])) for k in ("t", "q", "v", "tau")):
+        raise SceneFileError(f"{path}: the trajectory's t, q, v and tau must be finite numbers")
     dt = arrays["dt"]
     if dt.shape != () or dt.dtype.kind not in "iuf" or not float(dt) > 0 or arrays["integrator"].dtype.kind != "U":
         raise SceneFileError(f"{path}: dt must be one positive number and integrator a name (a damaged file?)")
