@@ -347,3 +347,14 @@ def test_generalized_alpha_keeps_the_energy_and_rho_inf_removes_only_high_freque
     assert drift["1", 1e-3] < 0.005
     assert drift["ros2", 1e-3] > 5 * drift["1", 1e-3]
     assert drift["0.9", 1e-3] < 3 * drift["1", 1e-3]
+
+
+def test_ros2_adaptive_defaults_cost_steps_of_dopri5s_order() -> None:
+    """Its defaults are set for a second-order method (steps ∝ rtol^-½): within 3× of dopri5's
+    steps on the book system (dopri5's own 1e-6 took 59×), with a force error below 1 N."""
+    scene = cd.scenes.linear_book()
+    controller = cd.scenes.drives_controller(*cd.scenes.book_task())
+    runs = {m: cd.simulate(scene, 0.1, controller=controller, integrator=m) for m in ("ros2_adaptive", "dopri5")}
+    assert runs["ros2_adaptive"].n_steps <= 3 * runs["dopri5"].n_steps
+    error = np.abs(runs["ros2_adaptive"].wrench(0) - runs["dopri5"].wrench(0)).max()
+    assert error < 1.0
