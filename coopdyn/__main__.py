@@ -71,7 +71,7 @@ def _view(args: argparse.Namespace) -> int:
         result = load_result(load(args.path), args.result)
     else:
         result = open_result(args.path).result
-    if args.html:
+    if args.html is not None:  # an empty path is refused, not taken for "no --html"
         path = export_html(result, args.html, fps=args.fps, meshes=args.meshes or "collision")
         print(f"wrote {path} ({path.stat().st_size / 1e6:.3g} MB)")
         return 0
@@ -254,7 +254,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="coopdyn",
         description="Multi-arm cooperating robots holding one object through elastic interconnections.",
-        epilog="`coopdyn COMMAND --help` describes a command. Exit codes: 0 done, 2 an error, 130 interrupted (Ctrl-C, SIGTERM, SIGHUP: what was done so far is saved).",
+        epilog=(
+            "`coopdyn COMMAND --help` describes a command. Exit codes: 0 done, 2 an error, 130 interrupted (Ctrl-C, SIGTERM, "
+            "SIGHUP: what was done so far is saved)."
+        ),
     )
     parser.add_argument("--version", action="version", version=f"coopdyn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -45,7 +45,11 @@ def sigterm_as_interrupt() -> Iterator[None]:
     def interrupt(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt(f"{signal.Signals(signum).name} received")
 
-    caught = [s for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None and signal.getsignal(s) is not signal.SIG_IGN]
+    caught = [
+        s
+        for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None))
+        if s is not None and signal.getsignal(s) is not signal.SIG_IGN
+    ]
     previous = {s: signal.signal(s, interrupt) for s in caught}
     try:
         yield

@@ -84,11 +84,24 @@ def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none
     return int(value)
 
 
+PATH_MAX = 4096  #: [bytes] the longest path Linux takes
+NAME_MAX = 255  #: [bytes] the longest file name
+MAX_DEPTH = 256  #: the most folders a path may nest (creating deeper ones recurses once a level)
+
+
 def path(value: Any, name: str, error: type[CoopdynError] = SceneError) -> Path:
-    """A file-system path from a non-empty ``str`` or ``os.PathLike`` without NUL bytes."""
-    if not isinstance(value, str | os.PathLike) or not str(value) or "\0" in str(value):
+    """A file-system path from a non-empty ``str`` or ``os.PathLike`` without NUL bytes, of a
+    length and depth a file system takes."""
+    if not isinstance(value, str | os.PathLike) or not isinstance(os.fspath(value), str) or not str(value) or "\0" in str(value):
         raise error(f"{name} must be a path, got {_short(value)}")
-    return Path(value)
+    result = Path(value)
+    longest = max((len(os.fsencode(part)) for part in result.parts), default=0)
+    if len(os.fsencode(str(result))) > PATH_MAX or longest > NAME_MAX or len(result.parts) > MAX_DEPTH:
+        raise error(
+            f"{name} is too long a path ({len(str(result))} characters, {len(result.parts)} levels, a name of {longest} "
+            f"bytes; at most {PATH_MAX}, {MAX_DEPTH} and {NAME_MAX}): {_short(str(result))}"
+        )
+    return result
 
 
 def _short(value: Any, limit: int = 120) -> str:

@@ -109,6 +109,9 @@ def _cost(name: str, scene: Scene, dt: float, t_measure: float, omega: np.ndarra
     )
 
 
+MAX_MEASURE = 60.0  #: [s] the longest simulated time advise_model spends timing one model
+
+
 def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measure: float = 0.05) -> ModelAdvice:
     """Which model the scene needs at a control ``bandwidth`` [Hz], and what each one costs.
 
@@ -125,6 +128,10 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     bandwidth = _validate.positive(bandwidth, "bandwidth", "Hz", SimulationError)
     dt = _validate.positive(dt, "dt", "s", SimulationError)
     measure = _validate.positive(measure, "measure", "s", SimulationError)
+    if measure > MAX_MEASURE:
+        raise SimulationError(
+            f"measure = {measure:g} s: each model is simulated that long to time it; give at most {MAX_MEASURE:g} s"
+        )
     qs = quasi_static(scene)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the preloads it drops are reported by rigid_limit itself elsewhere

@@ -9,11 +9,12 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate
 from .cooperative import GripLiftOscillate, ObjectImpedance
-from .errors import DivergenceError, SimulationInterrupted, StepBudgetError
+from .errors import DivergenceError, SimulationError, SimulationInterrupted, StepBudgetError
 from .outputs import check_folder, save_partial, write_outputs
 from .problems.facing_arms import facing_arms, object_start
-from .simulate import simulate
+from .simulate import MIN_DT, simulate
 from .viz.plotting import cooperative_figure
 
 STIFFNESS = 1e4  #: interconnection stiffness [N/m]; rotational 1e2 [N·m/rad]
@@ -34,6 +35,9 @@ def run_demo(
     files written; :func:`format_summary` makes it text). On a divergence or Ctrl-C the
     trajectory so far is written and the error re-raised with those paths in ``saved``."""
     out_dir = check_folder(out)  # before the run: a refusal costs nothing yet
+    dt = _validate.positive(dt, "dt", "s", SimulationError)
+    if dt < MIN_DT:
+        raise SimulationError(f"dt must be >= {MIN_DT:g} [s], got {dt!r}")
     scene = facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
     controller = ObjectImpedance(scene, task)

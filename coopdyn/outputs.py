@@ -106,13 +106,19 @@ def check_folder(folder: Any) -> Path:
     """The absolute output folder (a symbolic link: its target), checked before a run starts: a
     path, not a file, not the working folder or one of its parents (a run replaces its folder
     whole), and holding only what coopdyn writes."""
-    target = _validate.path(folder, "the output folder", OutputError).absolute()
-    if target.is_symlink():
-        target = target.resolve()
-    cwd = Path.cwd().resolve()
-    if target.resolve() == cwd or target.resolve() in cwd.parents:
-        raise OutputError(f"the output folder {target} is the working folder or holds it; a run replaces its folder whole")
-    _refuse_foreign(target)
+    target = _validate.path(folder, "the output folder", OutputError)
+    try:
+        target = target.absolute()
+        if target.is_symlink():
+            target = target.resolve(strict=True)
+        cwd = Path.cwd().resolve()
+        if target.resolve() == cwd or target.resolve() in cwd.parents:
+            raise OutputError(f"the output folder {target} is the working folder or holds it; a run replaces its folder whole")
+        _refuse_foreign(target)
+    except (OSError, RuntimeError) as exc:  # a link that points nowhere or to itself, a working folder deleted
+        if isinstance(exc, OutputError):
+            raise
+        raise OutputError(f"the output folder {folder} cannot be used: {getattr(exc, 'strerror', None) or exc}") from None
     return target
 
 

@@ -178,6 +178,8 @@ class Advice:
 
 def linearize(scene: Scene, q: Any = None, v: Any = None, controller: Controller | None = None) -> np.ndarray:
     """State matrix A (2nv, 2nv) of the linearised stiff dynamics at (q, v)."""
+    if not isinstance(scene, Scene):
+        raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
     q, v = scene.check_state(scene.q0 if q is None else q, scene.v0 if v is None else v)
     return state_matrix(*System(Dynamics(scene), controller).stiffness(q, v))
 

@@ -30,6 +30,10 @@ class Equilibrium:
     iterations: int  #: Newton steps taken
 
 
+MAX_ITER = 1000  #: the most Newton steps equilibrium() takes
+ROUND_OFF_STEP = 1e-13  #: [m, rad] a Newton step this small means the residual is round-off
+
+
 def equilibrium(
     scene: Scene, q: Any = None, *, tol: float = 1e-9, max_iter: int = 100, backend: str | None = None
 ) -> Equilibrium:
@@ -38,8 +42,9 @@ def equilibrium(
     Args:
         scene: the scene. q: the configuration to start from (default ``scene.q0``); its arm
             coordinates are kept.
-        tol: stop when every generalized force on the object is below this [N, N·m].
-        max_iter: Newton steps before giving up.
+        tol: stop when every generalized force on the object is below this [N, N·m], or when
+            a Newton step moves the object less than 1e-13 [m, rad] (what is left is round-off).
+        max_iter: Newton steps before giving up (at most 1000).
         backend: the dynamics backend (see :class:`coopdyn.Dynamics`).
 
     Raises:
@@ -50,6 +55,8 @@ def equilibrium(
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
     tol = _validate.positive(tol, "tol", "N or N·m", SimulationError)
     max_iter = _validate.count(max_iter, "max_iter", SimulationError)
+    if max_iter > MAX_ITER:
+        raise SimulationError(f"max_iter must be at most {MAX_ITER} (Newton converges in a handful of steps or not at all)")
     q, v = scene.check_state(scene.q0 if q is None else q, np.zeros(scene.nv))
     dynamics = Dynamics(scene, backend)
     obj, tau = scene.object_v, np.zeros(scene.n_actuated)
@@ -68,6 +75,8 @@ def equilibrium(
                 "the interconnections do not hold the object in every direction (their stiffness on the object's "
                 "coordinates is singular): it has no rest pose"
             ) from None
+        if float(np.max(np.abs(dx))) <= ROUND_OFF_STEP:  # the residual left is round-off: this is the rest pose
+            return Equilibrium(q, residual, it)
         step = np.zeros(scene.nv)
         step[obj] = dx
         q = pin.integrate(scene.model, q, step)

@@ -155,7 +155,7 @@ def test_no_user_file_is_removed(tmp_path: Path) -> None:
     thesis.write_text("three years of work")
     with pytest.raises(cd.OutputError, match=r"holds files coopdyn did not write \(trajectories/thesis.tex\)"):
         cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
-    with pytest.raises(cd.OutputError, match="trajectories/thesis.tex"):
+    with pytest.raises(cd.OutputError, match=r"trajectories/thesis\.tex"):
         cd.outputs.write_outputs(tmp_path, [("note", lambda folder: (folder / "diagnosis.txt").write_text("x"))])
     assert thesis.read_text() == "three years of work"
     thesis.unlink()

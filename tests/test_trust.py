@@ -64,7 +64,7 @@ def test_a_rerun_takes_the_code_the_user_names(tmp_path: Path, capsys: pytest.Ca
     assert rerun(table, 0, make_case=book_case).identical
     assert rerun(table, 0, make_case=f"{here}:book_case").identical
     assert main(["sweep", "--rerun", str(table), "0", "--case", f"{here}:book_case"]) == 0
-    with pytest.raises(cd.SweepError, match="MODULE:FUNCTION or FILE.py:FUNCTION"):
+    with pytest.raises(cd.SweepError, match=r"MODULE:FUNCTION or FILE\.py:FUNCTION"):
         rerun(table, 0, make_case="book_case")
     with pytest.raises(cd.SweepError, match="no file"):
         rerun(table, 0, make_case=f"{tmp_path}/missing.py:f")
@@ -122,7 +122,10 @@ def test_a_killed_run_from_the_command_line_saves_what_it_made(tmp_path: Path) -
     )
     for sig in (signal.SIGTERM, signal.SIGHUP):
         proc = subprocess.Popen(
-            [sys.executable, "-m", "coopdyn", "simulate", str(scene), "--max-steps", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            [sys.executable, "-m", "coopdyn", "simulate", str(scene), "--max-steps", "0"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         time.sleep(4.0)  # past start-up, into the run
         proc.send_signal(sig)

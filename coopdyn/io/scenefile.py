@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import scenes
+from .. import _validate, scenes
 from .._validate import _short
 from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
@@ -514,7 +514,7 @@ def open_result(path: str | Path, *, task: bool = False) -> Saved:
     (or of the ``scene.toml`` copy beside the result), built on the result's scene."""
     if not isinstance(path, str | Path) or not str(path):
         raise SceneFileError(f"a result is given by a path, got {path!r}")
-    path = Path(path)
+    path = _validate.path(path, "a result", SceneFileError)
     if path.suffix == ".toml":
         loaded = load(path)
         npz = Path(loaded.output["folder"]) / "trajectory.npz"

@@ -13,6 +13,7 @@ and :meth:`Beam.zero_modes` counts its rigid-body modes — six for a free objec
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -67,6 +68,8 @@ class Beam:
                 "the first modes converge at second order (0.5 % at 32 elements)"
             )
         object.__setattr__(self, "damping", _validate.non_negative(self.damping, "Beam: damping β", "s"))
+        tip_stiffness(self.section, self.element_length)  # refuses elements whose stiffness floating point cannot hold
+        self._lumped()  # and masses
 
     # -- geometry and mass -----------------------------------------------------------------------
     @property
@@ -105,16 +108,28 @@ class Beam:
         """Lumped mass: each node takes its tributary length l (half of each adjacent element)
         as mass ρAl at the node, with the slice's rotary inertia ρJ₀l about x and ρI l + m l²/12
         about y and z (J₀ = Iy + Iz)."""
+        return [pin.Inertia(m, np.zeros(3), np.diag(I)) for m, I in zip(*self._lumped(), strict=True)]
+
+    def _lumped(self) -> tuple[list[float], list[np.ndarray]]:
+        """Each node's mass [kg] and principal inertias (3,) [kg·m²] (:meth:`node_inertias`)."""
         s, h = self.section, self.element_length
-        out = []
-        for k in range(self.n_nodes):
-            tributary = h if 0 < k < self.n_elements else h / 2
-            m = s.rho * s.A * tributary
-            I = np.diag([s.rho * (s.Iy + s.Iz) * tributary, s.rho * s.Iy * tributary, s.rho * s.Iz * tributary])
-            I[1, 1] += m * tributary**2 / 12
-            I[2, 2] += m * tributary**2 / 12
-            out.append(pin.Inertia(m, np.zeros(3), I))
-        return out
+        masses, inertias = [], []
+        with np.errstate(all="ignore"):
+            for k in range(self.n_nodes):
+                tributary = np.float64(h if 0 < k < self.n_elements else h / 2)  # numpy: an overflow is inf, not an error
+                m = s.rho * s.A * tributary
+                I = np.array([s.rho * (s.Iy + s.Iz), s.rho * s.Iy, s.rho * s.Iz]) * tributary
+                I[1:] += m * tributary**2 / 12
+                masses.append(float(m))
+                inertias.append(I)
+        if not all(
+            math.isfinite(m) and m > 0 and np.all(np.isfinite(I)) and np.all(I > 0) for m, I in zip(masses, inertias, strict=True)
+        ):
+            raise SceneError(
+                f"Beam: its node masses or inertias are not representable in floating point (node mass {masses[0]:.3g} kg, "
+                f"inertias {inertias[0]} kg·m²); give lengths in metres and densities in kg/m³ of a real beam"
+            )
+        return masses, inertias
 
     def mass_matrix(self) -> np.ndarray:
         """The lumped (block-diagonal) mass matrix (6N, 6N), per node (δp, δθ) in beam axes."""

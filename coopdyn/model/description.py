@@ -423,7 +423,7 @@ def _section(value: Any, where: Location) -> Section:
         raise DescriptionError(f"must be {KINDS['section']}, got {_validate._short(value)}", where)
     entry = dict(value)
     shape = entry.pop("shape", "properties")
-    if shape not in SECTION:
+    if not isinstance(shape, str) or shape not in SECTION:
         raise DescriptionError(f"shape must be one of {sorted(SECTION)}, got {shape!r}", where)
     _keys(entry, SECTION[shape], where)
     kwargs = _values(entry, SECTION[shape], where)
@@ -457,7 +457,7 @@ def _build_object(entry: Any) -> RigidObject | Beam:
     if not isinstance(entry, Mapping):
         raise DescriptionError(f"must be a table, got {_validate._short(entry)}", where)
     kind = entry.get("type")
-    if kind not in OBJECT:
+    if not isinstance(kind, str) or kind not in OBJECT:
         raise DescriptionError(f"type must be one of {sorted(OBJECT)}, got {kind!r}", where._replace(key="type"))
     fields = OBJECT[kind]
     entry = {k: v for k, v in entry.items() if k != "type"}

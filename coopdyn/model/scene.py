@@ -7,6 +7,7 @@ around explicitly and Pinocchio ``Data`` lives in :class:`coopdyn.dynamics.Dynam
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -48,6 +49,46 @@ class Link:
 
 
 STATE_LIMIT = 1e6  #: |q|, |v| beyond this [m, rad, m/s, rad/s] is refused (energies would overflow)
+
+
+#: the pinocchio.Data a run holds at once (the scene's, the dynamics', the kernel's, a compiled controller's)
+DATA_ALIVE = 3
+
+
+def data_bytes(nv: int) -> float:
+    """[bytes] one pinocchio.Data of a model with ``nv`` velocities: its four nv×nv×nv
+    second-order derivative tensors (32·nv³) dominate beyond nv ≈ 100."""
+    return 32.0 * nv**3 + 400.0 * nv**2
+
+
+def available_memory() -> float | None:
+    """[bytes] memory this machine can still give (Linux's MemAvailable); None where unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(nv: int, obj: Any) -> None:
+    """Refuse, before anything big is allocated, a model whose Pinocchio data would not fit."""
+    need = DATA_ALIVE * data_bytes(nv)
+    have = available_memory()
+    if have is None or need <= have:
+        return
+    fits = next(n for n in range(nv, 0, -1) if DATA_ALIVE * data_bytes(n) <= have)
+    hint = ""
+    if isinstance(obj, Beam):
+        most = obj.n_elements - math.ceil((nv - fits) / 6)
+        hint = f"; this beam fits with at most {max(most, 0)} elements" if most >= 1 else "; no beam of free nodes fits"
+    raise SceneError(
+        f"this scene has nv = {nv} velocities: a run holds {DATA_ALIVE} Pinocchio Data of {data_bytes(nv) / 1e9:.3g} GB each "
+        f"(four nv×nv×nv tensors), {need / 1e9:.3g} GB in all, and this machine has {have / 1e9:.3g} GB available. "
+        f"At most nv = {fits} fits{hint}"
+    )
 
 
 class Scene:
@@ -127,6 +168,10 @@ class Scene:
             raise SceneError(f"obj must be a coopdyn.RigidObject or a coopdyn.Beam, got {type(obj).__name__}")
         if not isinstance(obj.name, str) or not obj.name:
             raise SceneError(f"the object's name must be a non-empty string, got {obj.name!r}")
+        if obj.name == "universe" or any(obj.name == n or obj.name.startswith(f"{n}/") for n in names):
+            raise SceneError(
+                f"the object's name {obj.name!r} is taken (by the world frame 'universe' or an arm's frames); rename the object"
+            )
         if isinstance(obj, RigidObject) and (not isinstance(obj.joint, str) or obj.joint not in OBJECT_JOINTS):
             raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {obj.joint!r}")
         if len(interconnections) == 0:
@@ -156,7 +201,8 @@ class Scene:
 
         arm_infos = tuple(_arm_info(model, la) for la in loaded)
         q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
-        data = model.createData()
+        check_memory(model.nv, obj)
+        data = pin.Data(model)  # (createData() copies it once more: twice the peak)
         pin.framesForwardKinematics(model, data, q0)
         o_frame = model.getFrameId(obj.name)
         world_M_object = pin.SE3(data.oMf[o_frame])

@@ -212,8 +212,8 @@ def _seeds(seeds: Any) -> Sequence[int | None]:
         return range(int(seeds))  # not a list: a huge count is refused by its length
     if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes):
         out = list(seeds)
-        if not out or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or s < 0 for s in out):
-            raise SweepError(f"seeds must be a non-empty list of integers >= 0, got {out!r}")
+        if not out or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or not 0 <= s < 2**63 for s in out):
+            raise SweepError(f"seeds must be a non-empty list of integers from 0 to 2**63 - 1 (a table's integers), got {out!r}")
         return [int(s) for s in out]
     raise SweepError(f"seeds must be a count or a list of integers, got {type(seeds).__name__}")
 

@@ -104,4 +104,3 @@ def _plain(value: Any) -> Any:
 
 
 __all__ = ["JOURNAL_NAME", "Journal", "finished_rows", "sweep_key"]
-

@@ -248,8 +248,7 @@ def _execute(
             raise SweepInterrupted(
                 f"sweep interrupted after {len(rows)} of {len(items)} runs"
                 + (
-                    f"; the table (the others 'not run') is in {saved}; resume=True (`coopdyn sweep SPEC --resume`) "
-                    "runs the rest"
+                    f"; the table (the others 'not run') is in {saved}; resume=True (`coopdyn sweep SPEC --resume`) runs the rest"
                     if saved
                     else "; the table so far is in this exception's .table"
                 ),

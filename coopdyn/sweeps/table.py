@@ -50,8 +50,7 @@ def save(table: Any, path: str | os.PathLike[str]) -> Path:
     """Write ``table`` as Parquet (atomically: a temporary file, then a rename)."""
     pa = require("pyarrow", "saving a sweep table (Parquet)", "pyarrow")
     pq = require("pyarrow.parquet", "saving a sweep table (Parquet)", "pyarrow")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = _validate.path(path, "the sweep table", SweepError)
     try:
         arrow = pa.Table.from_pandas(table, preserve_index=False)
     except (pa.ArrowException, OverflowError, TypeError, ValueError) as exc:  # e.g. a metric column of mixed kinds
@@ -65,6 +64,7 @@ def save(table: Any, path: str | os.PathLike[str]) -> Path:
     arrow = arrow.replace_schema_metadata(metadata)
     tmp = path.with_name(f".{path.name}.tmp")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(arrow, tmp, compression="zstd")
         os.replace(tmp, path)
     except OSError as exc:  # a full disk, a folder gone read-only: the rows are not lost

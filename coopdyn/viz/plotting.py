@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import write_atomically
 from ..errors import SweepError
 from ..problems.linear_book import BookSolution
 from ..result import Result
@@ -61,14 +62,15 @@ def book_figure(result: Result, exact: BookSolution | None = None, path: str | o
 
 
 def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
-    """Write ``fig`` atomically (temporary file, then rename) and close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
-    os.replace(tmp, path)
-    _pyplot().close(fig)
-    return path
+    """Write ``fig`` atomically (temporary file, then rename) and close it; the format from the
+    file's ending (``.png``, ``.pdf``, ``.svg``, …)."""
+    formats = {f".{f}" for f in fig.canvas.get_supported_filetypes()}
+    try:
+        return write_atomically(
+            path, "the figure", lambda tmp: fig.savefig(tmp, dpi=110, format=tmp.suffix.removesuffix(".tmp") or "png"), formats
+        )
+    finally:
+        _pyplot().close(fig)
 
 
 def result_figure(result: Result, reference: Any = None, path: str | os.PathLike[str] | None = None) -> Any:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from .._files import write_atomically
 from .._signals import sigterm_as_interrupt
 from .._validate import positive
 from ..errors import ViewerError
@@ -359,6 +360,16 @@ def _scaled(T: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return out
 
 
+MAX_FPS = 1000.0  #: frames per second an animation may ask for
+
+
+def _fps(fps: Any) -> float:
+    fps = positive(fps, "fps", "frames per second", ViewerError)
+    if fps > MAX_FPS:
+        raise ViewerError(f"fps must be at most {MAX_FPS:g} frames per second, got {fps:g}")
+    return fps
+
+
 def _frames(result: Result, fps: float) -> np.ndarray:
     times = np.arange(0.0, result.t[-1] + 1e-12, 1.0 / fps)
     return np.unique(np.clip(np.searchsorted(result.t, times), 0, len(result.t) - 1))
@@ -372,7 +383,7 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     meshcat = _meshcat()
     from meshcat.animation import Animation
 
-    fps = positive(fps, "fps", "frames per second", ViewerError)
+    fps = _fps(fps)
     window = RecordingWindow()
     vis = meshcat.Visualizer(window=window)
     scale, peak = force_scale(result)
@@ -399,12 +410,8 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
         if peak > 0
         else "no interconnection force in this run"
     )
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(window.get_scene(look, f"{legend} · {result.integrator}, {result.t[-1]:g} s"))
-    os.replace(tmp, path)
-    return path
+    page = window.get_scene(look, f"{legend} · {result.integrator}, {result.t[-1]:g} s")
+    return write_atomically(path, "the HTML animation", lambda tmp: tmp.write_text(page, encoding="utf-8"), {".html", ".htm"})
 
 
 def view(
@@ -424,7 +431,7 @@ def view(
     scene) and stops it however the viewing ends (Ctrl-C, SIGTERM, an error, or this process
     dying)."""
     meshcat = _meshcat()
-    fps = positive(fps, "fps", "frames per second", ViewerError)  # before a server starts
+    fps = _fps(fps)  # before a server starts
     host = check_host(host)
     server = None
     try:

@@ -13,6 +13,8 @@ SE(3) spring's, given this K and D.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -61,10 +63,11 @@ class Section:
         nu = _validate.number(nu, "Section.rectangle: nu", "1")
         if not -1.0 < nu < 0.5:
             raise SceneError(f"Section.rectangle: Poisson's ratio must be in (-1, 0.5), got {nu}")
-        a, c = max(b, h) / 2, min(b, h) / 2
-        J = a * c**3 * (16 / 3 - 3.36 * c / a * (1 - c**4 / (12 * a**4)))
         E = _validate.positive(E, "Section.rectangle: E", "Pa")
-        return cls(E, E / (2 * (1 + nu)), rho, b * h, b * h**3 / 12, h * b**3 / 12, J, 5 / 6 if timoshenko else None)
+        with _representable(f"Section.rectangle({b:g} m × {h:g} m)"):
+            a, c = max(b, h) / 2, min(b, h) / 2
+            J = a * c**3 * (16 / 3 - 3.36 * c / a * (1 - c**4 / (12 * a**4)))
+            return cls(E, E / (2 * (1 + nu)), rho, b * h, b * h**3 / 12, h * b**3 / 12, J, 5 / 6 if timoshenko else None)
 
     @classmethod
     def circle(cls, diameter: float, E: float, rho: float, nu: float = 0.3, timoshenko: bool = False) -> Section:
@@ -74,8 +77,24 @@ class Section:
         if not -1.0 < nu < 0.5:
             raise SceneError(f"Section.circle: Poisson's ratio must be in (-1, 0.5), got {nu}")
         E = _validate.positive(E, "Section.circle: E", "Pa")
-        I = np.pi * d**4 / 64
-        return cls(E, E / (2 * (1 + nu)), rho, np.pi * d**2 / 4, I, I, 2 * I, 6 / 7 if timoshenko else None)
+        with _representable(f"Section.circle({d:g} m)"):
+            I = np.pi * d**4 / 64
+            return cls(E, E / (2 * (1 + nu)), rho, np.pi * d**2 / 4, I, I, 2 * I, 6 / 7 if timoshenko else None)
+
+
+@contextmanager
+def _representable(what: str) -> Iterator[None]:
+    """Turn a float overflow, underflow to zero or division by zero inside the block into a
+    SceneError naming ``what``: sizes and materials far outside any real beam."""
+    try:
+        yield
+    except (OverflowError, ZeroDivisionError) as exc:
+        raise SceneError(
+            f"{what}: its stiffness or mass is not representable in floating point ({exc}); give lengths in metres, "
+            "moduli in pascals and densities in kg/m³ of a real beam"
+        ) from None
+    except SceneError as exc:
+        raise SceneError(f"{what}: {exc} (an overflow or underflow of its properties?)") from None
 
 
 @dataclass(frozen=True)
@@ -96,16 +115,19 @@ def tip_stiffness(section: Section, length: float) -> np.ndarray:
     order (u, v, w, θx, θy, θz) in beam axes: axial EA/L, torsion GJ/L, and per bending plane
     the Euler–Bernoulli (or, with a shear factor, Timoshenko) block — e.g. in x–y
     ``EIz/(L³(1+Φ)) [[12, −6L], [−6L, (4+Φ)L²]]`` on (v, θz), Φ = 12 EIz / (κ G A L²)."""
-    s, L = section, length
+    s, L = section, _validate.positive(length, "tip_stiffness: length", "m")
     K = np.zeros((6, 6))
-    K[0, 0] = s.E * s.A / L
-    K[3, 3] = s.G * s.J / L
-    for I, (d, r, sign) in ((s.Iz, (1, 5, -1.0)), (s.Iy, (2, 4, 1.0))):
-        phi = 0.0 if s.shear_factor is None else 12 * s.E * I / (s.shear_factor * s.G * s.A * L**2)
-        c = s.E * I / (L**3 * (1 + phi))
-        K[d, d] = 12 * c
-        K[d, r] = K[r, d] = sign * 6 * L * c
-        K[r, r] = (4 + phi) * L**2 * c
+    with _representable(f"a beam element of {L:g} m"), np.errstate(all="ignore"):
+        K[0, 0] = s.E * s.A / L
+        K[3, 3] = s.G * s.J / L
+        for I, (d, r, sign) in ((s.Iz, (1, 5, -1.0)), (s.Iy, (2, 4, 1.0))):
+            phi = 0.0 if s.shear_factor is None else 12 * s.E * I / (s.shear_factor * s.G * s.A * L**2)
+            c = s.E * I / (L**3 * (1 + phi))
+            K[d, d] = 12 * c
+            K[d, r] = K[r, d] = sign * 6 * L * c
+            K[r, r] = (4 + phi) * L**2 * c
+        if not np.all(np.isfinite(K)) or not np.all(np.diag(K) > 0):
+            raise ZeroDivisionError("a stiffness overflowed or vanished")
     return K
 
 
