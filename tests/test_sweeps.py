@@ -557,3 +557,38 @@ def test_heatmap_refuses_what_it_cannot_draw() -> None:
 def test_workers_with_an_executor_of_its_own_is_refused() -> None:
     with pytest.raises(cd.SweepError, match="workers sizes the local processes"):
         cd.sweep(lambda a: cd.scenes.linear_book(), {"a": [1]}, duration=0.01, executor="serial", workers=2)
+
+
+def test_a_failed_rows_message_is_the_same_on_every_executor(tmp_path: Path) -> None:
+    """A script's make_case reaches local workers by value (cloudpickle names its code
+    ``<dynamic-code>``): the failed row still names the script, as a serial run does, and
+    the row reruns identical."""
+    script = tmp_path / "study.py"
+    script.write_text(
+        textwrap.dedent(
+            f"""
+            import json, sys
+            import coopdyn as cd
+
+            def make_case(k):
+                if k > 1:
+                    raise ValueError("broken on purpose")
+                return cd.scenes.linear_book()
+
+            if __name__ == "__main__":
+                out = {{}}
+                for name, executor in (("serial", "serial"), ("processes", None)):
+                    table = cd.sweep(make_case, {{"k": [1, 2]}}, duration=0.01, executor=executor, progress=False,
+                                     out={str(tmp_path)!r} + "/" + name)
+                    out[name] = table["message"].tolist()
+                print(json.dumps(out))
+            """
+        )
+    )
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    import json
+
+    messages = json.loads(run.stdout.strip().splitlines()[-1])
+    assert messages["serial"] == messages["processes"] == ["", "ValueError: broken on purpose (at study.py:7 in make_case)"]
+    assert rerun(tmp_path / "processes", 1, make_case=f"{script}:make_case").identical

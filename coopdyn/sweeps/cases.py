@@ -230,6 +230,10 @@ class PythonJob:
     make_case: Callable[..., Any]
     metrics: Callable[..., Mapping[str, Any]] | None
     settings: Settings
+    #: the file ``make_case`` is defined in, as the parent sees it: a function cloudpickle sends
+    #: by value runs as ``<dynamic-code>`` in a worker, and a failed row's message names this
+    #: file instead, so that the message is the same on every executor
+    origin: str | None = None
 
     def case(self, item: Item) -> Case:
         kwargs = dict(item.params)
@@ -325,16 +329,32 @@ def default_metrics(result: Any, case: Case) -> tuple[dict[str, float], list[str
     return out, notes
 
 
-def _where(exc: BaseException) -> str:
+def source_name(fn: Any) -> str | None:
+    """The name of the file ``fn`` is defined in (None: unknown)."""
+    try:
+        file = inspect.getsourcefile(fn)
+    except TypeError:
+        return None
+    return Path(file).name if file else None
+
+
+def _where(exc: BaseException, origin: str | None = None) -> str:
     """`` (at file.py:12 in fn)``: the innermost frame outside coopdyn, or the innermost one; nothing
-    for coopdyn's own error about the case (its message says what)."""
+    for coopdyn's own error about the case (its message says what). Code cloudpickle sent by
+    value runs as ``<dynamic-code>``: it is named ``origin``, the file it came from."""
     frames = traceback.extract_tb(exc.__traceback__)
     package = str(Path(__file__).resolve().parent.parent)
     outside = [f for f in frames if not str(Path(f.filename).resolve()).startswith(package)]
     if not outside and isinstance(exc, CoopdynError):
         return ""
     frame = (outside or frames)[-1] if frames else None
-    return f" (at {Path(frame.filename).name}:{frame.lineno} in {frame.name})" if frame else ""
+    if frame is None:
+        return ""
+    name = origin if frame.filename == DYNAMIC_CODE and origin else Path(frame.filename).name
+    return f" (at {name}:{frame.lineno} in {frame.name})"
+
+
+DYNAMIC_CODE = "<dynamic-code>"  #: the file name cloudpickle gives code it sends by value
 
 
 def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> dict[str, Any]:
@@ -387,7 +407,11 @@ def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> 
             raise
         except BaseException as exc:
             result = getattr(exc, "result", result)
-            status, message, metrics = "failed", f"{type(exc).__name__}: {getattr(exc, 'detail', exc)}{_where(exc)}", {}
+            status, message, metrics = (
+                "failed",
+                f"{type(exc).__name__}: {getattr(exc, 'detail', exc)}{_where(exc, getattr(job, 'origin', None))}",
+                {},
+            )
     row.update(status=status, message=message, **metrics)
     texts = dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught)
     row["warnings"] = "; ".join([*texts, *notes])

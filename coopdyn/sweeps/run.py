@@ -25,7 +25,19 @@ from .._version import __version__
 from ..errors import SweepError, SweepInterrupted
 from ..outputs import TRAJECTORY_FILE, check_folder
 from . import table as tables
-from .cases import TIMING, Item, PythonJob, Settings, SpecJob, expand, placeholder, run_item, signature_check, versions
+from .cases import (
+    TIMING,
+    Item,
+    PythonJob,
+    Settings,
+    SpecJob,
+    expand,
+    placeholder,
+    run_item,
+    signature_check,
+    source_name,
+    versions,
+)
 from .engines import Executor, LocalProcesses, Serial, chunks, engine
 from .journal import JOURNAL_NAME, Journal, finished_rows, sweep_key
 from .spec import Spec
@@ -104,7 +116,7 @@ def sweep(
     if metrics is not None and not callable(metrics):
         raise SweepError(f"metrics must be a function metrics(result, case) -> dict, got {type(metrics).__name__}")
     settings = _settings(duration, integrator, dt, save_every, max_steps, energy_check)
-    job = PythonJob(make_case, metrics, settings)
+    job = PythonJob(make_case, metrics, settings, source_name(make_case))
     meta = {
         "source": {"kind": "python", **_reference(make_case)},
         "metrics": _reference(metrics) if metrics is not None else None,
@@ -486,7 +498,7 @@ def rerun(path: str | Path, run: int, *, make_case: Any = None, metrics: Any = N
         case_fn = _function(make_case, source, "make_case", "--case", trust)
         assert case_fn is not None
         metrics_fn = _function(metrics, meta.get("metrics"), "metrics", "--metrics", trust)
-        job = PythonJob(case_fn, metrics_fn, settings)
+        job = PythonJob(case_fn, metrics_fn, settings, source_name(case_fn))
     else:
         raise SweepError(f"{path}: its sweep description is damaged (a source of kind {kind!r})")
     seed = _value(stored.get("seed"))
