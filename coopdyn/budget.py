@@ -10,21 +10,20 @@ from typing import Any
 import numpy as np
 
 from . import _validate
+from .accuracy import accuracy_message
 from .closed_loop import System
 from .errors import AccuracyWarning, SimulationError
 from .integrators import Integrator
 from .model.scene import Scene
-from .stability import state_matrix, unresolved_mode_message
 
 
-def warn_unresolved(scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float) -> None:
-    """Warn once when a stable method's step does not resolve the fastest oscillatory mode at the
-    initial state (:func:`coopdyn.stability.unresolved_mode_message`)."""
-    try:
-        M, K, D = system.dynamics.stiffness(q, v)  # not system.stiffness: the run's counters stay the run's
-        kp, kd = system.gains
-        system.dynamics.add_joint_gains(K, D, kp, kd)
-        message = unresolved_mode_message(scene, state_matrix(M, K, D), method, dt)
+def warn_unresolved(
+    scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float, duration: float
+) -> None:
+    """Warn once when a fixed-step method at ``dt`` [s] gets a mode that moves the grasps wrong
+    over the run's ``duration`` [s] (:mod:`coopdyn.accuracy`; linearised at the initial state)."""
+    try:  # (system.dynamics, not system.stiffness: the run's counters stay the run's)
+        message = accuracy_message(system, method, q, v, dt, duration)
     except (
         ArithmeticError,
         ValueError,

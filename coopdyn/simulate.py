@@ -145,8 +145,8 @@ def simulate(
     if stream_to is not None:
         n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
-    if method.a_stable and not method.adaptive and not method.exact_discretisation and t_final > 0:
-        warn_unresolved(scene, system, method, q, v, dt)
+    if not method.adaptive and not method.exact_discretisation and not has_constraints(scene) and t_final > 0:
+        warn_unresolved(scene, system, method, q, v, dt, t_final)
     cpu0 = time.process_time()  # the compiled loop's preparation (e.g. the exponential's expm) counts too
     config, why = None, "loop='python'"
     if loop != "python":

@@ -134,3 +134,41 @@ def test_a_killed_run_from_the_command_line_saves_what_it_made(tmp_path: Path) -
         assert "interrupted at t = " in err and "The run so far was saved to" in err
         res = cd.Result.load(tmp_path / "out" / "trajectory.npz")
         assert res.status == "interrupted" and 0 < res.t[-1] < 1000.0
+
+
+def test_a_urdf_cannot_have_a_file_outside_its_package_read(tmp_path: Path) -> None:
+    """A URDF naming a "mesh" anywhere on the disk: that file is not read, nor embedded in the
+    HTML animation; a mesh inside the URDF's package is."""
+    from coopdyn.model.arm import load_arm
+    from coopdyn.resources import urdf_path
+
+    secret = tmp_path / "home" / "secret.stl"
+    secret.parent.mkdir()
+    secret.write_text("solid SECRET-TOKEN-123\nendsolid t\n")
+    pkg = tmp_path / "pkg"
+    (pkg / "urdf").mkdir(parents=True)
+    (pkg / "meshes").mkdir()
+    (pkg / "meshes" / "plate.stl").write_text(
+        "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 0.05 0 0\nvertex 0 0.05 0\nendloop\nendfacet\nendsolid t\n"
+    )
+    box = '<geometry><box size="0.04 0.04 0.01"/></geometry>'
+    base = urdf_path("slider_z.urdf").read_text()
+    for mesh, kept in ((secret, 0), (pkg / "meshes" / "plate.stl", 1)):
+        urdf = pkg / "urdf" / "robot.urdf"
+        urdf.write_text(base.replace(box, f'<geometry><mesh filename="{mesh}"/></geometry>'))
+        with pytest.warns(UserWarning, match="lies outside the URDF's package") if not kept else _no_warning():
+            loaded = load_arm(cd.Arm("a", urdf, tip_frame="tip"), meshes="visual")
+        assert loaded.visual is not None and loaded.visual.ngeoms == kept
+
+
+def _no_warning() -> object:
+    import contextlib
+    import warnings
+
+    @contextlib.contextmanager
+    def quiet() -> object:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            yield
+
+    return quiet()

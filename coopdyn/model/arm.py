@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -176,10 +177,61 @@ def _geometry(model: pin.Model, path: Path, package_dirs: list[str], meshes: str
     kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
     if meshes not in kinds:
         raise SceneError(f"meshes must be 'visual' or 'collision', got {meshes!r}")
+    text = _meshes_in_place(path, package_dirs, meshes)
     try:
-        return pin.buildGeomFromUrdf(model, str(path), kinds[meshes], package_dirs=package_dirs)
+        if text is None:
+            return pin.buildGeomFromUrdf(model, str(path), kinds[meshes], package_dirs=package_dirs)
+        return pin.buildGeomFromUrdfString(model, text, kinds[meshes], package_dirs=package_dirs)
     except Exception as exc:
         raise ModelLoadError(f"could not load the {meshes} geometry of {path}: {exc}") from exc
+
+
+MESH_SUFFIXES = frozenset({".stl", ".dae", ".obj", ".ply", ".glb", ".gltf"})  #: what a mesh file may be
+
+
+def _meshes_in_place(urdf: Path, package_dirs: list[str], meshes: str) -> str | None:
+    """Before any mesh is read: the URDF's text without the ``meshes`` ("visual" or
+    "collision") geometry whose mesh file lies outside the URDF's own package (the folder above
+    the URDF's) and the package folders, or has an ending no mesh has — each dropped with a
+    warning — or None when every mesh is in place. A URDF received from someone else could
+    otherwise have any file of this machine read, and embedded in an HTML animation."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(urdf).getroot()
+    except (ET.ParseError, OSError):
+        return None  # Pinocchio's parser says what is wrong with it
+    allowed = [urdf.resolve().parent.parent, *(Path(d).resolve() for d in package_dirs)]
+    dropped = False
+    for link in root.iter("link"):
+        for element in list(link.findall(meshes)):
+            mesh = element.find("geometry/mesh")
+            name = None if mesh is None else mesh.get("filename")
+            if not name:
+                continue
+            where = _mesh_file(name, urdf, package_dirs)
+            if where is None or (where.suffix.lower() in MESH_SUFFIXES and any(where.is_relative_to(r) for r in allowed)):
+                if where is not None and mesh is not None:
+                    mesh.set("filename", str(where))  # absolute: the text is parsed without its folder
+                continue
+            warnings.warn(
+                f"{urdf}: the {meshes} mesh {name} of link {link.get('name')!r} lies outside the URDF's package and the "
+                "package folders, or is not a mesh file: not read (give its folder in Arm(package_dirs=...) if you trust it)",
+                stacklevel=7,
+            )
+            link.remove(element)
+            dropped = True
+    return ET.tostring(root, encoding="unicode") if dropped else None
+
+
+def _mesh_file(name: str, urdf: Path, package_dirs: list[str]) -> Path | None:
+    """The file a URDF's mesh ``filename`` names (None: a package:// path no folder holds)."""
+    if name.startswith("package://"):
+        rest = name.removeprefix("package://")
+        found = next((Path(d) / rest for d in package_dirs if (Path(d) / rest).is_file()), None)
+        return found.resolve() if found is not None else None
+    path = Path(name.removeprefix("file://"))
+    return (path if path.is_absolute() else urdf.parent / path).resolve()
 
 
 def _joint_id(model: pin.Model, joint: str, what: str) -> int:
