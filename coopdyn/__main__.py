@@ -284,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     demo.add_argument("--t-final", type=float, default=5.0, help="duration [s] (default: 5)")
     demo.add_argument("--dt", type=float, default=1e-3, help="time step [s] (default: 1e-3)")
-    integrator_option(demo, "implicit_euler")
+    integrator_option(demo, "trapezoid")
     demo.add_argument("--no-html", action="store_true", help="skip the HTML animation")
     demo.set_defaults(func=_demo)
     simulate = command(

@@ -27,7 +27,7 @@ def run_demo(
     *,
     t_final: float = 5.0,
     dt: float = 1e-3,
-    integrator: str = "implicit_euler",
+    integrator: str = "trapezoid",
     html: bool = True,
     progress: bool = True,
 ) -> dict[str, Any]:
