@@ -172,3 +172,12 @@ def _no_warning() -> object:
             yield
 
     return quiet()
+
+
+def test_a_sweep_table_too_large_for_memory_is_refused_from_its_metadata(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from coopdyn.sweeps import load, table
+
+    cd.sweep(book_case, {"stiffness": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    monkeypatch.setattr(table, "MAX_LOAD_BYTES", 10.0)
+    with pytest.raises(cd.SweepError, match=r"would take .* GB in memory \(from its metadata\)"):
+        load(tmp_path)

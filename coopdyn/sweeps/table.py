@@ -25,6 +25,7 @@ from ..errors import SweepError
 from .cases import COUNTERS, SETTINGS, STATUS, TIMING, VERSIONS
 
 FORMAT = "coopdyn.sweep/1"
+MAX_LOAD_BYTES = 4e9  #: [bytes] the most a sweep table may take in memory, checked from its metadata before reading
 META_KEY = b"coopdyn.sweep"
 TABLE_NAME = "table.parquet"
 
@@ -86,6 +87,10 @@ def _rescue(arrow: Any) -> str:
     return f"The table was saved to {rescue} instead (and is in this exception's .table)"
 
 
+def _groups(pq: Any, path: Path) -> int:
+    return int(pq.ParquetFile(path).metadata.num_row_groups)
+
+
 def load(path: str | os.PathLike[str]) -> Any:
     """A sweep table saved by :func:`coopdyn.sweep` (a ``table.parquet``, or the folder holding
     it), with its description in ``attrs["coopdyn.sweep"]``."""
@@ -96,7 +101,15 @@ def load(path: str | os.PathLike[str]) -> Any:
     if not path.is_file():
         raise SweepError(f"no sweep table at {path}")
     try:
+        size = sum(g.total_byte_size for g in (pq.ParquetFile(path).metadata.row_group(i) for i in range(_groups(pq, path))))
+        if size > MAX_LOAD_BYTES:
+            raise SweepError(
+                f"{path}: its table would take {size / 1e9:.3g} GB in memory (from its metadata), more than the "
+                f"{MAX_LOAD_BYTES / 1e9:.3g} GB a sweep table may take"
+            )
         arrow = pq.read_table(path)
+    except SweepError:
+        raise
     except Exception as exc:
         raise SweepError(f"{path} is not a Parquet table ({type(exc).__name__}: {exc})") from exc
     raw = (arrow.schema.metadata or {}).get(META_KEY)
