@@ -7,16 +7,18 @@ R the method's stability function. One step's loss can be small (|λ|h < 1) and 
 total: implicit Euler at |λ|h = 0.5 keeps 89 % per step and nothing after 50 steps. And a mode
 that is badly integrated but moves no interconnection (a beam's internal node mode, far above
 what the grasps feel) costs no grasp force. So each oscillatory mode λ of the linearised closed
-loop (at the initial state) is judged by
+loop (at the initial state; damping ratio below 0.5: a more damped mode has decayed within its
+period, and smooth forcing moves it quasi-statically) is judged by
 
 * its **error over the run**: max over 0 ≤ t ≤ T of e^{Re λ t}·|(R(λh)e^{−λh})^{t/h} − 1| — the
   deviation of the method's mode from the exact one, in units of the mode's initial amplitude
   (a damped mode stops counting once it has decayed);
 * its **share of the grasp forces**: the interconnection force per unit of modal energy,
-  relative to the largest among the modes (equal energy in every mode is the prior).
+  relative to the largest among all the complex modes (equal energy in every mode is the prior).
 
-Their product above :data:`FORCE_ERROR_LIMIT` is a warning that names the mode. Checked against
-a grid of methods, steps, stiffnesses and damping on two Pandas (``tests/test_slow.py``).
+Their product above :data:`FORCE_ERROR_LIMIT` is a warning that names the mode. Measured against
+a grid of methods, steps, stiffnesses and damping (``benchmarks/accuracy_grid.py``): it leaves
+few wrong runs silent but also warns on some right ones (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import pinocchio as pin
 
 from .closed_loop import System
 from .integrators import Integrator
+from .stability import OSCILLATORY_DAMPING
 
 FORCE_ERROR_LIMIT = 0.1  #: the force-weighted error of a mode above which a run is not trusted
 OSCILLATORY = 1e-6  #: |Im λ| / |λ| above which a mode oscillates
@@ -88,8 +91,9 @@ def closed_loop_modes(system: System, q: np.ndarray, v: np.ndarray) -> Modes:
     Minv = np.linalg.inv(M)
     A = np.block([[np.zeros((nv, nv)), np.eye(nv)], [-Minv @ K, -Minv @ D]])
     lam, phi = np.linalg.eig(A)
-    keep = (lam.imag > OSCILLATORY * np.maximum(np.abs(lam), 1e-300)) & np.isfinite(lam)
-    lam, phi = lam[keep], phi[:, keep]
+    mag = np.abs(lam)
+    pairs = (lam.imag > OSCILLATORY * np.maximum(mag, 1e-300)) & np.isfinite(lam)  # one of each complex pair
+    lam, phi, mag = lam[pairs], phi[:, pairs], mag[pairs]
     if not len(lam):
         return Modes(lam, np.zeros(0))
     F = grasp_force_map(system, q, v)
@@ -97,8 +101,10 @@ def closed_loop_modes(system: System, q: np.ndarray, v: np.ndarray) -> Modes:
     dq, dv = phi[:nv], phi[nv:]
     energy = 0.5 * np.real(np.einsum("ij,ik,kj->j", dv.conj(), M, dv) + np.einsum("ij,ik,kj->j", dq.conj(), K, dq))
     per_energy = forces / np.sqrt(np.maximum(energy, 1e-300))
-    top = float(per_energy.max())
-    return Modes(lam, per_energy / top if top > 0 else np.zeros(len(lam)))
+    top = float(per_energy.max())  # over every complex mode: the share does not depend on which are judged
+    share = per_energy / top if top > 0 else np.zeros(len(lam))
+    judged = -lam.real < OSCILLATORY_DAMPING * mag
+    return Modes(lam[judged], share[judged])
 
 
 def judge(modes: Modes, method: Integrator, dt: float, duration: float) -> list[ModeAccuracy]:
