@@ -128,7 +128,9 @@ def _sweep(args: argparse.Namespace) -> int:
             raise SweepError(f"{flag} N needs N >= 1, got {value}")
     spec = load_spec(args.spec)
     if args.out is not None:
-        spec = dataclasses.replace(spec, folder=Path(args.out).resolve())
+        from ._validate import path as as_path
+
+        spec = dataclasses.replace(spec, folder=as_path(args.out, "--out DIR", SweepError).resolve())
     with _executor(args) as executor:
         table = run_spec(spec, executor=executor, workers=args.workers, chunk_size=args.chunk_size, resume=args.resume)
     meta = table.attrs["coopdyn.sweep"]

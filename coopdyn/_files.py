@@ -5,12 +5,23 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
 
 from . import _validate
 from .errors import OutputError
+
+TEMPORARY = re.compile(r"\..+\.tmp")  #: the names temporary() gives
+
+
+def temporary(path: Path) -> Path:
+    """The temporary file ``path`` is written as before its rename: ``.NAME.tmp`` beside it, or,
+    for a name within 5 bytes of the file system's limit, ``.coopdyn-PID.tmp``."""
+    if len(os.fsencode(path.name)) + 5 <= _validate.NAME_MAX:
+        return path.with_name(f".{path.name}.tmp")
+    return path.with_name(f".coopdyn-{os.getpid()}.tmp")
 
 
 def write_atomically(path: Any, what: str, write: Callable[[Path], Any], suffixes: Collection[str] = ()) -> Path:
@@ -26,7 +37,7 @@ def write_atomically(path: Any, what: str, write: Callable[[Path], Any], suffixe
         raise OutputError(f"{what} {path} must end in {' or '.join(sorted(suffixes))}, got {path.suffix or 'no ending'!r}")
     if path.is_dir():
         raise OutputError(f"{what} {path} is a folder; give a file name")
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = temporary(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write(tmp)
@@ -34,7 +45,7 @@ def write_atomically(path: Any, what: str, write: Callable[[Path], Any], suffixe
     except OSError as exc:
         if isinstance(exc, OutputError):
             raise
-        raise OutputError(exc.errno, f"cannot write {what} {path}: {exc.strerror or exc}", str(path)) from exc
+        raise OutputError(f"cannot write {what} {path}: {exc.strerror or exc}") from exc
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)

@@ -95,7 +95,10 @@ def path(value: Any, name: str, error: type[CoopdynError] = SceneError) -> Path:
     if not isinstance(value, str | os.PathLike) or not isinstance(os.fspath(value), str) or not str(value) or "\0" in str(value):
         raise error(f"{name} must be a path, got {_short(value)}")
     result = Path(value)
-    longest = max((len(os.fsencode(part)) for part in result.parts), default=0)
+    try:
+        longest = max((len(os.fsencode(part)) for part in result.parts), default=0)
+    except UnicodeError:
+        raise error(f"{name} must be a path this file system can name, got {_short(str(result))}") from None
     if len(os.fsencode(str(result))) > PATH_MAX or longest > NAME_MAX or len(result.parts) > MAX_DEPTH:
         raise error(
             f"{name} is too long a path ({len(str(result))} characters, {len(result.parts)} levels, a name of {longest} "

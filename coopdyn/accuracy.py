@@ -51,8 +51,9 @@ class ModeAccuracy:
 
     @property
     def weighted(self) -> float:
-        """What the mode's error does to the grasp forces (:data:`FORCE_ERROR_LIMIT`)."""
-        return self.error * self.force_share
+        """What the mode's error does to the grasp forces (:data:`FORCE_ERROR_LIMIT`); a mode that
+        moves no grasp costs none, however wrong."""
+        return self.error * self.force_share if self.force_share > 0 else 0.0
 
 
 def grasp_force_map(system: System, q: np.ndarray, v: np.ndarray, eps: float = 1e-7) -> np.ndarray:

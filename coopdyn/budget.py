@@ -36,8 +36,9 @@ def warn_unresolved(
 
 
 def step_count(t_final: float, dt: float) -> int:
-    """Steps on the grid k·dt up to ``t_final`` (the last one shortened)."""
-    return max(0, math.ceil(t_final / dt - 1e-9))
+    """Steps on the grid k·dt up to ``t_final`` (the last one shortened; one step, of
+    ``t_final``, when dt exceeds it)."""
+    return max(1 if t_final > 0 else 0, math.ceil(t_final / dt - 1e-9))
 
 
 #: Memory a saved sample takes at the run's peak: BYTES_PER_VALUE per float it holds (t, q, v, τ)

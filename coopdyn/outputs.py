@@ -45,6 +45,14 @@ KNOWN_FILES = frozenset(
 )
 #: the files coopdyn writes in a sweep's ``trajectories/`` folder
 TRAJECTORY_FILE = re.compile(r"run-\d{6,}\.npz")
+#: what a killed writer of one leaves (its temporary file)
+TRAJECTORY_TEMPORARY = re.compile(r"\.run-\d{6,}\.npz\.tmp")
+
+
+def _own_temporary(name: str, known: frozenset[str]) -> bool:
+    """Whether ``name`` is the temporary file a killed writer of a coopdyn file left."""
+    return name.startswith(".") and name.endswith(".tmp") and (name[1:-4] in known or name.startswith(".coopdyn-"))
+
 
 Writer = Callable[[Path], Any]  #: writes into the given folder; returns the path(s) written
 
@@ -110,7 +118,7 @@ def check_folder(folder: Any) -> Path:
     try:
         target = target.absolute()
         if target.is_symlink():
-            target = target.resolve(strict=True)
+            target = target.resolve()  # (a loop raises; a link to a folder not made yet is fine)
         cwd = Path.cwd().resolve()
         if target.resolve() == cwd or target.resolve() in cwd.parents:
             raise OutputError(f"the output folder {target} is the working folder or holds it; a run replaces its folder whole")
@@ -134,12 +142,18 @@ def _refuse_foreign(target: Path) -> None:
     if target.exists() and not target.is_dir():
         raise OutputError(f"the output folder {target} is a file")
     if target.is_dir():
-        foreign = sorted(p.name for p in target.iterdir() if p.name not in KNOWN_FILES)
+        foreign = sorted(
+            p.name for p in target.iterdir() if p.name not in KNOWN_FILES and not _own_temporary(p.name, KNOWN_FILES)
+        )
         saved = target / "trajectories"
         if saved.is_symlink() or (saved.exists() and not saved.is_dir()):
             foreign.append("trajectories (not a folder coopdyn made)")
         elif saved.is_dir():
-            foreign += sorted(f"trajectories/{p.name}" for p in saved.iterdir() if not TRAJECTORY_FILE.fullmatch(p.name))
+            foreign += sorted(
+                f"trajectories/{p.name}"
+                for p in saved.iterdir()
+                if not TRAJECTORY_FILE.fullmatch(p.name) and not TRAJECTORY_TEMPORARY.fullmatch(p.name)
+            )
         if foreign:
             shown = ", ".join(foreign[:5]) + (", …" if len(foreign) > 5 else "")
             raise OutputError(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import json
 import os
 import shutil
@@ -16,6 +17,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from ._files import temporary
 from ._validate import finite_array
 from ._validate import path as as_path
 from ._version import __version__
@@ -232,7 +234,7 @@ class Result:
         except (OSError, ValueError) as exc:
             reason = getattr(exc, "strerror", None) or exc
             raise OutputError(getattr(exc, "errno", None), f"cannot write {path}: {reason}", str(path)) from exc
-        tmp = path.with_name(f".{path.name}.tmp")
+        tmp = temporary(path)
         W = self.wrenches().reshape(len(self.t), -1)
         try:
             if path.suffix == ".npz":
@@ -301,6 +303,8 @@ class Result:
         t = arrays["t"]
         if t.ndim != 1 or t.dtype.kind != "f":
             raise SimulationError(f"{path}: t must be a list of times [s], got {t.dtype} of shape {t.shape} (a damaged file?)")
+        if np.any(np.diff(t) <= 0):
+            raise SimulationError(f"{path}: its times t must increase from sample to sample (a damaged file?)")
         for key, shape in {"q": (len(t), scene.nq), "v": (len(t), scene.nv), "tau": (len(t), scene.n_actuated)}.items():
             if arrays[key].shape != shape or arrays[key].dtype.kind != "f":
                 raise SimulationError(
@@ -443,6 +447,9 @@ def _reserved_npy(path: Path, shape: tuple[int, ...]) -> np.memmap[Any, Any]:
         fd = os.open(path, os.O_RDWR)
         try:
             os.posix_fallocate(fd, 0, size)
+        except OSError as exc:
+            if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):  # a file system without it: stream unreserved
+                raise
         finally:
             os.close(fd)
     return mm

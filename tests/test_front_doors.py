@@ -142,3 +142,106 @@ def test_a_result_file_with_bad_counters_is_refused(tmp_path: Path) -> None:
         with pytest.raises(cd.SimulationError, match=f"{key} = {value}"):
             cd.Result.load(tmp_path / "bad.npz")
     assert os.path.getsize(path) > 0
+
+
+def test_figures_are_written_in_the_format_their_ending_names(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    from coopdyn.viz.plotting import save_figure
+
+    for name, magic in (("f.pdf", b"%PDF"), ("f.svg", b"<?xml"), ("f.png", b"\x89PNG")):
+        assert save_figure(plt.figure(), tmp_path / name).read_bytes().startswith(magic)
+    longest = "a" * 251 + ".png"  # 255 bytes: its temporary file needs a shorter name
+    assert save_figure(plt.figure(), tmp_path / longest).stat().st_size > 0
+
+
+def test_paths_a_file_system_takes_are_taken_and_the_others_refused(tmp_path: Path) -> None:
+    from coopdyn.outputs import check_folder
+
+    link = tmp_path / "out"
+    link.symlink_to(tmp_path / "scratch" / "not-made-yet")
+    assert check_folder(link) == tmp_path / "scratch" / "not-made-yet"
+    with pytest.raises(cd.OutputError, match="a path this file system can name"):
+        check_folder("\ud800")
+    with pytest.raises(cd.SimulationError, match="a path this file system can name"):
+        cd.Result.load("\ud800.npz")
+
+
+def test_a_rerun_of_code_that_cannot_be_loaded_says_so(tmp_path: Path) -> None:
+    from coopdyn.sweeps import rerun
+
+    cd.sweep(lambda k: cd.scenes.linear_book(), {"k": [1.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    with pytest.raises(cd.SweepError, match="cannot import nosuchmod_xyz"):
+        rerun(tmp_path, 0, make_case="nosuchmod_xyz:f")
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise RuntimeError('top level fails')\n")
+    with pytest.raises(cd.SweepError, match=r"running .*broken\.py for the sweep's make_case raised RuntimeError"):
+        rerun(tmp_path, 0, make_case=f"{broken}:f")
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ('[scene]\nbuilder = "linear_book"\n[simulation]\nduration = 0.01\n[output]\nfolder = "a\\u0000b"\n', "folder"),
+        ('[[arms]]\nname = "a"\nrobot = "a\\u0000b.urdf"\ntip_frame = "t"\n', "robot"),
+        (f'[[arms]]\nname = "a"\nrobot = "{"r" * 300}.urdf"\ntip_frame = "t"\n', "too long a path"),
+    ],
+)
+def test_bad_paths_inside_scene_files_are_refused_by_line(tmp_path: Path, text: str, match: str) -> None:
+    path = tmp_path / "s.toml"
+    rest = "" if "[simulation]" in text else ARMS_REST
+    path.write_text(text + rest)
+    with pytest.raises(cd.SceneFileError, match=match):
+        scenefile.load(path)
+
+
+ARMS_REST = (
+    '[object]\ntype = "box"\nmass = 1.0\nsize = [0.1, 0.1, 0.1]\n[[interconnections]]\nstiffness = 1e4\n'
+    "[simulation]\nduration = 0.1\n"
+)
+
+
+def test_bad_sweep_folders_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    spec = tmp_path / "spec.toml"
+    body = '[scene]\nbuilder = "linear_book"\n[simulation]\nduration = 0.01\n[sweep.grid]\n"scene.m" = [20.0]\n'
+    spec.write_text(body + '[sweep]\nfolder = "a\\u0000b"\n')
+    assert main(["sweep", str(spec), "--serial"]) == 2
+    assert "folder" in capsys.readouterr().err
+    spec.write_text(body)
+    assert main(["sweep", str(spec), "--serial", "--out", "a\0b"]) == 2
+    assert "--out DIR must be a path" in capsys.readouterr().err
+
+
+def test_a_step_longer_than_the_run_is_one_step_of_the_run() -> None:
+    res = cd.simulate(cd.scenes.linear_book(), 0.01, integrator="rk4", dt=1e10)
+    assert res.n_steps == 1 and res.t[-1] == pytest.approx(0.01)
+
+
+def test_a_result_whose_times_do_not_increase_is_refused(tmp_path: Path) -> None:
+    path = cd.simulate(cd.scenes.linear_book(), 0.01, dt=1e-3).save(tmp_path / "r.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["t"] = arrays["t"][::-1].copy()
+    np.savez(path, **arrays)
+    with pytest.raises(cd.SimulationError, match="must increase from sample to sample"):
+        cd.Result.load(path)
+
+
+def _sweep_on_my_own_pool(_: int) -> str:
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    try:
+        with cf.ProcessPoolExecutor(2, mp_context=mp.get_context("fork")) as pool:
+            cd.sweep(lambda: cd.scenes.linear_book(), duration=0.01, progress=False, executor=pool)
+    except cd.SweepError as exc:
+        return str(exc)
+    return "no error"
+
+
+def test_a_process_pool_of_ones_own_inside_a_daemonic_process_is_refused_by_name() -> None:
+    import multiprocessing as mp
+
+    with mp.get_context("fork").Pool(1) as pool:
+        message = pool.map(_sweep_on_my_own_pool, [0])[0]
+    assert "the executor cannot take the sweep's runs here" in message and "executor='serial'" in message

@@ -263,3 +263,56 @@ def test_a_disk_filling_up_during_a_streamed_run_cannot_kill_it(small_disk: Path
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, (run.returncode, run.stderr[-2000:])
     assert "disk full: No space left on device" in run.stdout and "samples 3001 3.0" in run.stdout
+
+
+def test_a_journal_line_cut_by_a_kill_is_dropped_before_appending(tmp_path: Path) -> None:
+    from coopdyn.sweeps.journal import Journal, finished_rows
+
+    journal = Journal(tmp_path, "k", append=False)
+    journal.add([{"run": 0, "status": "completed"}])
+    journal.close(remove=False)
+    with open(tmp_path / "table.journal", "a") as f:
+        f.write('{"run": 1, "status": "compl')  # the kill came mid-line
+    journal = Journal(tmp_path, "k", append=True)
+    journal.add([{"run": 2, "status": "completed"}])
+    journal.close(remove=False)
+    assert sorted(finished_rows(tmp_path, "k")) == [0, 2]
+
+
+def test_a_journal_that_cannot_be_written_does_not_stop_the_sweep(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from coopdyn.sweeps import journal
+
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    class FullDisk:
+        def write(self, text: str) -> int:
+            raise OSError(28, "No space left on device")
+
+        def close(self) -> None:
+            pass
+
+    real = journal.Journal._write
+    calls = []
+
+    def full(self: journal.Journal, records: list[dict[str, object]]) -> None:
+        calls.append(len(records))
+        if len(calls) > 1:  # the header went in; then the disk is full
+            self._file = FullDisk()  # type: ignore[assignment]
+        real(self, records)
+
+    monkeypatch.setattr(journal.Journal, "_write", full)
+    with pytest.warns(RuntimeWarning, match="journal .* cannot be written .*No space left"):
+        table = cd.sweep(case, {"k": [1.0, 2.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    assert list(table["status"]) == ["completed", "completed"] and len(load(tmp_path)) == 2
+
+
+def test_temporary_files_a_kill_left_do_not_block_the_folder(tmp_path: Path) -> None:
+    def case(k: float) -> cd.Scene:
+        return cd.scenes.linear_book()
+
+    (tmp_path / "trajectories").mkdir()
+    (tmp_path / "trajectories" / ".run-000009.npz.tmp").write_text("half")
+    (tmp_path / ".table.parquet.tmp").write_text("half")
+    cd.sweep(case, {"k": [1.0]}, duration=0.01, executor="serial", out=tmp_path, progress=False)
+    assert not (tmp_path / ".table.parquet.tmp").exists() and not (tmp_path / "trajectories").exists()

@@ -259,7 +259,10 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         if key not in OUTPUT_KEYS:
             raise f.error(f"unknown key; valid keys: {sorted(OUTPUT_KEYS)}", "output", key)
         output[key] = _check_type(f, "output", key, value, OUTPUT_KEYS[key])
-    folder = Path(str(output["folder"]))
+    try:
+        folder = _validate.path(str(output["folder"]), "a folder", SceneFileError)
+    except SceneFileError as exc:
+        raise f.error(str(exc), "output", "folder") from None
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
     return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
 

@@ -120,7 +120,7 @@ def _load_urdf(
     its package folders)."""
     name = _robot_name(robot)
     if name is None:
-        path = Path(os.fspath(robot))
+        path = _validate.path(robot, "robot (a URDF path)", ModelLoadError)
         if not path.is_file():
             raise ModelLoadError(f"URDF file not found: {path}. Give an existing .urdf path or an example-robot-data name.")
         try:
@@ -191,9 +191,10 @@ MESH_SUFFIXES = frozenset({".stl", ".dae", ".obj", ".ply", ".glb", ".gltf"})  #:
 
 def _meshes_in_place(urdf: Path, package_dirs: list[str], meshes: str) -> str | None:
     """Before any mesh is read: the URDF's text without the ``meshes`` ("visual" or
-    "collision") geometry whose mesh file lies outside the URDF's own package (the folder above
-    the URDF's) and the package folders, or has an ending no mesh has — each dropped with a
-    warning — or None when every mesh is in place. A URDF received from someone else could
+    "collision") geometry whose mesh file lies outside the URDF's own folder (its package, the
+    folder above, when it sits in a ROS package's ``urdf/`` folder) and the package folders, or
+    has an ending no mesh has — each dropped with a warning — or None when every mesh is in
+    place. A URDF received from someone else could
     otherwise have any file of this machine read, and embedded in an HTML animation."""
     import xml.etree.ElementTree as ET
 
@@ -201,7 +202,9 @@ def _meshes_in_place(urdf: Path, package_dirs: list[str], meshes: str) -> str | 
         root = ET.parse(urdf).getroot()
     except (ET.ParseError, OSError):
         return None  # Pinocchio's parser says what is wrong with it
-    allowed = [urdf.resolve().parent.parent, *(Path(d).resolve() for d in package_dirs)]
+    folder = urdf.resolve().parent
+    package = folder.parent if folder.name in ("urdf", "robots") and folder.parent != folder.parent.parent else folder
+    allowed = [package, *(Path(d).resolve() for d in package_dirs)]
     dropped = False
     for link in root.iter("link"):
         for element in list(link.findall(meshes)):

@@ -440,6 +440,10 @@ def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:
     _keys(entry, ARM, where)
     kwargs = _values(entry, ARM, where)
     robot = kwargs["robot"]
+    try:
+        _validate.path(robot, "a URDF path or an example-robot-data name")
+    except SceneError as exc:
+        raise DescriptionError(str(exc), where._replace(key="robot")) from None
     if _robot_name(robot) is None or (folder / robot).is_file():
         kwargs["robot"] = str((folder / robot).resolve()) if not Path(robot).is_absolute() else robot
     if "package_dirs" in kwargs:

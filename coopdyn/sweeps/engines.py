@@ -284,7 +284,13 @@ class Executor:
     def run(self, payload: Any, work: Sequence[list[Item]], trajectories: str | None) -> Iterator[Rows]:
         if self.client is not None:  # on Dask: the job to every worker once, each chunk refers to it
             payload = self.client.scatter(payload, broadcast=True)
-        futures = self._futures = {self.executor.submit(run_chunk, payload, c, trajectories): c for c in work}
+        try:
+            futures = self._futures = {self.executor.submit(run_chunk, payload, c, trajectories): c for c in work}
+        except (AssertionError, RuntimeError) as exc:  # e.g. a process pool inside a daemonic process
+            raise SweepError(
+                f"the executor cannot take the sweep's runs here ({_describe_failure(exc)}); in a daemonic process (a "
+                "pool's worker) use executor='serial' or executor=None"
+            ) from exc
         while futures:
             done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
             for future in done:

@@ -10,8 +10,10 @@ whole; an interrupted sweep keeps it beside its partial table.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any
@@ -24,8 +26,8 @@ JOURNAL_NAME = "table.journal"
 
 
 def sweep_key(meta: dict[str, Any], items: Sequence[Item]) -> str:
-    """What makes two sweeps the same sweep: their source (function or spec text), metrics,
-    settings and runs (parameters and seeds)."""
+    """What makes two sweeps the same sweep: their source (a function's place and the hash of its
+    source text, or a spec's text), metrics, settings and runs (parameters and seeds)."""
     ident = {
         "source": meta.get("source"),
         "metrics": meta.get("metrics"),
@@ -74,6 +76,10 @@ class Journal:
     def __init__(self, folder: Path, key: str, append: bool) -> None:
         self.path = folder / JOURNAL_NAME
         fresh = not (append and self.path.is_file())
+        if not fresh:  # a line a kill cut short is dropped, or the next record would be glued onto it
+            data = self.path.read_bytes()
+            with open(self.path, "r+b") as f:
+                f.truncate(data.rfind(b"\n") + 1)
         self._file: IO[str] | None = open(self.path, "w" if fresh else "a", encoding="utf-8")
         if fresh:
             self._write([{"journal": FORMAT, "key": key}])
@@ -84,8 +90,19 @@ class Journal:
     def _write(self, records: Sequence[dict[str, Any]]) -> None:
         if self._file is None:
             return
-        self._file.write("".join(json.dumps(r, allow_nan=True, default=_plain) + "\n" for r in records))
-        self._file.flush()  # in the kernel's hands: a kill of this process loses nothing written
+        try:
+            self._file.write("".join(json.dumps(r, allow_nan=True, default=_plain) + "\n" for r in records))
+            self._file.flush()  # in the kernel's hands: a kill of this process loses nothing written
+        except OSError as exc:  # a full disk: the sweep goes on, its rows in memory (the table is rescued if need be)
+            warnings.warn(
+                f"the sweep's journal {self.path} cannot be written ({exc.strerror or exc}): the sweep goes on, but a kill from "
+                "now on loses the rows it finished",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+            with contextlib.suppress(OSError):
+                self._file.close()
+            self._file = None
 
     def close(self, remove: bool) -> None:
         """Close; ``remove`` once the table holds every row."""

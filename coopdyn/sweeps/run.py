@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime
+import hashlib
 import importlib
 import importlib.util
 import inspect
@@ -23,7 +24,7 @@ from .. import _signals, _validate
 from .._optional import require
 from .._version import __version__
 from ..errors import SweepError, SweepInterrupted
-from ..outputs import TRAJECTORY_FILE, check_folder
+from ..outputs import TRAJECTORY_FILE, TRAJECTORY_TEMPORARY, check_folder
 from . import table as tables
 from .cases import (
     TIMING,
@@ -194,7 +195,7 @@ def _execute(
         if not rows and (folder / tables.TABLE_NAME).is_file() and not (folder / JOURNAL_NAME).is_file():
             raise SweepError(
                 f"nothing to resume in {folder}: its sweep finished (a table, no journal of unfinished runs); "
-                "run without resume to run it again"
+                "run it again without resume (--resume) to start it anew"
             )
     todo = [i for i in items if i.run not in rows]
     runner = engine(executor, workers)
@@ -208,8 +209,7 @@ def _execute(
         if folder is not None:
             try:
                 folder.mkdir(parents=True, exist_ok=True)
-                if not resume:  # everything checked: what an earlier sweep wrote there goes (the folder holds one sweep)
-                    _clear(folder)
+                _clear(folder, finished=not resume)  # everything checked: the folder holds one sweep
                 journal = Journal(folder, key, append=resume)
                 if trajectories:
                     (folder / "trajectories").mkdir(exist_ok=True)
@@ -283,15 +283,19 @@ def _execute(
         runner.close()
 
 
-def _clear(folder: Path) -> None:
-    """Remove what an earlier sweep wrote in ``folder``: coopdyn's own files only (a file of the
-    user's there was refused by :func:`check_folder` before anything ran)."""
+def _clear(folder: Path, finished: bool) -> None:
+    """Remove what an earlier sweep wrote in ``folder`` — the temporary files a killed one left,
+    and with ``finished`` its table, journal, heat map and trajectories too: coopdyn's own files
+    only (a file of the user's there was refused by :func:`check_folder` before anything ran)."""
     for name in (tables.TABLE_NAME, JOURNAL_NAME, "heatmap.png"):
-        (folder / name).unlink(missing_ok=True)
+        if finished:
+            (folder / name).unlink(missing_ok=True)
+        (folder / f".{name}.tmp").unlink(missing_ok=True)
     saved = folder / "trajectories"
     if saved.is_dir() and not saved.is_symlink():
         for path in saved.iterdir():
-            if TRAJECTORY_FILE.fullmatch(path.name) and path.is_file():
+            mine = TRAJECTORY_TEMPORARY.fullmatch(path.name) or (finished and TRAJECTORY_FILE.fullmatch(path.name))
+            if mine and path.is_file():
                 path.unlink()
         with contextlib.suppress(OSError):
             saved.rmdir()  # only when empty
@@ -333,11 +337,16 @@ def _reference(fn: Any) -> dict[str, Any]:
     except TypeError:
         file = None
     findable = bool(module and qualname and "<" not in qualname)
+    try:
+        code = hashlib.sha256(inspect.getsource(fn).encode()).hexdigest()
+    except (OSError, TypeError):
+        code = None
     return {
         "module": module if findable else None,
         "qualname": qualname if findable else None,
         "file": str(Path(file).resolve()) if file and findable else None,
         "name": getattr(fn, "__qualname__", repr(fn)),
+        "source_sha256": code,  #: its source's hash: a sweep resumes only with the same code
     }
 
 
@@ -350,13 +359,14 @@ def _resolve(ref: dict[str, Any], what: str) -> Callable[..., Any]:
             "define it at the top level of a module or script to rerun rows"
         )
     module = None
+    file = ref.get("file")
     if ref.get("module") and ref["module"] != "__main__":
         try:
             module = importlib.import_module(ref["module"])
-        except ImportError:
-            module = None
+        except Exception as exc:
+            if not file:  # nothing else to load it from
+                raise SweepError(f"cannot import {ref['module']} for the sweep's {what}: {type(exc).__name__}: {exc}") from exc
     if module is None:
-        file = ref.get("file")
         if not file or not Path(file).is_file():
             raise SweepError(f"the sweep's {what} {ref['qualname']} was defined in {file}, which is not there any more")
         name = f"_coopdyn_rerun_{Path(file).stem}"
@@ -365,7 +375,10 @@ def _resolve(ref: dict[str, Any], what: str) -> Callable[..., Any]:
             raise SweepError(f"cannot load {file}")
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
-        spec.loader.exec_module(module)  # runs the script's top level (its sweep sits under `if __name__ == "__main__"`)
+        try:
+            spec.loader.exec_module(module)  # runs the script's top level (its sweep sits under `if __name__ == "__main__"`)
+        except Exception as exc:
+            raise SweepError(f"running {file} for the sweep's {what} raised {type(exc).__name__}: {exc}") from exc
     obj: Any = module
     try:
         for part in ref["qualname"].split("."):

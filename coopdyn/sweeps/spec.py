@@ -175,5 +175,8 @@ def load_spec(path: str | Path) -> Spec:
         unknown = [v for v in heatmap["values"] if v not in numeric]
         if unknown:
             raise f.error(f"values {unknown}: a spec's runs have the columns {list(numeric)}", "sweep.heatmap", "values")
-    out = Path(folder)
+    try:
+        out = _validate.path(folder, "a folder", SweepError)
+    except SweepError as exc:
+        raise f.error(str(exc), "sweep", "folder") from None
     return Spec(path.resolve(), text, items, out if out.is_absolute() else (path.parent / out).resolve(), trajectories, heatmap)

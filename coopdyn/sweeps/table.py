@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import _validate
+from .._files import temporary
 from .._optional import require
 from ..errors import SweepError
 from .cases import COUNTERS, SETTINGS, STATUS, TIMING, VERSIONS
@@ -63,7 +64,7 @@ def save(table: Any, path: str | os.PathLike[str]) -> Path:
     metadata = dict(arrow.schema.metadata or {})
     metadata[META_KEY] = json.dumps(table.attrs.get("coopdyn.sweep", {}), allow_nan=False).encode()
     arrow = arrow.replace_schema_metadata(metadata)
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = temporary(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(arrow, tmp, compression="zstd")

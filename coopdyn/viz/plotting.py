@@ -65,10 +65,9 @@ def save_figure(fig: Any, path: str | os.PathLike[str]) -> Path:
     """Write ``fig`` atomically (temporary file, then rename) and close it; the format from the
     file's ending (``.png``, ``.pdf``, ``.svg``, …)."""
     formats = {f".{f}" for f in fig.canvas.get_supported_filetypes()}
+    kind = Path(path).suffix.lstrip(".").lower() if isinstance(path, str | os.PathLike) else ""
     try:
-        return write_atomically(
-            path, "the figure", lambda tmp: fig.savefig(tmp, dpi=110, format=tmp.suffix.removesuffix(".tmp") or "png"), formats
-        )
+        return write_atomically(path, "the figure", lambda tmp: fig.savefig(tmp, dpi=110, format=kind or "png"), formats)
     finally:
         _pyplot().close(fig)
 
