@@ -7,7 +7,8 @@ maps (heatmap.png). A run that diverges is a grey cell that says so.
 
 Run:   python examples/sweep_gains.py            (local processes, every core)
        python examples/sweep_gains.py --serial   (this process)
-Then:  coopdyn sweep --rerun out/sweep_gains 7   (row 7 again, compared bit for bit)
+Then:  coopdyn sweep --rerun out/sweep_gains 7 --case examples/sweep_gains.py:make_case
+       (row 7 again, compared bit for bit; a table runs no code it names unless you name it)
 """
 
 from __future__ import annotations
