@@ -31,7 +31,7 @@ import pinocchio as pin
 
 from .closed_loop import System
 from .integrators import Integrator
-from .stability import OSCILLATORY_DAMPING
+from .stability import OSCILLATORY_DAMPING, state_matrix
 
 FORCE_ERROR_LIMIT = 0.1  #: the force-weighted error of a mode above which a run is not trusted
 OSCILLATORY = 1e-6  #: |Im λ| / |λ| above which a mode oscillates
@@ -89,9 +89,7 @@ def closed_loop_modes(system: System, q: np.ndarray, v: np.ndarray) -> Modes:
     kp, kd = system.gains
     system.dynamics.add_joint_gains(K, D, kp, kd)
     nv = M.shape[0]
-    Minv = np.linalg.inv(M)
-    A = np.block([[np.zeros((nv, nv)), np.eye(nv)], [-Minv @ K, -Minv @ D]])
-    lam, phi = np.linalg.eig(A)
+    lam, phi = np.linalg.eig(state_matrix(M, K, D))
     mag = np.abs(lam)
     pairs = (lam.imag > OSCILLATORY * np.maximum(mag, 1e-300)) & np.isfinite(lam)  # one of each complex pair
     lam, phi, mag = lam[pairs], phi[:, pairs], mag[pairs]
