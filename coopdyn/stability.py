@@ -276,33 +276,6 @@ def advise(
     return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec, oscillation, lam)
 
 
-def unresolved_mode_message(scene: Scene, A: np.ndarray, method: Integrator, dt: float) -> str | None:
-    """The accuracy warning for a stable method whose step ``dt`` [s] does not resolve the
-    scene's fastest oscillatory mode (|λ|·dt > :data:`RESOLVE_LIMIT`), or None when it does."""
-    o = fastest_oscillation(np.linalg.eigvals(A))
-    if o is None or o.rate * dt <= RESOLVE_LIMIT:
-        return None
-    z = complex(-o.damping_ratio, math.sqrt(max(1.0 - o.damping_ratio**2, 0.0))) * o.rate * dt
-    with np.errstate(all="ignore"):  # |R| and the true decay e^Re z may both underflow: compare logs
-        log_r = float(np.log(np.abs(method.stability_function(np.array([z]))[0])))
-    kept = math.exp(min(log_r - z.real, 0.0)) if math.isfinite(log_r) else 0.0
-    effect = (
-        f"the method keeps {kept:.0%} of its amplitude per step (relative to its true decay)"
-        if kept < 0.999
-        else "the method keeps its amplitude but not its phase"
-    )
-    stiffnesses = [np.asarray(getattr(lk.element, "K", np.zeros((3, 3))), dtype=float) for lk in scene.links]
-    k = max((float(np.max(np.diag(K)[:3])) for K in stiffnesses), default=0.0)  # translational [N/m]
-    force = f"; with k = {k:.3g} N/m, each 1 mm of its amplitude is {k * 1e-3:.3g} N of contact force" if k > 0 else ""
-    return (
-        f"{method.name} at dt = {dt * 1e3:.4g} ms does not resolve the scene's fastest oscillatory mode, "
-        f"{o.frequency:.4g} Hz (|λ| = {o.rate:.4g} 1/s, damping ratio {o.damping_ratio:.3g}; |λ|·dt = {o.rate * dt:.3g} > "
-        f"{RESOLVE_LIMIT:g}): {effect}, so the forces it carries can be off by their whole swing{force}. "
-        f"Resolve it with dt ≤ {o.max_resolved_dt * 1e3:.4g} ms (trapezoid keeps its amplitude), or let dopri5 follow it; "
-        "coopdyn.advise(scene, dt=dt) says more"
-    )
-
-
 __all__ = [
     "ADVISED",
     "RESOLVE_LIMIT",
@@ -314,5 +287,4 @@ __all__ = [
     "linearize",
     "predicted_stable_dt",
     "state_matrix",
-    "unresolved_mode_message",
 ]
