@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from ._files import temporary
-from ._validate import finite_array
+from ._validate import finite_array, positive
 from ._validate import path as as_path
 from ._version import __version__
 from .dynamics import Dynamics, Energy
@@ -272,6 +272,7 @@ class Result:
         ``max_bytes`` [bytes] are refused before they are read; non-finite samples are refused
         by name."""
         path = as_path(path, "path (a .npz file Result.save wrote)", SimulationError)
+        max_bytes = positive(max_bytes, "max_bytes", "bytes", SimulationError)
         if path.suffix != ".npz":
             raise SimulationError(f"{path}: Result.load reads the .npz files Result.save writes (a .csv is a table only)")
         if not path.is_file():

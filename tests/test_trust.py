@@ -93,6 +93,9 @@ def test_a_result_bomb_is_refused_before_it_is_decompressed(tmp_path: Path) -> N
     with pytest.raises(cd.SimulationError, match=r"would take 2.15 GB in memory, more than the 1 GB allowed"):
         cd.Result.load(bomb, max_bytes=1e9)
     assert cd.Result.load(path).t[-1] == pytest.approx(0.01)
+    for bad, match in (("x", "must be numeric"), (-1, "must be > 0"), (float("nan"), "must be finite")):
+        with pytest.raises(cd.SimulationError, match=f"max_bytes {match}"):
+            cd.Result.load(path, max_bytes=bad)
 
 
 @pytest.mark.parametrize("key", ["t", "q", "v", "tau"])
