@@ -324,7 +324,8 @@ def _interrupt_after(seconds: float) -> threading.Timer:
 @pytest.mark.parametrize("loop", ["python", "compiled"])
 def test_ctrl_c_at_random_moments_always_gives_a_consistent_result(book: cd.Scene, loop: str) -> None:
     """SIGINT at 12 random wall-clock moments: never another exception, and the partial result is
-    whole (equal lengths, finite, torques filled)."""
+    whole (equal lengths, finite, torques filled; empty only when the message says the interrupt
+    came before the first sample, e.g. while the compiled loop was being prepared)."""
     rng = np.random.default_rng(7)
     seen = 0
     for delay in rng.uniform(0.005, 0.15, 12):
@@ -336,7 +337,8 @@ def test_ctrl_c_at_random_moments_always_gives_a_consistent_result(book: cd.Scen
             except cd.SimulationInterrupted as exc:
                 res = exc.result
                 n = len(res.t)
-                assert res.q.shape[0] == res.v.shape[0] == res.tau.shape[0] == n >= 1
+                assert res.q.shape[0] == res.v.shape[0] == res.tau.shape[0] == n
+                assert n >= 1 or "before the first sample" in str(exc)
                 assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.tau))
                 seen += 1
             timer.join()

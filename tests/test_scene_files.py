@@ -145,6 +145,19 @@ def test_the_csv_names_its_columns_with_units(tmp_path: Path, book: cd.Scene) ->
     assert np.array_equal(table[:, header.index("wrench tip1.fz [N]")], res.wrench(0)[:, 2])
 
 
+def test_the_csv_reads_back_to_the_same_doubles(tmp_path: Path) -> None:
+    """Every value is written as a decimal that parses to the same double: extremes, subnormals,
+    signed zeros and the values next to round numbers."""
+    from coopdyn.result import _write_csv
+
+    rng = np.random.default_rng(3)
+    special = [0.0, -0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308, 0.1, 1 / 3, np.nextafter(1.0, 2.0)]
+    data = np.column_stack([rng.standard_normal(64) * 10.0 ** rng.integers(-300, 300, 64), np.resize(special, 64)])
+    _write_csv(tmp_path / "x.csv", ["a [m]", "b [N]"], data)
+    back = np.loadtxt(tmp_path / "x.csv", delimiter=",", skiprows=1)
+    assert np.array_equal(back, data) and np.array_equal(np.signbit(back), np.signbit(data))
+
+
 def test_loading_what_is_not_a_result_says_so(tmp_path: Path, book: cd.Scene) -> None:
     res = cd.simulate(book, 0.01, integrator="exponential", dt=1e-3, progress=False)
     with pytest.raises(SimulationError, match=r"a \.csv is a table only"):
