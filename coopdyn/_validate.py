@@ -132,8 +132,14 @@ def non_negative(value: Any, name: str, unit: str) -> float:
     return x
 
 
+#: [m] how far from the world origin a pose may be: at 1e6 m a double still resolves 1e-10 m,
+#: while at 1e154 m Pinocchio's inertias (squares of positions) overflow to NaN
+MAX_DISTANCE = 1e6
+
+
 def se3(value: Any, name: str) -> pin.SE3:
-    """Accept a ``pin.SE3``, a 4x4 homogeneous matrix or a 3-vector (pure translation)."""
+    """Accept a ``pin.SE3``, a 4x4 homogeneous matrix or a 3-vector (pure translation), within
+    :data:`MAX_DISTANCE` of the origin."""
     if isinstance(value, pin.SE3):
         pose = pin.SE3(value)
     else:
@@ -150,6 +156,12 @@ def se3(value: Any, name: str) -> pin.SE3:
             )
     if not (np.all(np.isfinite(pose.homogeneous))):
         raise SceneError(f"{name} must be finite")
+    far = float(np.max(np.abs(pose.translation)))  # (its norm can overflow)
+    if far > MAX_DISTANCE:
+        raise SceneError(
+            f"{name}: the translation {far:.3g} m is farther than {MAX_DISTANCE:g} m from the origin "
+            "(a scene's poses are in metres; that far, the dynamics lose their precision and overflow)"
+        )
     R = pose.rotation
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0.0:
         raise SceneError(f"{name}: the rotation part is not a proper rotation matrix (RᵀR = I, det R = 1)")

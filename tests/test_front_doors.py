@@ -106,6 +106,16 @@ def test_bad_arguments_to_the_helpers_are_refused() -> None:
         cd.sweep(lambda seed: cd.scenes.linear_book(), seeds=[2**70], duration=0.01, executor="serial", progress=False)
 
 
+def test_a_pose_beyond_a_thousand_kilometres_is_refused() -> None:
+    """At 1e269 m Pinocchio's inertias overflowed to NaN and the run's diagnosis was garbled."""
+    from coopdyn.resources import urdf_path
+
+    arm = cd.Arm("far", str(urdf_path("slider_z.urdf")), tip_frame="tip", base=[0.0, 0.0, 1e269])
+    box = cd.RigidObject.box(1.0, (0.1,) * 3)
+    with pytest.raises(cd.SceneError, match=r"far.*1e\+269 m is farther than 1e\+06 m from the origin"):
+        cd.Scene([arm], box, [cd.Interconnection("far", stiffness=1e4)])
+
+
 def test_equilibrium_of_the_shipped_beam_converges_to_round_off() -> None:
     from coopdyn.problems.facing_arms import held_beam
 
