@@ -1,24 +1,31 @@
-"""Whether a fixed-step run's forces can be trusted, judged before it starts over its whole
-length and by what each mode contributes to the grasp forces (:func:`run_accuracy`).
+"""Whether a run's interconnection forces can be trusted: a screen before the run, judged over
+its whole length and by what each mode contributes to the grasp forces (:func:`screen`), and —
+for a run the screen cannot clear — a check of the forces themselves against dopri5
+(:func:`checked_message`, run by ``simulate``).
 
-A stable method that does not resolve an oscillatory mode completes without complaint while it
-damps or mis-phases that mode: over N steps its amplitude is multiplied by (R(λh)/e^{λh})^N,
-R the method's stability function. One step's loss can be small (|λ|h < 1) and the run's still
-total: implicit Euler at |λ|h = 0.5 keeps 89 % per step and nothing after 50 steps. And a mode
-that is badly integrated but moves no interconnection (a beam's internal node mode, far above
-what the grasps feel) costs no grasp force. So each oscillatory mode λ of the linearised closed
-loop (at the initial state; damping ratio below 0.5: a more damped mode has decayed within its
-period, and smooth forcing moves it quasi-statically) is judged by
+A stable method that does not resolve a mode completes without complaint while it damps,
+mis-phases or (the trapezoid on a stiff overdamped mode) rings that mode: over N steps its
+amplitude is multiplied by (R(λh)/e^{λh})^N, R the method's stability function. One step's loss
+can be small (|λ|h < 1) and the run's still total: implicit Euler at |λ|h = 0.5 keeps 89 % per
+step and nothing after 50 steps. And a mode that is badly integrated but moves no
+interconnection (a beam's internal node mode, far above what the grasps feel) costs no grasp
+force. So each mode λ of the linearised closed loop (at the initial state) is judged by
 
-* its **error over the run**: max over 0 ≤ t ≤ T of e^{Re λ t}·|(R(λh)e^{−λh})^{t/h} − 1| — the
-  deviation of the method's mode from the exact one, in units of the mode's initial amplitude
-  (a damped mode stops counting once it has decayed);
+* its **error over the run**: max over 0 ≤ t ≤ T of |R(λh)^{t/h} − e^{λt}| — the deviation of
+  the method's mode from the exact one, in units of the mode's initial amplitude (a damped mode
+  stops counting once both have decayed);
 * its **share of the grasp forces**: the interconnection force per unit of modal energy,
-  relative to the largest among all the complex modes (equal energy in every mode is the prior).
+  relative to the largest among the oscillating modes, at most 1 (equal energy in every mode is
+  the prior).
 
-Their product above :data:`FORCE_ERROR_LIMIT` is a warning that names the mode. Measured against
-a grid of methods, steps, stiffnesses and damping (``benchmarks/accuracy_grid.py``): it leaves
-few wrong runs silent but also warns on some right ones (docs/benchmarks.md).
+What the screen cannot say is how much each mode is excited (by the start, by the task): a
+run whose worst product exceeds :data:`SCREEN_LIMIT` has its forces compared with a reference
+run of the same scene, controller and start (:func:`reference_for`: dopri5, or ros2_adaptive
+at a tight tolerance on stiff scenes), and the warning comes when they differ by more than
+:data:`FORCE_ERROR_LIMIT` of their peak, with the figure (``Result.force_error_estimate``).
+Where that reference runs past its step budget (:data:`CHECK_COST`, :data:`CHECK_FLOOR`) or
+cannot run, the screen's own judgement above :data:`FORCE_ERROR_LIMIT` is the warning. Measured against a grid of methods,
+steps, stiffnesses and damping: ``benchmarks/accuracy_grid.py`` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -30,10 +37,15 @@ import numpy as np
 import pinocchio as pin
 
 from .closed_loop import System
-from .integrators import Integrator
-from .stability import OSCILLATORY_DAMPING, state_matrix
+from .integrators import AdaptiveIntegrator, AdaptiveROS2, DormandPrince, Integrator, Trapezoid
+from .stability import state_matrix
 
-FORCE_ERROR_LIMIT = 0.1  #: the force-weighted error of a mode above which a run is not trusted
+FORCE_ERROR_LIMIT = 0.1  #: a force error, relative to the peak force, above which a run is not trusted
+SCREEN_LIMIT = 0.005  #: a mode's force-weighted error above which the forces are checked against a reference run
+CHECK_COST = 30  #: the check may take this many times the run's steps (or CHECK_FLOOR), else the screen decides
+CHECK_FLOOR = 20_000  #: steps the check may always take
+DOPRI5_REACH = 3.3  #: |λ|·h at dopri5's stability limit, for the estimate of its steps
+STIFF_REFERENCE = (1e-4, 1e-7)  #: (rtol, atol) of ros2_adaptive as the reference where dopri5 would be stability-bound
 OSCILLATORY = 1e-6  #: |Im λ| / |λ| above which a mode oscillates
 TIME_SAMPLES = 256  #: points of [0, T] on which a mode's error is maximised
 
@@ -42,12 +54,13 @@ TIME_SAMPLES = 256  #: points of [0, T] on which a mode's error is maximised
 class ModeAccuracy:
     """How a method treats one oscillatory mode over a run."""
 
-    frequency: float  #: [Hz]
+    frequency: float  #: [Hz] (0: a mode that decays without oscillating)
     rate: float  #: |λ| [1/s]
     damping_ratio: float  #: −Re λ / |λ|
     error: float  #: the mode's largest deviation over the run, in units of its initial amplitude
     force_share: float  #: its grasp force per unit energy, relative to the largest (0–1)
     kept_per_step: float  #: |R(λh) e^{−λh}|: the amplitude it keeps per step, relative to the exact
+    amplification: float = 1.0  #: |R(λh)|: the amplitude it keeps per step
 
     @property
     def weighted(self) -> float:
@@ -76,34 +89,42 @@ def grasp_force_map(system: System, q: np.ndarray, v: np.ndarray, eps: float = 1
 
 @dataclass(frozen=True)
 class Modes:
-    """The oscillatory modes of a closed loop linearised at a state (:func:`closed_loop_modes`)."""
+    """The modes of a closed loop linearised at a state (:func:`closed_loop_modes`)."""
 
-    eigenvalues: np.ndarray  #: λ (m,), Im λ > 0 [1/s]
-    force_share: np.ndarray  #: (m,) each mode's grasp force per unit energy, relative to the largest
+    eigenvalues: np.ndarray  #: λ (m,): one of each complex pair (Im λ > 0) and the real ones [1/s]
+    force_share: np.ndarray  #: (m,) each mode's grasp force per unit energy, relative to the oscillating modes' largest (≤ 1)
+    fastest: float = 0.0  #: the largest |λ| [1/s] (what limits an explicit method's step)
 
 
 def closed_loop_modes(system: System, q: np.ndarray, v: np.ndarray) -> Modes:
-    """The oscillatory modes of the closed loop (elements, joint damping, the controller's joint
-    gains) linearised at (q, v), with their share of the grasp forces."""
+    """The modes of the closed loop (elements, joint damping, the controller's joint gains)
+    linearised at (q, v), with their share of the grasp forces; modes at rest (λ = 0: a free
+    drift) are left out."""
     M, K, D = system.dynamics.stiffness(q, v)
     kp, kd = system.gains
     system.dynamics.add_joint_gains(K, D, kp, kd)
     nv = M.shape[0]
     lam, phi = np.linalg.eig(state_matrix(M, K, D))
     mag = np.abs(lam)
-    pairs = (lam.imag > OSCILLATORY * np.maximum(mag, 1e-300)) & np.isfinite(lam)  # one of each complex pair
-    lam, phi, mag = lam[pairs], phi[:, pairs], mag[pairs]
+    fastest = float(np.max(mag, initial=0.0, where=np.isfinite(mag)))
+    real = np.abs(lam.imag) <= OSCILLATORY * mag
+    kept = (lam.imag > OSCILLATORY * mag) | (real & (mag > 1e-9 * max(fastest, 1e-300)))  # one of each complex pair
+    kept &= np.isfinite(lam)
+    lam, phi, mag = lam[kept], phi[:, kept], mag[kept]
+    lam = np.where(np.abs(lam.imag) <= OSCILLATORY * mag, lam.real + 0j, lam)
     if not len(lam):
-        return Modes(lam, np.zeros(0))
+        return Modes(lam, np.zeros(0), fastest)
     F = grasp_force_map(system, q, v)
     forces = np.abs(F @ phi).reshape(-1, 3, len(lam)).max(axis=(0, 1)) if F.size else np.zeros(len(lam))
     dq, dv = phi[:nv], phi[nv:]
     energy = 0.5 * np.real(np.einsum("ij,ik,kj->j", dv.conj(), M, dv) + np.einsum("ij,ik,kj->j", dq.conj(), K, dq))
     per_energy = forces / np.sqrt(np.maximum(energy, 1e-300))
-    top = float(per_energy.max())  # over every complex mode: the share does not depend on which are judged
-    share = per_energy / top if top > 0 else np.zeros(len(lam))
-    judged = -lam.real < OSCILLATORY_DAMPING * mag
-    return Modes(lam[judged], share[judged])
+    # relative to the oscillatory modes' largest (a stiff non-oscillating mode — a damped node of a
+    # beam — can carry far more force per unit energy, and would make every grasp mode look idle)
+    oscillating = np.abs(lam.imag) > 0
+    top = float(per_energy[oscillating].max() if oscillating.any() else per_energy.max())
+    share = np.minimum(per_energy / top, 1.0) if top > 0 else np.zeros(len(lam))
+    return Modes(lam, share, fastest)
 
 
 def judge(modes: Modes, method: Integrator, dt: float, duration: float) -> list[ModeAccuracy]:
@@ -117,7 +138,7 @@ def judge(modes: Modes, method: Integrator, dt: float, duration: float) -> list[
     with np.errstate(all="ignore"):
         log_r = np.log(_amplification(method, z))
         log_rel = log_r - z  # per step, relative to the exact solution
-        steps = np.linspace(0.0, duration, TIME_SAMPLES) / dt
+        steps = np.unique(np.ceil(np.linspace(0.0, duration / dt, TIME_SAMPLES) - 1e-9))  # whole steps: R^n exists there
         # |R^n − e^{nz}|: both factors decay for a stable method (no 0·∞ for a heavily damped mode)
         deviation = np.abs(np.exp(np.outer(steps, log_r)) - np.exp(np.outer(steps, z)))
     error = np.where(np.all(np.isfinite(deviation), axis=0), np.max(deviation, axis=0), np.inf)
@@ -128,19 +149,57 @@ def judge(modes: Modes, method: Integrator, dt: float, duration: float) -> list[
             0.0 - float(lam[j].real / mag[j]),
             float(error[j]),
             float(modes.force_share[j]),
-            float(np.exp(log_rel[j].real)) if np.isfinite(log_rel[j].real) else 0.0,
+            _exp(log_rel[j].real),
+            _exp(log_r[j].real),
         )
         for j in range(len(lam))
     ]
     return sorted(out, key=lambda m: -m.weighted)
 
 
-def run_accuracy(
-    system: System, q: np.ndarray, v: np.ndarray, method: Integrator, dt: float, duration: float
-) -> list[ModeAccuracy]:
-    """Every oscillatory mode of the closed loop linearised at (q, v), judged for ``method`` at
-    step ``dt`` [s] over ``duration`` [s], worst first."""
-    return judge(closed_loop_modes(system, q, v), method, dt, duration)
+@dataclass(frozen=True)
+class Screen:
+    """The screen of a run before (fixed step) or after it (adaptive: at its mean step)."""
+
+    modes: Modes
+    worst: list[ModeAccuracy]  #: every mode, worst first (:func:`judge`)
+    method: Integrator
+    dt: float  #: [s] the step judged
+    duration: float  #: [s]
+
+    @property
+    def weighted(self) -> float:
+        """The worst mode's force-weighted error (0 without modes)."""
+        return self.worst[0].weighted if self.worst else 0.0
+
+    @property
+    def suspect(self) -> bool:
+        """Whether the forces must be checked (:data:`SCREEN_LIMIT`)."""
+        return self.weighted > SCREEN_LIMIT
+
+    def reference_steps(self) -> float:
+        """About how many steps dopri5 takes over the run: its stability limit on the fastest mode."""
+        return self.duration * self.modes.fastest / DOPRI5_REACH
+
+
+def reference_for(s: Screen, n_steps: int) -> tuple[AdaptiveIntegrator, int]:
+    """The method the forces of a run of ``n_steps`` steps are checked against, and the most
+    steps it may take (max(CHECK_COST × n_steps, CHECK_FLOOR)): dopri5 (rtol 1e-6) where its
+    stability limit on the fastest mode fits that budget; else — a stiff scene, e.g. a beam's
+    kHz node modes — ros2_adaptive at :data:`STIFF_REFERENCE` (L-stable: a stiff mode decays as
+    it should; within 0.13 % of dopri5 at rtol 1e-8 on the held strip, k = 1e3–1e6)."""
+    budget = max(CHECK_COST * max(n_steps, 1), CHECK_FLOOR)
+    if s.reference_steps() <= budget:
+        return DormandPrince(), 2 * budget  # (its rejected steps count)
+    rtol, atol = STIFF_REFERENCE
+    return AdaptiveROS2(rtol=rtol, atol=atol), budget
+
+
+def screen(system: System, q: np.ndarray, v: np.ndarray, method: Integrator, dt: float, duration: float) -> Screen:
+    """Every mode of the closed loop linearised at (q, v), judged for ``method`` at step ``dt``
+    [s] over ``duration`` [s]."""
+    modes = closed_loop_modes(system, q, v)
+    return Screen(modes, judge(modes, method, dt, duration), method, dt, duration)
 
 
 def trusted_dt(modes: Modes, method: Integrator, dt: float, duration: float) -> float:
@@ -155,28 +214,70 @@ def trusted_dt(modes: Modes, method: Integrator, dt: float, duration: float) -> 
     return h
 
 
-def accuracy_message(system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float, duration: float) -> str | None:
-    """The warning for a run whose forces a mode's error spoils (:data:`FORCE_ERROR_LIMIT`), or None."""
-    modes = closed_loop_modes(system, q, v)
-    worst = judge(modes, method, dt, duration)
-    if not worst or worst[0].weighted <= FORCE_ERROR_LIMIT:
-        return None
-    m = worst[0]
+def _mode_text(s: Screen) -> str:
+    m = s.worst[0]
     kept = m.kept_per_step
-    effect = (
-        f"keeps {kept:.1%} of its amplitude per step (relative to its true decay)"
-        if abs(kept - 1.0) > 1e-3
-        else "keeps its amplitude but not its phase"
+    if m.frequency == 0.0:
+        effect = f"keeps {m.amplification:.3g} of it per step where it decays to {math.exp(-m.rate * s.dt):.3g}"
+    elif abs(kept - 1.0) > 1e-3:
+        effect = f"keeps {kept:.1%} of its amplitude per step (relative to its true decay)"
+    else:
+        effect = "keeps its amplitude but not its phase"
+    name = (
+        f"{m.frequency:.4g} Hz mode (damping ratio {m.damping_ratio:.3g}"
+        if m.frequency > 0
+        else f"non-oscillating mode (time constant {1e3 / m.rate:.3g} ms"
     )
-    error = "more than its whole amplitude" if m.error > 1 else f"{m.error:.0%} of its amplitude"
     return (
-        f"{method.name} at dt = {dt * 1e3:.4g} ms misrepresents the scene's {m.frequency:.4g} Hz mode over this "
-        f"{duration:g} s run (damping ratio {m.damping_ratio:.3g}, |λ|·dt = {m.rate * dt:.3g}): the method {effect}, so "
-        f"by the end the mode is off by {error}, and it carries {m.force_share:.0%} of the largest grasp force per unit "
-        f"energy among the modes: the interconnection forces can be wrong by a large part of their swing. Use "
-        f"dt ≤ {trusted_dt(modes, method, dt, duration) * 1e3:.4g} ms, or dopri5 (error-controlled); "
+        f"its {name}, |λ|·dt = {m.rate * s.dt:.3g}, {m.force_share:.0%} of the largest grasp force per unit energy among the "
+        f"modes): the method {effect}"
+    )
+
+
+def _advice(s: Screen) -> str:
+    instead = ""
+    if s.method.order < 2:  # a first-order method needs far smaller steps than a second-order one
+        instead = f", the trapezoid at dt ≤ {trusted_dt(s.modes, Trapezoid(), s.dt, s.duration) * 1e3:.4g} ms"
+    return (
+        f"Use dt ≤ {trusted_dt(s.modes, s.method, s.dt, s.duration) * 1e3:.4g} ms{instead}, or dopri5 (error-controlled); "
         "coopdyn.advise(scene, dt=dt) says more"
     )
+
+
+def described(reference: AdaptiveIntegrator) -> str:
+    """A reference method as a warning names it, e.g. ``dopri5 at rtol 1e-06``."""
+    return f"{reference.name} at rtol {reference.rtol:g}"
+
+
+def checked_message(s: Screen, error: float, peak: float, reference: AdaptiveIntegrator) -> str | None:
+    """The warning for a run whose forces differ from the ``reference`` run's by more than
+    :data:`FORCE_ERROR_LIMIT` of their ``peak`` [N] (``error`` [N]), or None."""
+    if not error > FORCE_ERROR_LIMIT * peak:
+        return None
+    return (
+        f"{s.method.name} at dt = {s.dt * 1e3:.4g} ms gets the interconnection forces of this {s.duration:g} s run wrong by up "
+        f"to {error:.4g} N, {error / peak:.0%} of their {peak:.4g} N peak (checked against {described(reference)} from the "
+        f"same start, Result.force_error_estimate). The likely cause is {_mode_text(s)}. {_advice(s)}"
+    )
+
+
+def screen_message(s: Screen, unchecked: str) -> str | None:
+    """The warning from the screen alone (the forces could not be checked: ``unchecked`` says
+    why), when the worst mode's force-weighted error exceeds :data:`FORCE_ERROR_LIMIT`; or None."""
+    if not s.weighted > FORCE_ERROR_LIMIT:
+        return None
+    m = s.worst[0]
+    error = "more than its whole amplitude" if m.error > 1 else f"{m.error:.0%} of its amplitude"
+    return (
+        f"{s.method.name} at dt = {s.dt * 1e3:.4g} ms misrepresents a mode of the scene over this {s.duration:g} s run, "
+        f"{_mode_text(s)}, so by the end the mode is off by {error}: the interconnection forces can be wrong by a large "
+        f"part of their swing (not checked against a reference run: {unchecked}). {_advice(s)}"
+    )
+
+
+def _exp(x: float) -> float:
+    """e^x for a finite x below the overflow, else 0 (−inf, nan) or inf."""
+    return math.exp(min(x, 700.0)) if np.isfinite(x) else (math.inf if x > 0 else 0.0)
 
 
 def _amplification(method: Integrator, z: np.ndarray) -> np.ndarray:

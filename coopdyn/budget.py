@@ -1,38 +1,14 @@
-"""Checks before a run starts: whether it fits a step and memory budget, and whether a stable
-method's step resolves the scene's fastest oscillatory mode (:func:`coopdyn.simulate` calls them)."""
+"""Checks before a run starts: whether it fits a step and memory budget (:func:`coopdyn.simulate`
+calls them)."""
 
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Any
 
-import numpy as np
-
 from . import _validate
-from .accuracy import accuracy_message
-from .closed_loop import System
-from .errors import AccuracyWarning, SimulationError
-from .integrators import Integrator
+from .errors import SimulationError
 from .model.scene import Scene
-
-
-def warn_unresolved(
-    scene: Scene, system: System, method: Integrator, q: np.ndarray, v: np.ndarray, dt: float, duration: float
-) -> None:
-    """Warn once when a fixed-step method at ``dt`` [s] gets a mode that moves the grasps wrong
-    over the run's ``duration`` [s] (:mod:`coopdyn.accuracy`; linearised at the initial state)."""
-    try:  # (system.dynamics, not system.stiffness: the run's counters stay the run's)
-        message = accuracy_message(system, method, q, v, dt, duration)
-    except (
-        ArithmeticError,
-        ValueError,
-        NotImplementedError,
-        np.linalg.LinAlgError,
-    ):  # e.g. a destabilising gain: the run says more
-        return
-    if message is not None:
-        warnings.warn(message, AccuracyWarning, stacklevel=3)
 
 
 def step_count(t_final: float, dt: float) -> int:

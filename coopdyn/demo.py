@@ -71,6 +71,7 @@ def run_demo(
         "real_time_factor": t_final / wall,
         "wall_s": wall,
         "rhs_evaluations": res.n_rhs,
+        "force_error_estimate_N": res.force_error_estimate,
     }
 
     def figure(folder: Path) -> Path:
@@ -103,8 +104,10 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"  internal force: peak {summary['peak_internal_force_N']:.2f} N, at the end "
         f"{', '.join(f'{s:.3f}' for s in summary['internal_force_at_end_N'])} N (commanded {SQUEEZE:g} N)",
         f"  CPU {summary['cpu_s']:.2f} s, wall {summary['wall_s']:.2f} s: real-time factor {summary['real_time_factor']:.2f}",
-        f"output folder: {summary['output_folder']}",
     ]
+    if summary.get("force_error_estimate_N") is not None:
+        lines.append(f"  interconnection force error against dopri5: max {summary['force_error_estimate_N']:.3g} N")
+    lines += [f"output folder: {summary['output_folder']}"]
     lines += [f"  wrote {f}" for f in summary["files"]]
     lines += [f"  not written: {p}" for p in summary.get("problems", ())]
     return "\n".join(lines)

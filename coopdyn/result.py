@@ -86,6 +86,11 @@ class Result:
         n_rhs: right-hand-side evaluations; cpu_time: CPU time of the integration loop [s].
         n_jac, n_factor: Jacobian evaluations and factorisations (implicit methods).
         n_steps, n_rejected: accepted and rejected steps.
+        force_error_estimate: the largest error of the interconnection forces [N] found by
+            comparing this run with a dopri5 run of the same scene, controller and start, when
+            the accuracy screen could not clear the run (:mod:`coopdyn.accuracy`); ``None`` when
+            it was not needed (every mode passed the screen, or an error-controlled or exact
+            method), not possible, or ``accuracy_check`` was not ``"auto"``.
     """
 
     scene: Scene
@@ -104,6 +109,7 @@ class Result:
     status: str = "completed"  #: "completed", "interrupted" (Ctrl-C), "diverged" or "stopped" (step budget)
     backend: str | None = None  #: the dynamics backend of the run; readouts use the same
     loop: str = "python"  #: the step loop that ran: "compiled" or "python" (see coopdyn.simulate)
+    force_error_estimate: float | None = None  #: [N] (see above)
 
     @cached_property
     def _dynamics(self) -> Dynamics:
@@ -363,7 +369,13 @@ def _write_csv(path: Path, names: list[str], data: np.ndarray) -> None:
 
 
 #: what a saved counter or setting may hold, by the annotation of its Result field
-_META_TYPES: dict[str, tuple[type, ...]] = {"float": (int, float), "int": (int,), "str": (str,), "str | None": (str, type(None))}
+_META_TYPES: dict[str, tuple[type, ...]] = {
+    "float": (int, float),
+    "int": (int,),
+    "str": (str,),
+    "str | None": (str, type(None)),
+    "float | None": (int, float, type(None)),
+}
 
 
 def _check_meta(meta: dict[str, Any]) -> None:

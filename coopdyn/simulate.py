@@ -3,22 +3,27 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import itertools
 import math
 import os
+import sys
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from . import _progress, _signals, _validate, compiled
-from .budget import check_budget, step_count, warn_unresolved
+from . import _progress, _signals, _validate, accuracy, compiled
+from .budget import check_budget, step_count
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .dynamics.constrained import check_integrator, has_constraints
 from .errors import (
+    AccuracyWarning,
     ControllerError,
+    CoopdynError,
     DivergenceError,
     EnergyBalanceError,
     EnergyBalanceWarning,
@@ -55,6 +60,7 @@ def simulate(
     max_steps: int | None = 2 * 10**6,
     max_memory: float | None = 4e9,
     stream_to: str | os.PathLike[str] | None = None,
+    accuracy_check: str = "auto",
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -95,6 +101,17 @@ def simulate(
         stream_to: a new or empty folder: the samples go to ``t.npy``, ``q.npy``, ``v.npy`` and
             ``tau.npy`` there as the run goes (sized up front, checked against the free disk
             space) instead of memory, and the result's arrays are read-only memory maps of them.
+        accuracy_check: whether the interconnection forces of a run with a fixed-step method
+            (or ``ros2_adaptive``) are judged (:mod:`coopdyn.accuracy`). ``"auto"`` (default):
+            a screen of the linearised closed loop's modes at the initial state; a run it cannot
+            clear is compared, after it completes, with a reference run of the same scene,
+            controller and start (the controller is called again from t = 0): dopri5 where its
+            stability limit allows, else ros2_adaptive at rtol 1e-4 (stiff scenes), within
+            max(30× the run's steps, 20 000) steps. An ``AccuracyWarning`` gives the force
+            error found (``Result.force_error_estimate`` [N]); past that budget the screen alone
+            decides.
+            ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
+            Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -124,7 +141,11 @@ def simulate(
     max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
     if max_speed <= 0.0:
         raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {max_speed}")
-    for name, value, valid in (("energy_check", energy_check, ENERGY_CHECKS), ("loop", loop, LOOPS)):
+    for name, value, valid in (
+        ("energy_check", energy_check, ENERGY_CHECKS),
+        ("loop", loop, LOOPS),
+        ("accuracy_check", accuracy_check, ACCURACY_CHECKS),
+    ):
         if not isinstance(value, str) or value not in valid:
             raise SimulationError(f"{name} must be one of {list(valid)}, got {_validate._short(value)}")
     if not isinstance(progress, bool | np.bool_):
@@ -145,8 +166,13 @@ def simulate(
     if stream_to is not None:
         n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
-    if not method.adaptive and not method.exact_discretisation and not has_constraints(scene) and t_final > 0:
-        warn_unresolved(scene, system, method, q, v, dt, t_final)
+    judged = (
+        accuracy_check != "off"
+        and method.name != "dopri5"
+        and not method.exact_discretisation
+        and not has_constraints(scene)
+        and t_final > 0
+    )
     cpu0 = time.process_time()  # the compiled loop's preparation (e.g. the exponential's expm) counts too
     config, why = None, "loop='python'"
     if loop != "python":
@@ -179,7 +205,7 @@ def simulate(
             else:
                 _fixed_loop(run, q, v, monitor, bar)
         run.cpu_time = time.process_time() - cpu0
-        return run.result()
+        result = run.result()
     except KeyboardInterrupt as exc:
         if isinstance(exc, SimulationInterrupted):
             raise
@@ -200,12 +226,78 @@ def simulate(
     finally:
         if bar is not None:
             bar.close()
+    if not judged:
+        return result
+    rerun = dict(controller=controller, q0=q, v0=v, object_wrench=object_wrench, backend=backend, progress=progress)
+    return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
+
+
+def _judge_forces(result: Result, system: System, method: Integrator, mode: str, streamed: bool, rerun: dict[str, Any]) -> Result:
+    """Screen the run's modes (:mod:`coopdyn.accuracy`) and, when the screen cannot clear it and
+    ``mode`` is ``"auto"``, compare its interconnection forces with a reference run's
+    (:func:`coopdyn.accuracy.reference_for`); warn when they are wrong. Returns the result with
+    its ``force_error_estimate`` when the check ran."""
+    t_final = float(result.t[-1])
+    q, v = rerun["q0"], rerun["v0"]
+    step = result.dt if not method.adaptive else t_final / max(result.n_steps, 1)  # adaptive: its mean step
+    try:
+        judged = accuracy.screen(system, q, v, method, step, t_final)  # (system.dynamics: the run's counters stay)
+    except (ArithmeticError, ValueError, NotImplementedError, np.linalg.LinAlgError):  # e.g. a destabilising gain
+        return result
+    if not judged.suspect:
+        return result
+    reference, budget = accuracy.reference_for(judged, result.n_steps)
+    name = accuracy.described(reference)
+    unchecked = "accuracy_check='screen'" if mode == "screen" else "a streamed run is not run twice" if streamed else ""
+    checked = None
+    if not unchecked:
+        interval = float(result.t[1] - result.t[0]) if len(result.t) > 1 else t_final
+        if rerun.pop("progress"):
+            print(f"checking the forces against {name} (the accuracy screen could not clear this run) …", file=sys.stderr)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                checked = simulate(
+                    result.scene,
+                    t_final,
+                    integrator=reference,
+                    dt=interval,
+                    max_steps=budget,
+                    energy_check="off",
+                    accuracy_check="off",
+                    **rerun,
+                )
+        except SimulationInterrupted:
+            raise SimulationInterrupted(f"interrupted while checking the run's forces against {name}", result=result) from None
+        except StepBudgetError:
+            unchecked = f"{name} needed more than {budget} steps"
+        except CoopdynError as exc:
+            unchecked = f"{name} stopped: {str(exc).splitlines()[0][:200]}"
+    if checked is None:
+        message = accuracy.screen_message(judged, unchecked)
+    else:
+        mine = result.wrenches()[..., :3]
+        theirs = checked.wrenches()[..., :3]
+        if len(checked.t) != len(result.t) or not np.allclose(checked.t, result.t, rtol=0.0, atol=1e-9):
+            theirs = np.stack(
+                [[np.interp(result.t, checked.t, theirs[:, i, c]) for c in range(3)] for i in range(theirs.shape[1])]
+            ).transpose(2, 0, 1)
+        error = float(np.max(np.linalg.norm(mine - theirs, axis=-1), initial=0.0))
+        peak = float(np.max(np.linalg.norm(theirs, axis=-1), initial=0.0))
+        readouts = result.readouts
+        result = dataclasses.replace(result, force_error_estimate=error)
+        result.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
+        message = accuracy.checked_message(judged, error, peak, reference)
+    if message is not None:
+        warnings.warn(message, AccuracyWarning, stacklevel=3)
+    return result
 
 
 STREAM_BATCH = 1024  #: samples kept in memory between writes to ``stream_to``
 MIN_DT = 1e-12  #: [s] the shortest step ``simulate`` takes
 ENERGY_CHECKS = ("warn", "raise", "off")
 LOOPS = ("auto", "compiled", "python")
+ACCURACY_CHECKS = ("auto", "screen", "off")
 
 
 class _Run:

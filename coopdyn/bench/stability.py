@@ -46,6 +46,7 @@ def is_stable_at(
                 save_every=max(1, n_steps // 50),
                 max_speed=limit,
                 energy_check="off",
+                accuracy_check="off",  # stability only
             )
     except SimulationError:
         return False

@@ -450,6 +450,8 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
         summary.append(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
     if len(loaded.scene.links) > 1:
         summary.append(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
+    if res.force_error_estimate is not None:
+        summary.append(f"  interconnection force error against dopri5: max {res.force_error_estimate:.3g} N")
     summary += [f"  not written: {p}" for p in done.problems]
     return RunReport(res, tuple(written), tuple(summary))
 
