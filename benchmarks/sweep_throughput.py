@@ -1,6 +1,6 @@
 """Sweep throughput on this machine: simulations per minute, serial vs local processes vs a
 local Dask cluster, on the same sweep (examples/sweep_gains.py's grid: two Pandas, the
-grip / lift / oscillate / hold task, 5 s per run with implicit Euler at 1 ms).
+grip / lift / oscillate / hold task, 5 s per run with the trapezoid at 1 ms).
 
 Rounds are interleaved (serial, processes, Dask; the order rotates each round) and the table
 gives the median wall time per sweep and runs per minute; the local process pool is started by
@@ -56,7 +56,7 @@ def main() -> None:
                     make_case,
                     grid,
                     duration=args.duration,
-                    integrator="implicit_euler",
+                    integrator="trapezoid",
                     dt=1e-3,
                     executor=engines[name],
                     workers=args.workers if engines[name] == "processes" else None,
@@ -95,7 +95,7 @@ def main() -> None:
     for i, r in enumerate(rows):
         ax.text(r[2], i, f" {r[2]:.0f} ({r[3]:.2f}×)", va="center")
     ax.set_xlabel("simulations per minute (median)")
-    ax.set_title(f"Sweep throughput: {n} runs × {args.duration:g} s, two Pandas, implicit Euler 1 ms", fontsize=10)
+    ax.set_title(f"Sweep throughput: {n} runs × {args.duration:g} s, two Pandas, trapezoid 1 ms", fontsize=10)
     ax.invert_yaxis()
     ax.set_xlim(0, max(r[2] for r in rows) * 1.3)
     fig.savefig(out / "sweep_throughput.png", dpi=120)

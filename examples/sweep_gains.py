@@ -41,7 +41,7 @@ def main(out: str = OUT, duration: float = 5.0, executor: str | None = None, sti
         make_case,
         {"stiffness": stiffness, "gain": gain},
         duration=duration,
-        integrator="implicit_euler",  # stable at every stiffness of the grid
+        integrator="trapezoid",  # A-stable, second order and non-dissipative: the accuracy screen clears every row at 1 ms
         dt=1e-3,
         executor=executor,
         out=out,
