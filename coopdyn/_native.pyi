@@ -7,6 +7,7 @@ import numpy as np
 
 PINOCCHIO_VERSION: str
 ELEMENTS: list[str]
+STATUSES: tuple[str, ...]
 
 class Kernel:
     def __init__(

@@ -29,7 +29,9 @@ def _element(kind: str, rng: np.random.Generator) -> Element:
         return SE3Spring(_spd(rng, 6, scale), _spd(rng, 6, scale * 1e-3))
     if kind == "beam":
         return BeamElement(BeamSegment(cd.Section.rectangle(0.03, 0.01, E=70e9, rho=2700.0, timoshenko=True), 0.1), 1e-4)
-    return BallSpring(_spd(rng, 3, np.full(3, 1e4)), _spd(rng, 3, np.full(3, 10.0)))
+    if kind == "ball":
+        return BallSpring(_spd(rng, 3, np.full(3, 1e4)), _spd(rng, 3, np.full(3, 10.0)))
+    raise ValueError(f"no test instance for element kind {kind!r}: add one here (a new element is tested as itself)")
 
 
 def _undamped(el: Element) -> Element:

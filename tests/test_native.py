@@ -10,6 +10,7 @@ fixture, no arm), and the book's prismatic linear case (1-D springs, no free-fly
 from __future__ import annotations
 
 import platform
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -397,3 +398,27 @@ def test_missing_kernel_warns_and_falls_back(monkeypatch: pytest.MonkeyPatch, pa
         assert Dynamics(pandas).backend == "python"
     with pytest.raises(backend.BackendError, match=r"native backend was requested but coopdyn\._native was built"):
         Dynamics(pandas, backend="native")
+
+
+def test_the_type_stub_matches_the_compiled_module() -> None:
+    """coopdyn/_native.pyi names what the kernel exports, member by member, and nothing else
+    (the module also carries eigenpy's registrations, which are not coopdyn's)."""
+    import ast
+
+    import coopdyn._native as native
+
+    stub = ast.parse((Path(cd.__file__).parent / "_native.pyi").read_text(encoding="utf-8"))
+    declared: dict[str, set[str] | None] = {}
+    for node in stub.body:
+        if isinstance(node, ast.ClassDef):
+            declared[node.name] = {n.name for n in node.body if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
+        elif isinstance(node, ast.FunctionDef):
+            declared[node.name] = None
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            declared[node.target.id] = None
+    eigenpy = {"boost_type_index", "std_type_index", "seed", "sharedMemory"}
+    exported = {name for name in dir(native) if not name.startswith("_")} - eigenpy
+    assert set(declared) == exported
+    for name, members in declared.items():
+        if members is not None:
+            assert members == {m for m in dir(getattr(native, name)) if not m.startswith("_")}, name
