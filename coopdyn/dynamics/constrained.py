@@ -27,7 +27,7 @@ import pinocchio as pin
 
 from ..errors import KernelError, SimulationError
 from ..model.scene import Scene
-from .dynamics import PythonDynamics, Readouts
+from .dynamics import KINDS, PythonDynamics, Readouts
 
 #: The proximal solver's settings: absolute and relative accuracy, regularisation μ, iterations.
 #: μ only has to be small against the constraints' inverse inertia; the iterations from λ = 0
@@ -130,5 +130,7 @@ class ConstrainedDynamics(PythonDynamics):
                 r.arm_wrench[k, i, :3], r.arm_wrench[k, i, 3:] = oMT.rotation @ f_T[:3], oMT.rotation @ f_T[3:]
         return r
 
+
+KINDS["constrained"] = ConstrainedDynamics
 
 __all__ = ["ConstrainedDynamics", "check_integrator", "has_constraints"]

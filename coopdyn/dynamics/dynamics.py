@@ -97,16 +97,8 @@ class Dynamics:
     def __new__(cls, scene: Scene, backend: str | None = None) -> Dynamics:
         if cls is not Dynamics:
             return super().__new__(cls)
-        name = _backend.resolve(backend, scene)
-        if scene.constraints:  # the rigid limit
-            from .constrained import ConstrainedDynamics
-
-            return super().__new__(ConstrainedDynamics)
-        if name == "native":
-            from .native import NativeDynamics
-
-            return super().__new__(NativeDynamics)
-        return super().__new__(PythonDynamics)
+        name = _backend.resolve(backend, scene)  # (refuses what the backend cannot run, e.g. rigid grasps on "native")
+        return super().__new__(KINDS["constrained" if scene.constraints else name])
 
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         self.scene = scene
@@ -395,3 +387,8 @@ class PythonDynamics(Dynamics):
                 WT[k, i, :3], WT[k, i, 3:] = oMT.rotation @ f_T[:3], oMT.rotation @ f_T[3:]
                 PG[k, i], PT[k, i] = oMG.translation, oMT.translation
         return Readouts(E, U, P, WG, WT, PG, PT, PO, KE, PE)
+
+
+#: what ``Dynamics(scene, backend)`` builds, by kind: ``"python"``, ``"native"`` and
+#: ``"constrained"`` (rigid grasps); each module registers its class (dynamics/__init__.py imports them)
+KINDS: dict[str, type[Dynamics]] = {"python": PythonDynamics}

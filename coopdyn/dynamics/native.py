@@ -15,7 +15,7 @@ from ..errors import CoopdynError, KernelError
 from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
-from .dynamics import Dynamics, Readouts, step_coefficients
+from .dynamics import KINDS, Dynamics, Readouts, step_coefficients
 
 
 def _kernel_error(exc: Exception, what: str) -> KernelError:
@@ -133,5 +133,7 @@ class NativeDynamics(Dynamics):
             KP.reshape(m, 2)[:n, 1].copy(),
         )
 
+
+KINDS["native"] = NativeDynamics
 
 __all__ = ["NativeDynamics"]
