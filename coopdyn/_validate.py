@@ -5,6 +5,7 @@ from __future__ import annotations
 import decimal
 import numbers
 import os
+import reprlib
 from pathlib import Path
 from typing import Any
 
@@ -78,10 +79,17 @@ def gain(
 
 def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none: str | None = None) -> int:
     """An integer >= 1 (not a bool, not a float); ``none`` names what ``None`` means, if allowed."""
-    if not (isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1):
+    if not (isinstance(value, int | np.integer) and not isinstance(value, bool | np.timedelta64) and value >= 1):
         also = f" or None ({none})" if none else ""
         raise error(f"{name} must be an integer >= 1{also}, got {_short(value)}")
     return int(value)
+
+
+def flag(value: Any, name: str, error: type[CoopdynError] = SceneError) -> bool:
+    """``value`` as a bool: only True or False (an array or a number is not taken for one)."""
+    if not isinstance(value, bool | np.bool_):
+        raise error(f"{name} must be True or False, got {_short(value)}")
+    return bool(value)
 
 
 PATH_MAX = 4096  #: [bytes] the longest path Linux takes
@@ -107,10 +115,15 @@ def path(value: Any, name: str, error: type[CoopdynError] = SceneError) -> Path:
     return result
 
 
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxstring, _REPR.maxother = 4, 8, 8, 8, 100, 100
+
+
 def _short(value: Any, limit: int = 120) -> str:
-    """``repr(value)`` cut to ``limit`` characters (an error message must stay readable)."""
+    """``repr(value)`` cut to ``limit`` characters and four levels of nesting (an error message
+    must stay readable, and a list nested thousands deep must not recurse)."""
     try:
-        text = repr(value)
+        text = _REPR.repr(value)
     except Exception:
         text = f"<{type(value).__name__}>"
     return text if len(text) <= limit else text[: limit - 5] + " …" + text[-3:]

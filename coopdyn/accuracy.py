@@ -41,6 +41,7 @@ from .integrators import AdaptiveIntegrator, AdaptiveROS2, DormandPrince, Integr
 from .stability import state_matrix
 
 FORCE_ERROR_LIMIT = 0.1  #: a force error, relative to the peak force, above which a run is not trusted
+FORCE_FLOOR = 1e-9  #: [N] forces below this are round-off: a reference without force is not divided by
 SCREEN_LIMIT = 0.005  #: a mode's force-weighted error above which the forces are checked against a reference run
 CHECK_COST = 30  #: the check may take this many times the run's steps (or CHECK_FLOOR), else the screen decides
 CHECK_FLOOR = 20_000  #: steps the check may always take
@@ -252,12 +253,13 @@ def described(reference: AdaptiveIntegrator) -> str:
 def checked_message(s: Screen, error: float, peak: float, reference: AdaptiveIntegrator) -> str | None:
     """The warning for a run whose forces differ from the ``reference`` run's by more than
     :data:`FORCE_ERROR_LIMIT` of their ``peak`` [N] (``error`` [N]), or None."""
-    if not error > FORCE_ERROR_LIMIT * peak:
+    if not error > FORCE_ERROR_LIMIT * max(peak, FORCE_FLOOR):
         return None
+    share = f"{error / peak:.0%} of their {peak:.4g} N peak" if peak > 0 else "where the reference's are zero"
     return (
         f"{s.method.name} at dt = {s.dt * 1e3:.4g} ms gets the interconnection forces of this {s.duration:g} s run wrong by up "
-        f"to {error:.4g} N, {error / peak:.0%} of their {peak:.4g} N peak (checked against {described(reference)} from the "
-        f"same start, Result.force_error_estimate). The likely cause is {_mode_text(s)}. {_advice(s)}"
+        f"to {error:.4g} N, {share} (checked against {described(reference)} from the same start, "
+        f"Result.force_error_estimate). The likely cause is {_mode_text(s)}. {_advice(s)}"
     )
 
 

@@ -136,6 +136,8 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     bandwidth = _validate.positive(bandwidth, "bandwidth", "Hz", SimulationError)
     dt = _validate.positive(dt, "dt", "s", SimulationError)
     measure = _validate.positive(measure, "measure", "s", SimulationError)
+    if not 1e-12 <= dt <= measure:
+        raise SimulationError(f"dt must be from 1e-12 s up to measure = {measure:g} s, got {dt:g} s")
     if measure > MAX_MEASURE:
         raise SimulationError(
             f"measure = {measure:g} s: each model is simulated that long to time it; give at most {MAX_MEASURE:g} s"

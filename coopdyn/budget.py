@@ -32,8 +32,8 @@ def check_budget(scene: Scene, t_final: float, dt: float, save_every: int, max_s
         max_steps = _validate.count(max_steps, "max_steps", SimulationError, none="no limit")
     if max_memory is not None:
         max_memory = _validate.number(max_memory, "max_memory", "bytes", SimulationError)
-        if max_memory <= 0:
-            raise SimulationError(f"max_memory must be > 0 [bytes] or None (no limit), got {max_memory:g}")
+        if not max_memory >= 1.0:
+            raise SimulationError(f"max_memory must be at least 1 [byte] or None (no limit), got {max_memory:g}")
     ratio = t_final / dt
     if not ratio < 1e15 or (max_steps is not None and ratio > max_steps):
         limit = " (beyond what a run can count)" if max_steps is None else f", more than max_steps = {max_steps:,}"

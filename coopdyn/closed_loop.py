@@ -103,12 +103,15 @@ class System:
         """The controller output, checked: (n_actuated,) finite floats."""
         if self.controller is None:
             return self._zero
+        q_seen, v_seen = q.view(), v.view()  # read-only: a controller cannot change the state it is shown
+        q_seen.flags.writeable = v_seen.flags.writeable = False
         try:
-            out = self.controller(t, q, v)
+            out = self.controller(t, q_seen, v_seen)
         except (CoopdynError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the user's code (or a reference it calls) failed: say where
-            raise ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}") from exc
+            hint = " (q and v are read-only: copy them to change them)" if "read-only" in str(exc) else ""
+            raise ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}{hint}") from exc
         if type(out) is np.ndarray and out.dtype == np.float64:  # not a subclass (masked arrays)
             tau = out
         else:  # lists, other dtypes, and what is not a torque vector at all

@@ -16,6 +16,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .closed_loop import System
+from .errors import ControllerError, CoopdynError
 from .integrators import Integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL
@@ -37,7 +38,14 @@ def _own_spec(obj: Any, *args: Any) -> dict[str, Any] | None:
     """``obj.compiled_spec(*args)`` when obj's own class defines it (a subclass that changes the
     behaviour runs in Python), else None."""
     spec = type(obj).__dict__.get("compiled_spec")
-    return None if spec is None else spec(obj, *args)
+    if spec is None:
+        return None
+    try:
+        return spec(obj, *args)
+    except (CoopdynError, KeyboardInterrupt):
+        raise
+    except Exception as exc:  # a user's class: say whose hook failed
+        raise ControllerError(f"{type(obj).__name__}.compiled_spec raised {type(exc).__name__}: {exc}") from exc
 
 
 class Plan(NamedTuple):

@@ -134,6 +134,16 @@ class GripLiftOscillate:
         for name, unit in (("squeeze", "N"), ("lift", "m"), ("t_lift", "s"), ("amplitude", "m"), ("t_osc", "s")):
             checked[name] = _validate.number(getattr(self, name), f"GripLiftOscillate: {name}", unit)
         checked["cycles"] = _validate.non_negative(self.cycles, "GripLiftOscillate: cycles", "periods")
+        for name in ("lift", "amplitude"):  # a motion beyond a scene's reach (its squares and derivatives overflow)
+            if abs(checked[name]) > _validate.MAX_DISTANCE:
+                raise SceneError(
+                    f"GripLiftOscillate: |{name}| must be at most {_validate.MAX_DISTANCE:g} m, got {checked[name]:g}"
+                )
+        for name in ("t_grip", "lift_duration", "t_lift", "t_osc", "cycles"):
+            if abs(checked[name]) > 1e9:
+                raise SceneError(f"GripLiftOscillate: {name} must be at most 1e9, got {checked[name]:g}")
+        if checked["frequency"] > 1e6:
+            raise SceneError(f"GripLiftOscillate: frequency must be at most 1e6 Hz, got {checked['frequency']:g}")
         for name, value in checked.items():
             object.__setattr__(self, name, value)
         _validate.finite_array(self.start, "GripLiftOscillate: start", (3,))

@@ -27,6 +27,9 @@ from .errors import CoopdynError, OutputError, SimulationError
 from .model.description import build, describe
 from .model.scene import Scene
 
+#: the largest magnitude a loaded sample may have (t [s], q, v, τ): far beyond any run (simulate
+#: stops at max_speed), and small enough that the readouts' squares and products stay finite
+MAX_SAMPLE = 1e100
 RESULT_FORMAT = "coopdyn.result/1"  #: what a saved result's ``meta`` says it is
 ARRAYS = ("t", "q", "v", "tau")  #: the fields a saved result keeps as arrays (the others go in ``meta``)
 MAX_LOAD_BYTES = 4e9  #: [bytes] the most a result file's arrays may take in memory, checked before they are read
@@ -318,12 +321,14 @@ class Result:
                     f"need floats of shape {shape} (a damaged file?)"
                 )
         for key in ARRAYS:
-            finite = np.isfinite(arrays[key])
+            arrays[key] = np.asarray(arrays[key], dtype=np.float64)  # (a float16 or float32 file: the readouts take doubles)
+            finite = np.abs(arrays[key]) <= MAX_SAMPLE
             bad = np.flatnonzero(~(finite if finite.ndim == 1 else finite.all(axis=1)))
             if len(bad):
                 raise SimulationError(
-                    f"{path}: {key} is not finite at {len(bad)} sample(s), the first at index {bad[0]} (NaN or inf: a damaged "
-                    "file, or one not written by coopdyn, which saves finite samples only)"
+                    f"{path}: {key} is not finite or beyond ±{MAX_SAMPLE:g} at {len(bad)} sample(s), the first at index "
+                    f"{bad[0]} (a damaged file, or one not written by coopdyn, which saves finite samples within "
+                    "max_speed only)"
                 )
         try:
             return cls(scene=scene, t=arrays["t"], q=arrays["q"], v=arrays["v"], tau=arrays["tau"], **meta)

@@ -221,13 +221,20 @@ def advise(
     Args:
         scene: the scene. q, v: the state to linearise at.
         controller: its PD gains (``controller.gains()``) enter the linearisation when it has them.
-        methods: names of the methods to report on.
+        methods: names of the methods to report on, from :data:`ADVISED` (the methods with a
+            stability function).
         dt: the step the user intends [s]; the recommendation then says which methods are stable at it.
     """
-    if dt is not None:
-        from ._validate import positive
+    from ._validate import _short, positive
 
+    if dt is not None:
         dt = positive(dt, "dt", "s", SimulationError)
+    if (
+        isinstance(methods, str)
+        or not isinstance(methods, Sequence)
+        or not all(isinstance(m, str) and m in ADVISED for m in methods)
+    ):
+        raise SimulationError(f"methods must be a list of names from {list(ADVISED)}, got {_short(methods)}")
     A = linearize(scene, q, v, controller)
     n = scene.nv
     lam = np.linalg.eigvals(A)

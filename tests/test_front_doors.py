@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -255,3 +256,130 @@ def test_a_process_pool_of_ones_own_inside_a_daemonic_process_is_refused_by_name
     with mp.get_context("fork").Pool(1) as pool:
         message = pool.map(_sweep_on_my_own_pool, [0])[0]
     assert "the executor cannot take the sweep's runs here" in message and "executor='serial'" in message
+
+
+def _nested(depth: int) -> object:
+    x: object = 1.0
+    for _ in range(depth):
+        x = [x]
+    return x
+
+
+def _slider_scene(**arm: object) -> cd.Scene:
+    from coopdyn.resources import urdf_path
+
+    spec = {"tip_frame": "tip", "q0": [0.4], **arm}
+    box = cd.RigidObject.box(5.0, [0.1] * 3, pose=[0, 0, 0.45], joint="prismatic", axis="z")
+    return cd.Scene(
+        [cd.Arm("s", str(urdf_path("slider_z.urdf")), **spec)], box, [cd.Interconnection("s", stiffness=2e4, element="ball")]
+    )
+
+
+def _abstract_element() -> cd.Scene:
+    from coopdyn.model.elements.base import Element
+    from coopdyn.resources import urdf_path
+
+    box = cd.RigidObject.box(5.0, [0.1] * 3, pose=[0, 0, 0.45], joint="prismatic", axis="z")
+    arm = cd.Arm("s", str(urdf_path("slider_z.urdf")), tip_frame="tip", q0=[0.4])
+    return cd.Scene([arm], box, [cd.Interconnection("s", stiffness=[1e4] * 3 + [100.0] * 3, element=Element)])
+
+
+class _FailingHook:
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.zeros(2)
+
+    def compiled_spec(self, scene: cd.Scene) -> dict[str, object]:
+        raise ZeroDivisionError("hook")
+
+
+def _writes_its_input(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    q[0] = np.nan
+    return np.zeros(2)
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [  # the second fuzz (18 400 cases): each signature it found, now refused by name
+        (lambda: cd.advise(cd.scenes.linear_book(), methods=None), cd.SimulationError, "methods must be a list of names"),
+        (lambda: cd.advise(cd.scenes.linear_book(), methods=["scipy"]), cd.SimulationError, "methods must be a list of names"),
+        (lambda: cd.simulate(cd.scenes.linear_book(), 0.01, backend=_nested(5000)), cd.CoopdynError, r"got \[\[\[\["),
+        (lambda: cd.scenes.facing_arms(_nested(5000)), cd.SceneError, "robot must be a URDF path"),
+        (lambda: cd.scenes.facing_arms("x" * 5000), cd.ModelLoadError, "unknown robot 'xxx"),
+        (
+            lambda: cd.Beam(0.8, cd.Section.rectangle(0.03, 0.003, E=70e9, rho=2700.0), n_elements=2).zero_modes(()),
+            cd.SceneError,
+            "rtol",
+        ),
+        (lambda: cd.simulate(cd.scenes.linear_book(), 0.01, max_memory=1e-320), cd.SimulationError, "at least 1"),
+        (lambda: cd.advise_model(cd.scenes.linear_book(), dt=1e-320, measure=1e-6), cd.SimulationError, "dt must be from 1e-12"),
+        (
+            lambda: cd.sweep(lambda: cd.scenes.linear_book(), seeds=2**63, duration=0.005, executor="serial"),
+            cd.SweepError,
+            "count from 1",
+        ),
+        (lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", n_steps=10**400), cd.SimulationError, "n_steps in"),
+        (
+            lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", rel_tol=1e-300, n_steps=50),
+            cd.SimulationError,
+            "rel_tol in",
+        ),
+        (
+            lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", guess=float("nan"), n_steps=50),
+            cd.SimulationError,
+            "finite",
+        ),
+        (lambda: cd.integrators.Trapezoid(rho_inf=np.timedelta64(1, "s")), cd.SimulationError, "rho_inf"),
+        (lambda: cd.simulate(cd.scenes.linear_book(), 0.01, save_every=np.timedelta64(1, "s")), cd.SimulationError, "save_every"),
+        (lambda: cd.Section.rectangle(0.03, 0.003, E=70e9, rho=2700.0, timoshenko=np.array([])), cd.SceneError, "True or False"),
+        (_abstract_element, cd.SceneError, "not an element to build"),
+        (lambda: _slider_scene(tip_frame="universe"), cd.SceneError, "the world frame"),
+        (lambda: _slider_scene(package_dirs=3), cd.SceneError, "package_dirs must be a list"),
+        (
+            lambda: cd.simulate(cd.scenes.linear_book(), 0.002, controller=_FailingHook()),
+            cd.ControllerError,
+            "compiled_spec raised",
+        ),
+        (
+            lambda: cd.simulate(
+                cd.scenes.linear_book(), 0.0, controller=lambda t, q, v: np.zeros(5), integrator="dopri5", energy_check="off"
+            ),
+            cd.ControllerError,
+            "shape",
+        ),
+        (
+            lambda: cd.simulate(cd.scenes.linear_book(), 0.0, controller=_writes_its_input, energy_check="off"),
+            cd.ControllerError,
+            "read-only",
+        ),
+        (
+            lambda: cd.cooperative.GripLiftOscillate(start=[0, 0, 0.7], amplitude=1.7976931348623157e308),
+            cd.SceneError,
+            "amplitude",
+        ),
+    ],
+)
+def test_what_the_second_fuzz_found_is_refused_by_name(call: Any, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        call()
+
+
+@pytest.mark.parametrize("dtype", ["float16", "float32"])
+def test_a_result_file_of_narrower_floats_loads_as_doubles(tmp_path: Path, dtype: str) -> None:
+    path = cd.simulate(cd.rigid_limit(cd.scenes.linear_book()), 0.01).save(tmp_path / "r.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["q"] = arrays["q"].astype(dtype)
+    np.savez(path, **arrays)
+    res = cd.Result.load(path)
+    assert res.q.dtype == np.float64 and np.all(np.isfinite(res.wrenches()))
+
+
+def test_a_result_file_with_absurd_samples_is_refused(tmp_path: Path) -> None:
+    """Finite but beyond any run (|v| = 1e300): the readouts' squares would be inf or NaN."""
+    path = cd.simulate(cd.scenes.linear_book(), 0.01).save(tmp_path / "r.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["v"] = np.full_like(arrays["v"], -1e300)
+    np.savez(path, **arrays)
+    with pytest.raises(cd.SimulationError, match=r"v is not finite or beyond ±1e\+100 at 11 sample"):
+        cd.Result.load(path)

@@ -108,7 +108,9 @@ def test_a_result_with_nan_samples_is_refused_by_name(tmp_path: Path, key: str) 
     arrays[key] = arrays[key].copy()
     arrays[key][3] = np.nan
     np.savez(path, **arrays)
-    with pytest.raises(cd.SimulationError, match=rf"{key} is not finite at 1 sample\(s\), the first at index 3"):
+    with pytest.raises(
+        cd.SimulationError, match=rf"{key} is not finite or beyond ±1e\+100 at 1 sample\(s\), the first at index 3"
+    ):
         cd.Result.load(path)
 
 

@@ -28,10 +28,20 @@ def is_stable_at(
 ) -> bool:
     """Run ``n_steps`` of ``integrator`` at ``dt`` [s]; stable when the state stays finite and the
     largest velocity stays below ``growth·(1 + max|v₀|)``."""
+    from .._validate import _short, count, finite_array, positive
+
     method = get_integrator(integrator)
     if isinstance(method, ScipyReference) or method.adaptive:
         raise SimulationError("measure the stability of fixed-step methods only")
-    v_start = scene.v0 if v0 is None else np.asarray(v0, dtype=float)
+    dt = positive(dt, "dt", "s", SimulationError)
+    n_steps = count(n_steps, "n_steps", SimulationError)
+    growth = positive(growth, "growth", "1", SimulationError)
+    if n_steps > 10**6 or not n_steps * dt < 1e9 or not 1.0 <= growth <= 1e100:
+        raise SimulationError(
+            f"is_stable_at takes n_steps up to 1e6, n_steps·dt below 1e9 s and growth in [1, 1e100]; got n_steps = "
+            f"{_short(n_steps)}, dt = {dt:g} s, growth = {growth:g}"
+        )
+    v_start = scene.v0 if v0 is None else finite_array(v0, "v0", (scene.nv,), SimulationError)
     limit = growth * (1.0 + float(np.max(np.abs(v_start))))
     try:
         with warnings.catch_warnings():  # a run that blows up on purpose may twist its springs past π
@@ -64,8 +74,20 @@ def measure_stable_dt(
     v0: Any = None,
 ) -> float:
     """Largest stable step [s] of a fixed-step method on ``scene``, by bisection on simulations
-    (:func:`is_stable_at`); ``guess`` is a starting bracket point [s]."""
+    (:func:`is_stable_at`); ``guess`` is a starting bracket point [s] (1e-9 to 1 s), ``rel_tol``
+    the bracket's relative width at the end (1e-6 to 1), ``n_steps`` the steps a run at each
+    trial step takes (1 to 10⁶)."""
+    from .._validate import _short, count, positive
+
     method = get_integrator(integrator)
+    guess = positive(guess, "guess", "s", SimulationError)
+    rel_tol = positive(rel_tol, "rel_tol", "1", SimulationError)
+    n_steps = count(n_steps, "n_steps", SimulationError)
+    if not 1e-9 <= guess <= 1.0 or not 1e-6 <= rel_tol <= 1.0 or n_steps > 10**6:
+        raise SimulationError(
+            f"measure_stable_dt takes guess in [1e-9, 1] s, rel_tol in [1e-6, 1] and n_steps in [1, 1e6]; got guess = "
+            f"{guess:g} s, rel_tol = {rel_tol:g}, n_steps = {_short(n_steps)}"
+        )
 
     def stable(h: float) -> bool:
         return is_stable_at(scene, method, h, controller=controller, n_steps=n_steps, v0=v0)

@@ -22,6 +22,7 @@ from types import ModuleType
 
 import pinocchio as pin
 
+from .. import _validate
 from ..errors import BackendError, NativeBackendWarning
 from ..model.scene import Scene
 
@@ -63,7 +64,7 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
         raise BackendError(f"dynamics need a coopdyn.Scene, got {type(scene).__name__}")
     name = os.environ.get("COOPDYN_BACKEND", "auto") if backend is None else backend
     if not isinstance(name, str) or name not in BACKENDS:
-        raise BackendError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+        raise BackendError(f"backend must be one of {', '.join(BACKENDS)}, got {_validate._short(name)}")
     module, why = _load()
     if name == "python":
         return "python"

@@ -182,7 +182,7 @@ class AdaptiveROS2(AdaptiveIntegrator):
 def _check_rho(rho_inf: object) -> float:
     """ρ∞ as a float, or a SimulationError naming the bad value."""
     try:  # float() of a huge int overflows
-        rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool) else math.nan
+        rho = float(rho_inf) if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool | np.timedelta64) else math.nan
     except OverflowError:
         rho = math.nan
     if not 0.0 <= rho <= 1.0:

@@ -91,7 +91,11 @@ class LoadedArm:
 
 def _robot_name(robot: str | os.PathLike[str]) -> str | None:
     text = os.fspath(robot)
-    if text.endswith(".urdf") or os.sep in text or Path(text).exists():
+    try:
+        exists = Path(text).exists()
+    except (OSError, ValueError):  # a name no file system takes (too long, NUL): not a file
+        exists = False
+    if text.endswith(".urdf") or os.sep in text or exists:
         return None
     return text
 
@@ -100,8 +104,8 @@ def package_search_path(extra: Sequence[str | os.PathLike[str]] = ()) -> list[st
     """Where ``package://`` paths are looked up: ``extra`` (an arm's ``package_dirs``), then the
     entries of ``ROS_PACKAGE_PATH``, then example-robot-data's model folders."""
     if isinstance(extra, str | bytes) or not isinstance(extra, Sequence):
-        raise SceneError(f"package_dirs must be a list of folders, got {extra!r}")
-    dirs = [os.fspath(p) for p in extra]
+        raise SceneError(f"package_dirs must be a list of folders, got {_validate._short(extra)}")
+    dirs = [os.fspath(_validate.path(p, "package_dirs entry")) for p in extra]
     dirs += [p for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p]
     try:
         from example_robot_data.path import EXAMPLE_ROBOT_DATA_MODEL_DIR
@@ -138,7 +142,7 @@ def _load_urdf(
     loader = robots_loader.ROBOTS.get(name)
     if loader is None:
         raise ModelLoadError(
-            f"unknown robot {name!r}: not a URDF path and not an example-robot-data name."
+            f"unknown robot {_validate._short(name)}: not a URDF path and not an example-robot-data name."
             + did_you_mean(name, robots_loader.ROBOTS)
         )
     if not loader.urdf_filename:
@@ -250,12 +254,13 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     if not isinstance(arm, Arm):
         raise SceneError(f"expected a coopdyn.Arm, got {type(arm).__name__}")
     if not isinstance(arm.name, str) or not arm.name or "/" in arm.name:
-        raise SceneError(f"arm name must be a non-empty string without '/', got {arm.name!r}")
+        raise SceneError(f"arm name must be a non-empty string without '/', got {_validate._short(arm.name)}")
     what = f"arm {arm.name!r}"
     if not isinstance(arm.robot, str | os.PathLike) or not os.fspath(arm.robot):
-        raise SceneError(f"{what}: robot must be a URDF path or an example-robot-data name, got {arm.robot!r}")
+        raise SceneError(f"{what}: robot must be a URDF path or an example-robot-data name, got {_validate._short(arm.robot)}")
+    package_search_path(arm.package_dirs)  # (checked here: it is used only when meshes are loaded)
     if arm.tip_frame is not None and not isinstance(arm.tip_frame, str):
-        raise SceneError(f"{what}: tip_frame must be a frame name (string), got {arm.tip_frame!r}")
+        raise SceneError(f"{what}: tip_frame must be a frame name (string), got {_validate._short(arm.tip_frame)}")
     locked_spec = arm.locked_joints
     if locked_spec is not None:
         names = list(locked_spec) if isinstance(locked_spec, Mapping | list | tuple) else None
@@ -313,7 +318,9 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
         )
     if not model.existFrame(tip):
         names = [f.name for f in model.frames]
-        raise SceneError(f"{what}: no frame named {tip!r} in the model.{did_you_mean(tip, names)}")
+        raise SceneError(f"{what}: no frame named {_validate._short(tip)} in the model.{did_you_mean(tip, names)}")
+    if tip == "universe":
+        raise SceneError(f"{what}: tip_frame 'universe' is the world frame, not a frame of the arm")
 
     if arm.q0 is not None:
         q0 = _validate.finite_array(arm.q0, f"{what}, q0", (model.nq,))

@@ -157,7 +157,11 @@ class Beam:
         return K
 
     def zero_modes(self, rtol: float = 1e-9) -> int:
-        """Number of zero-energy modes of the free beam (6N − rank K): six rigid-body motions."""
+        """Number of zero-energy modes of the free beam (6N − rank K): six rigid-body motions;
+        an eigenvalue within ``rtol`` (0 < rtol < 1) of the largest counts as zero."""
+        rtol = _validate.positive(rtol, "rtol", "1")
+        if rtol >= 1.0:
+            raise SceneError(f"rtol must be below 1 (a fraction of the largest eigenvalue), got {rtol:g}")
         w = np.linalg.eigvalsh(self.stiffness_matrix())
         return int(np.sum(np.abs(w) <= rtol * np.abs(w).max()))
 

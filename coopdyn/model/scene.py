@@ -73,20 +73,27 @@ def available_memory() -> float | None:
     return None
 
 
+MEMORY_SHARE = 0.5  #: the part of the available memory a scene's Pinocchio data may take
+
+
 def check_memory(nv: int, obj: Any) -> None:
     """Refuse, before anything big is allocated, a model whose Pinocchio data would not fit."""
     need = DATA_ALIVE * data_bytes(nv)
-    have = available_memory()
-    if have is None or need <= have:
+    available = available_memory()
+    if available is None:
         return
-    fits = next(n for n in range(nv, 0, -1) if DATA_ALIVE * data_bytes(n) <= have)
+    have = MEMORY_SHARE * available
+    if need <= have:
+        return
+    fits = next((n for n in range(nv, 0, -1) if DATA_ALIVE * data_bytes(n) <= have), 0)
     hint = ""
     if isinstance(obj, Beam):
         most = obj.n_elements - math.ceil((nv - fits) / 6)
         hint = f"; this beam fits with at most {max(most, 0)} elements" if most >= 1 else "; no beam of free nodes fits"
     raise SceneError(
         f"this scene has nv = {nv} velocities: a run holds {DATA_ALIVE} Pinocchio Data of {data_bytes(nv) / 1e9:.3g} GB each "
-        f"(four nv×nv×nv tensors), {need / 1e9:.3g} GB in all, and this machine has {have / 1e9:.3g} GB available. "
+        f"(four nv×nv×nv tensors), {need / 1e9:.3g} GB in all, more than {MEMORY_SHARE:.0%} of the {available / 1e9:.3g} GB "
+        "this machine has available (the run, its results and the machine need the rest). "
         f"At most nv = {fits} fits{hint}"
     )
 

@@ -204,15 +204,19 @@ def _bad_params(value: Any) -> dict[str, Any]:
 def _seeds(seeds: Any) -> Sequence[int | None]:
     if seeds is None:
         return [None]
-    if isinstance(seeds, bool):
+    if isinstance(seeds, bool | np.timedelta64):
         raise SweepError(f"seeds must be a count or a list of integers, got {seeds!r}")
     if isinstance(seeds, int | np.integer):
-        if seeds < 1:
-            raise SweepError(f"seeds must be a count >= 1 or a list of integers, got {seeds}")
+        if not 1 <= seeds <= MAX_RUNS:
+            raise SweepError(
+                f"seeds must be a count from 1 to {MAX_RUNS:.0e} (what one sweep holds) or a list of integers, got {seeds}"
+            )
         return range(int(seeds))  # not a list: a huge count is refused by its length
     if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes):
         out = list(seeds)
-        if not out or any(isinstance(s, bool) or not isinstance(s, int | np.integer) or not 0 <= s < 2**63 for s in out):
+        if not out or any(
+            isinstance(s, bool | np.timedelta64) or not isinstance(s, int | np.integer) or not 0 <= s < 2**63 for s in out
+        ):
             raise SweepError(f"seeds must be a non-empty list of integers from 0 to 2**63 - 1 (a table's integers), got {out!r}")
         return [int(s) for s in out]
     raise SweepError(f"seeds must be a count or a list of integers, got {type(seeds).__name__}")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from ..._validate import _short
 from ...errors import SceneError, did_you_mean
 from .ball_spring import BallSpring
 from .base import Element, ElementEval, SpringDamper
@@ -50,11 +51,14 @@ def register(cls: type[Element], native: str | None = None) -> type[Element]:
 def lookup(kind: str | type[Element]) -> ElementType:
     """The registered element for a kind name (or an Element subclass, registered or not)."""
     if isinstance(kind, type) and issubclass(kind, Element):
-        known = ELEMENTS.get(kind.kind)
+        name = getattr(kind, "kind", None)
+        if not isinstance(name, str) or not name or getattr(kind, "__abstractmethods__", None):
+            raise SceneError(f"{kind.__name__} is not an element to build: a concrete Element subclass with kind = '<name>'")
+        known = ELEMENTS.get(name)
         return known if known is not None and known.python is kind else ElementType(kind, None)
     if not isinstance(kind, str) or kind not in ELEMENTS:
         hint = did_you_mean(kind, ELEMENTS) if isinstance(kind, str) else ""
-        raise SceneError(f"unknown interconnection element {kind!r}.{hint} Registered: {sorted(ELEMENTS)}")
+        raise SceneError(f"unknown interconnection element {_short(kind)}.{hint} Registered: {sorted(ELEMENTS)}")
     return ELEMENTS[kind]
 
 

@@ -58,6 +58,7 @@ class Section:
         """A solid ``width`` (along y) × ``height`` (along z) rectangle [m] of an isotropic
         material: E [Pa], density [kg/m³], Poisson's ratio ``nu``; J by Roark's series-fitted
         formula (0.1 % accurate)."""
+        timoshenko = _validate.flag(timoshenko, "Section.rectangle: timoshenko")
         b = _validate.positive(width, "Section.rectangle: width", "m")
         h = _validate.positive(height, "Section.rectangle: height", "m")
         nu = _validate.number(nu, "Section.rectangle: nu", "1")
@@ -72,6 +73,7 @@ class Section:
     @classmethod
     def circle(cls, diameter: float, E: float, rho: float, nu: float = 0.3, timoshenko: bool = False) -> Section:
         """A solid round bar of ``diameter`` [m] (see :meth:`rectangle` for the rest)."""
+        timoshenko = _validate.flag(timoshenko, "Section.circle: timoshenko")
         d = _validate.positive(diameter, "Section.circle: diameter", "m")
         nu = _validate.number(nu, "Section.circle: nu", "1")
         if not -1.0 < nu < 0.5:
