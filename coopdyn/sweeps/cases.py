@@ -12,7 +12,6 @@ simulation of each scene.
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import inspect
 import itertools
@@ -23,9 +22,9 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -226,6 +225,16 @@ def _seeds(seeds: Any) -> Sequence[int | None]:
 # jobs: how a worker turns an item into a case
 
 
+class Job(Protocol):
+    """What a worker turns an item into a case with: :class:`PythonJob`, or a scene file's
+    :class:`~coopdyn.sweeps.spec.SpecJob`."""
+
+    settings: Settings
+    metrics: Callable[..., Mapping[str, Any]] | None
+
+    def case(self, item: Item) -> Case: ...
+
+
 @dataclass
 class PythonJob:
     """Cases from the user's ``make_case(**params[, seed=…])``; ``metrics(result, case)``
@@ -249,31 +258,6 @@ class PythonJob:
         if not isinstance(made, Case):
             raise SweepError(f"make_case must return a coopdyn.sweeps.Case or a coopdyn.Scene, got {type(made).__name__}")
         return made
-
-
-@dataclass
-class SpecJob:
-    """Cases from a scene file's document with each run's values put in (:mod:`.spec`)."""
-
-    text: str
-    path: str
-    settings: Settings
-    metrics: Callable[..., Mapping[str, Any]] | None = None
-    _parsed: Any = field(default=None, repr=False, compare=False)
-
-    def case(self, item: Item) -> Case:
-        from ..io import scenefile
-        from .spec import put
-
-        if self._parsed is None:
-            path = Path(self.path)
-            self._parsed = (scenefile.parse(self.text, path), scenefile._File(path, self.text))
-        doc, f = self._parsed
-        doc = copy.deepcopy(doc)
-        for name, value in item.params.items():
-            put(doc, name, value)
-        run = scenefile.from_document(doc, f)
-        return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every)
 
 
 def signature_check(make_case: Callable[..., Any], items: Sequence[Item]) -> None:
@@ -361,7 +345,7 @@ def _where(exc: BaseException, origin: str | None = None) -> str:
 DYNAMIC_CODE = "<dynamic-code>"  #: the file name cloudpickle gives code it sends by value
 
 
-def run_item(job: PythonJob | SpecJob, item: Item, trajectories: str | None) -> dict[str, Any]:
+def run_item(job: Job, item: Item, trajectories: str | None) -> dict[str, Any]:
     """Build, simulate and measure one case; every outcome is a row (a Ctrl-C propagates)."""
     row: dict[str, Any] = {"run": item.run, **item.params, "seed": item.seed}
     wall0 = time.perf_counter()
@@ -443,7 +427,7 @@ _JOBS: dict[str, Any] = {}  #: jobs a worker process has unpacked, by the hash o
 _LAST_JOB: list[Any] = []  #: [the last payload object, its job]: no hash for a payload seen before
 
 
-def _job(payload: bytes | PythonJob | SpecJob) -> Any:
+def _job(payload: bytes | Job) -> Any:
     if not isinstance(payload, bytes):
         return payload  # in-process: the job itself
     if _LAST_JOB and _LAST_JOB[0] is payload:  # a local worker's chunks share one payload object
@@ -460,7 +444,7 @@ def _job(payload: bytes | PythonJob | SpecJob) -> Any:
 
 
 def run_chunk(
-    payload: bytes | PythonJob | SpecJob, items: Sequence[Item], trajectories: str | None, markers: str | None = None
+    payload: bytes | Job, items: Sequence[Item], trajectories: str | None, markers: str | None = None
 ) -> list[dict[str, Any]]:
     """A worker's task: run ``items`` one after the other; the rows. With ``markers`` (a folder),
     the run in progress is written to ``markers/<pid>`` so that the parent can tell, if this

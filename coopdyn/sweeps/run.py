@@ -31,7 +31,6 @@ from .cases import (
     Item,
     PythonJob,
     Settings,
-    SpecJob,
     expand,
     placeholder,
     run_item,
@@ -41,7 +40,7 @@ from .cases import (
 )
 from .engines import Executor, LocalProcesses, Serial, chunks, engine
 from .journal import JOURNAL_NAME, Journal, finished_rows, sweep_key
-from .spec import Spec
+from .spec import Spec, SpecJob
 
 MAX_CHUNK = 64  #: the most runs per task with the automatic chunk size
 PAYLOAD_WARN_BYTES = 10 << 20  #: a job bigger than this is sent to every worker: say so

@@ -18,7 +18,9 @@ which of its values change from run to run:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +29,7 @@ import numpy as np
 from .. import _validate
 from ..errors import CoopdynError, SweepError
 from ..io import scenefile
-from .cases import COUNTERS, METRICS, Item, Settings, SpecJob, _plain, expand
+from .cases import COUNTERS, METRICS, Case, Item, Settings, _plain, expand
 
 SWEEP_KEYS = ("grid", "random", "seeds", "folder", "trajectories", "heatmap")
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice")
@@ -76,6 +78,28 @@ def put(doc: dict[str, Any], name: str, value: Any) -> None:
         entries = [target]
     for entry in entries:
         entry[key] = value
+
+
+@dataclass
+class SpecJob:
+    """Cases from a scene file's document with each run's values put in (:mod:`.spec`)."""
+
+    text: str
+    path: str
+    settings: Settings
+    metrics: Callable[..., Mapping[str, Any]] | None = None
+    _parsed: Any = field(default=None, repr=False, compare=False)
+
+    def case(self, item: Item) -> Case:
+        if self._parsed is None:
+            path = Path(self.path)
+            self._parsed = (scenefile.parse(self.text, path), scenefile._File(path, self.text))
+        doc, f = self._parsed
+        doc = copy.deepcopy(doc)
+        for name, value in item.params.items():
+            put(doc, name, value)
+        run = scenefile.from_document(doc, f)
+        return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every)
 
 
 def _draw(rng: np.random.Generator, name: str, dist: Any) -> Any:
