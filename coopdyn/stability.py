@@ -18,7 +18,7 @@ import numpy as np
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import SimulationError
-from .integrators import Integrator, get_integrator
+from .integrators import INTEGRATORS, Integrator, get_integrator
 from .model.scene import Scene
 
 #: |λ|·dt above which a step does not resolve an oscillatory mode (fewer than 2π steps per
@@ -30,8 +30,8 @@ from .model.scene import Scene
 #: implicit Euler's stays large (45 N and 22 N there).
 RESOLVE_LIMIT = 1.0
 
-#: Methods :func:`advise` reports on by default.
-ADVISED = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "exponential")
+#: the methods ``advise`` reports on by default: the registry's ``advised`` ones, in its order
+ADVISED = tuple(name for name, cls in INTEGRATORS.items() if cls.advised)
 
 
 @dataclass(frozen=True)

@@ -358,3 +358,18 @@ def test_ros2_adaptive_defaults_cost_steps_of_dopri5s_order() -> None:
     assert runs["ros2_adaptive"].n_steps <= 3 * runs["dopri5"].n_steps
     error = np.abs(runs["ros2_adaptive"].wrench(0) - runs["dopri5"].wrench(0)).max()
     assert error < 1.0
+
+
+def test_the_advised_methods_are_the_registry_s_with_a_stability_function_of_their_own() -> None:
+    """``advise`` reports on every registered method whose step has a spectral radius of its own
+    (ros2_adaptive shares ros2's; scipy has none), in the registry's order."""
+    import numpy as np
+
+    from coopdyn.integrators import INTEGRATORS
+    from coopdyn.stability import ADVISED
+
+    expected = ("symplectic_euler", "rk4", "dopri5", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "exponential")
+    assert ADVISED == expected
+    oscillator = np.array([[0.0, 1.0], [-100.0, -0.1]])  # x'' + 0.1 x' + 100 x = 0
+    for name in ADVISED:
+        assert 0.0 < INTEGRATORS[name]().spectral_radius(oscillator, 1e-3) <= 1.0 + 1e-9, name

@@ -105,6 +105,9 @@ class Integrator(ABC):
     exact_discretisation: ClassVar[bool] = False
     #: True when the method is unconditionally stable on the linearised problem.
     a_stable: ClassVar[bool] = False
+    #: True when ``coopdyn.advise`` reports on it by default (a method with a stability function
+    #: of its own: not a variant that shares another's, not a scipy wrapper)
+    advised: ClassVar[bool] = True
 
     @abstractmethod
     def step(

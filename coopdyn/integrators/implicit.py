@@ -164,6 +164,7 @@ class AdaptiveROS2(AdaptiveIntegrator):
     order = 2
     error_order = 1
     a_stable = True
+    advised = False  # ros2's stability function
 
     def __init__(self, rtol: float = 1e-3, atol: float = 1e-6, h_min: float = 1e-12) -> None:
         super().__init__(rtol=rtol, atol=atol, h_min=h_min)

@@ -28,6 +28,7 @@ class ScipyReference(Integrator):
 
     name = "scipy"
     order = 8
+    advised = False  # no stability function of its own
 
     def __init__(self, method: str = "DOP853", rtol: float = 1e-10, atol: float = 1e-12) -> None:
         from .._validate import positive
