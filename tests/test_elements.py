@@ -206,7 +206,6 @@ class ToyVerticalSpring(Element):
 
     kind: ClassVar[str] = "toy_vertical"
     deformation_size: ClassVar[int] = 1
-    deformation_units: ClassVar[str] = "m"
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "toy") -> None:
         self.k = float(stiffness)

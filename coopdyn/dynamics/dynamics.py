@@ -225,11 +225,6 @@ class Dynamics:
         potential = float(pin.computePotentialEnergy(model, data))
         return Energy(kinetic, potential, float(np.sum(self._elastic())))
 
-    def dissipation(self, q: np.ndarray, v: np.ndarray) -> float:
-        """Power dissipated by interconnection and joint damping [W] (≥ 0)."""
-        states = self.element_states(q, v)
-        return sum(s.power for s in states) + float(v @ (self._damping * v))
-
 
 class PythonDynamics(Dynamics):
     """The reference implementation, on Pinocchio's Python bindings and the elements' Python laws."""

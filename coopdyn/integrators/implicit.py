@@ -156,8 +156,9 @@ class AdaptiveROS2(AdaptiveIntegrator):
     A second-order method's error estimate shrinks as h², so its steps grow as rtol^½ (dopri5's
     as rtol^⅕): it is meant for loose tolerances, and its defaults are looser than dopri5's
     (rtol 1e-3, atol 1e-6). At dopri5's 1e-6 it took 170–280× dopri5's steps on the bench scenes,
-    at these 5–9× (``benchmarks/adaptive_steps.py``).
-    For tight accuracy, use dopri5.
+    at these 5–9× with force errors of 0.1–4 % of the force swing; ten times looser (rtol 1e-2)
+    it would take 1.7–2.5× but be 1–29 % off (``benchmarks/adaptive_steps.py``). For tight
+    accuracy, use dopri5.
     """
 
     name = "ros2_adaptive"

@@ -48,7 +48,6 @@ class BallSpring(SpringDamper):
     kind: ClassVar[str] = "ball"
     deformation_size: ClassVar[int] = 3
     linear: ClassVar[bool] = True  # with translations only, the deformation is the relative translation
-    deformation_units: ClassVar[str] = "m, m, m"
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         D = np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m")

@@ -51,15 +51,14 @@ def read_only(array: np.ndarray) -> np.ndarray:
 class Element(ABC):
     """Base class of interconnection elements (see the module docstring).
 
-    A subclass sets :attr:`kind` (its registry name), :attr:`deformation_size` and
-    :attr:`deformation_units`, validates its parameters in ``__init__(stiffness, damping,
-    name)`` and implements :meth:`evaluate`. An element with a C++ twin also implements
-    :meth:`native_parameters`. Register it with :func:`coopdyn.model.elements.register`.
+    A subclass sets :attr:`kind` (its registry name) and :attr:`deformation_size`, validates
+    its parameters in ``__init__(stiffness, damping, name)`` and implements :meth:`evaluate`.
+    An element with a C++ twin also implements :meth:`native_parameters`. Register it with
+    :func:`coopdyn.model.elements.register`.
     """
 
     kind: ClassVar[str]
     deformation_size: ClassVar[int]
-    deformation_units: ClassVar[str]
     #: True when, with translations only (prismatic joints), the law is linear in the relative
     #: translation and velocity (the exponential integrator needs it).
     linear: ClassVar[bool] = False

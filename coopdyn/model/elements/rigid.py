@@ -38,7 +38,6 @@ class RigidGrasp(Element):
 
     kind: ClassVar[str] = "rigid"
     deformation_size: ClassVar[int] = 6
-    deformation_units: ClassVar[str] = "m, m, m, rad, rad, rad"
     constraint: ClassVar[str | None] = "6D"
 
     def __init__(self, stiffness: Any = None, damping: Any = None, name: str = "interconnection") -> None:
@@ -67,7 +66,6 @@ class RigidPoint(RigidGrasp):
 
     kind: ClassVar[str] = "rigid_point"
     deformation_size: ClassVar[int] = 3
-    deformation_units: ClassVar[str] = "m, m, m"
     constraint: ClassVar[str | None] = "3D"
 
     def drift(self, T_M_G: pin.SE3) -> tuple[np.ndarray, float]:

@@ -33,7 +33,6 @@ class SE3Spring(SpringDamper):
     kind: ClassVar[str] = "se3"
     deformation_size: ClassVar[int] = 6
     linear: ClassVar[bool] = True  # log6 of a pure translation is the translation
-    deformation_units: ClassVar[str] = "m, m, m, rad, rad, rad"
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         K = _validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad")
