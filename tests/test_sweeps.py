@@ -513,6 +513,7 @@ def test_parameter_sets_must_name_the_same_parameters_and_settings_are_checked_u
         ({"dt": float("nan")}, "dt"),
         ({"save_every": 0}, "save_every must be an integer >= 1"),
         ({"energy_check": "loud"}, "energy_check must be one of"),
+        ({"accuracy_check": "maybe"}, r"accuracy_check must be one of \['auto', 'screen', 'off'\]"),
     ):
         with pytest.raises(cd.SweepError, match=message):
             cd.sweep(make_case, {"a": [1]}, duration=0.1, **kwargs)  # type: ignore[arg-type]
@@ -592,3 +593,24 @@ def test_a_failed_rows_message_is_the_same_on_every_executor(tmp_path: Path) -> 
     messages = json.loads(run.stdout.strip().splitlines()[-1])
     assert messages["serial"] == messages["processes"] == ["", "ValueError: broken on purpose (at study.py:7 in make_case)"]
     assert rerun(tmp_path / "processes", 1, make_case=f"{script}:make_case").identical
+
+
+def test_a_sweep_passes_its_accuracy_check_to_every_run(tmp_path: Path) -> None:
+    """implicit Euler at 2 ms on k = 1e5 N/m under the object-impedance task: with "screen" the
+    rows carry the screen's warning (no second run), with "off" none, with "auto" the checked one."""
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+
+    def make_case(k: float) -> cd.Case:
+        scene = cd.scenes.facing_arms("panda", stiffness=k)
+        return cd.Case(scene, ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0)))
+
+    warned = {}
+    for check in ("auto", "screen", "off"):
+        table = cd.sweep(
+            make_case, {"k": [1e5]}, duration=0.5, integrator="implicit_euler", dt=2e-3, executor="serial",
+            progress=False, energy_check="off", accuracy_check=check,
+        )  # fmt: skip
+        warned[check] = str(table["warnings"][0])
+    assert "checked against dopri5" in warned["auto"]
+    assert "not checked against a reference run: accuracy_check='screen'" in warned["screen"]
+    assert "AccuracyWarning" not in warned["off"]

@@ -94,6 +94,7 @@ class Settings:
     save_every: int | None = None  #: None: a sample every millisecond
     max_steps: int | None = 2 * 10**6
     energy_check: str = "warn"
+    accuracy_check: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -376,6 +377,7 @@ def run_item(job: Job, item: Item, trajectories: str | None) -> dict[str, Any]:
                     save_every=save_every,
                     max_steps=s.max_steps,
                     energy_check=s.energy_check,
+                    accuracy_check=s.accuracy_check,
                 )
             except DivergenceError as exc:
                 result, status, message = exc.result, "diverged", exc.detail

@@ -64,6 +64,7 @@ def sweep(
     progress: bool = True,
     max_steps: int | None = 2 * 10**6,
     energy_check: str = "warn",
+    accuracy_check: str = "auto",
     resume: bool = False,
 ) -> Any:
     """Run ``make_case`` for every parameter set (and seed) and collect a table, one row per run.
@@ -93,6 +94,9 @@ def sweep(
         trajectories: also save every run's trajectory (``trajectories/run-NNNNNN.npz``).
         progress: a progress bar (runs done, and how many did not complete).
         max_steps, energy_check: as for :func:`coopdyn.simulate`.
+        accuracy_check: as for :func:`coopdyn.simulate`: ``"auto"`` checks a run the accuracy
+            screen cannot clear against a reference run (a second run for that row);
+            ``"screen"`` keeps the screen's warning without it, ``"off"`` drops both.
         resume: finish the sweep that was writing to ``out`` when it stopped (killed,
             interrupted, the machine went down): the rows its journal holds are kept, the
             others run. The same ``make_case``, parameters, seeds and settings are required.
@@ -115,7 +119,7 @@ def sweep(
     signature_check(make_case, items)
     if metrics is not None and not callable(metrics):
         raise SweepError(f"metrics must be a function metrics(result, case) -> dict, got {type(metrics).__name__}")
-    settings = _settings(duration, integrator, dt, save_every, max_steps, energy_check)
+    settings = _settings(duration, integrator, dt, save_every, max_steps, energy_check, accuracy_check)
     job = PythonJob(make_case, metrics, settings, source_name(make_case))
     meta = {
         "source": {"kind": "python", **_reference(make_case)},
@@ -143,9 +147,11 @@ def run_spec(
     return _execute(job, spec.items, meta, executor, workers, chunk_size, spec.folder, spec.trajectories, progress, resume)
 
 
-def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any) -> Settings:
+def _settings(
+    duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any, accuracy_check: Any = "auto"
+) -> Settings:
     from ..integrators import INTEGRATORS
-    from ..simulate import ENERGY_CHECKS, MIN_DT
+    from ..simulate import ACCURACY_CHECKS, ENERGY_CHECKS, MIN_DT
 
     # the checks simulate() makes, up front: a bad setting refused once, not as a failed row per run
     if duration is not None and (
@@ -160,9 +166,15 @@ def _settings(duration: Any, integrator: Any, dt: Any, save_every: Any, max_step
         save_every = _validate.count(save_every, "save_every", SweepError, none="each case's own")
     if max_steps is not None:
         max_steps = _validate.count(max_steps, "max_steps", SweepError, none="no limit")
-    if energy_check not in ENERGY_CHECKS:
-        raise SweepError(f"energy_check must be one of {ENERGY_CHECKS}, got {energy_check!r}")
-    return Settings(None if duration is None else float(duration), integrator, float(dt), save_every, max_steps, energy_check)
+    for name, value, valid in (
+        ("energy_check", energy_check, ENERGY_CHECKS),
+        ("accuracy_check", accuracy_check, ACCURACY_CHECKS),
+    ):
+        if not isinstance(value, str) or value not in valid:
+            raise SweepError(f"{name} must be one of {list(valid)}, got {_validate._short(value)}")
+    return Settings(
+        None if duration is None else float(duration), integrator, float(dt), save_every, max_steps, energy_check, accuracy_check
+    )
 
 
 def _execute(
