@@ -604,13 +604,15 @@ def test_a_sweep_passes_its_accuracy_check_to_every_run(tmp_path: Path) -> None:
         scene = cd.scenes.facing_arms("panda", stiffness=k)
         return cd.Case(scene, ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0)))
 
-    warned = {}
+    warned, estimate = {}, {}
     for check in ("auto", "screen", "off"):
         table = cd.sweep(
             make_case, {"k": [1e5]}, duration=0.5, integrator="implicit_euler", dt=2e-3, executor="serial",
             progress=False, energy_check="off", accuracy_check=check,
         )  # fmt: skip
         warned[check] = str(table["warnings"][0])
-    assert "checked against dopri5" in warned["auto"]
+        estimate[check] = table["force_error_estimate_N"][0] if "force_error_estimate_N" in table else float("nan")
+    assert "checked against dopri5" in warned["auto"] and estimate["auto"] > 0
+    assert np.isnan(estimate["screen"]) and np.isnan(estimate["off"])
     assert "not checked against a reference run: accuracy_check='screen'" in warned["screen"]
     assert "AccuracyWarning" not in warned["off"]
