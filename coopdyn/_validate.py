@@ -77,9 +77,15 @@ def gain(
     return np.broadcast_to(arr.reshape(-1) if arr.shape == (1,) else arr, (n,)).copy()
 
 
+def integral(value: Any) -> bool:
+    """Whether ``value`` is an integer: a Python or numpy one, not a bool and not a numpy
+    timedelta (a numpy signed integer that is a duration)."""
+    return isinstance(value, int | np.integer) and not isinstance(value, bool | np.timedelta64)
+
+
 def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none: str | None = None) -> int:
     """An integer >= 1 (not a bool, not a float); ``none`` names what ``None`` means, if allowed."""
-    if not (isinstance(value, int | np.integer) and not isinstance(value, bool | np.timedelta64) and value >= 1):
+    if not (integral(value) and value >= 1):
         also = f" or None ({none})" if none else ""
         raise error(f"{name} must be an integer >= 1{also}, got {_short(value)}")
     return int(value)

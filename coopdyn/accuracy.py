@@ -1,7 +1,8 @@
-"""Whether a run's interconnection forces can be trusted: a screen before the run, judged over
-its whole length and by what each mode contributes to the grasp forces (:func:`screen`), and —
-for a run the screen cannot clear — a check of the forces themselves against dopri5
-(:func:`checked_message`, run by ``simulate``).
+"""Whether a run's interconnection forces can be trusted: a screen of the linearised closed
+loop's modes, judged over the run's whole length and by what each mode contributes to the grasp
+forces (:func:`screen`), and — for a run the screen cannot clear — a check of the forces
+themselves against a reference run (:func:`reference_for`, :func:`checked_message`; ``simulate``
+runs it).
 
 A stable method that does not resolve a mode completes without complaint while it damps,
 mis-phases or (the trapezoid on a stiff overdamped mode) rings that mode: over N steps its
@@ -11,7 +12,7 @@ step and nothing after 50 steps. And a mode that is badly integrated but moves n
 interconnection (a beam's internal node mode, far above what the grasps feel) costs no grasp
 force. So each mode λ of the linearised closed loop (at the initial state) is judged by
 
-* its **error over the run**: max over 0 ≤ t ≤ T of |R(λh)^{t/h} − e^{λt}| — the deviation of
+* its **error over the run**: max over whole steps n ≤ T/h of |R(λh)ⁿ − e^{nλh}| — the deviation of
   the method's mode from the exact one, in units of the mode's initial amplitude (a damped mode
   stops counting once both have decayed);
 * its **share of the grasp forces**: the interconnection force per unit of modal energy,
@@ -24,8 +25,9 @@ run of the same scene, controller and start (:func:`reference_for`: dopri5, or r
 at a tight tolerance on stiff scenes), and the warning comes when they differ by more than
 :data:`FORCE_ERROR_LIMIT` of their peak, with the figure (``Result.force_error_estimate``).
 Where that reference runs past its step budget (:data:`CHECK_COST`, :data:`CHECK_FLOOR`) or
-cannot run, the screen's own judgement above :data:`FORCE_ERROR_LIMIT` is the warning. Measured against a grid of methods,
-steps, stiffnesses and damping: ``benchmarks/accuracy_grid.py`` (docs/benchmarks.md).
+cannot run, the screen's own judgement above :data:`FORCE_ERROR_LIMIT` is the warning. Measured
+against a grid of methods, steps, stiffnesses and damping: ``benchmarks/accuracy_grid.py``
+(docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ TIME_SAMPLES = 256  #: points of [0, T] on which a mode's error is maximised
 
 @dataclass(frozen=True)
 class ModeAccuracy:
-    """How a method treats one oscillatory mode over a run."""
+    """How a method treats one mode over a run."""
 
     frequency: float  #: [Hz] (0: a mode that decays without oscillating)
     rate: float  #: |λ| [1/s]

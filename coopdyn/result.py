@@ -90,7 +90,8 @@ class Result:
         n_jac, n_factor: Jacobian evaluations and factorisations (implicit methods).
         n_steps, n_rejected: accepted and rejected steps.
         force_error_estimate: the largest error of the interconnection forces [N] found by
-            comparing this run with a dopri5 run of the same scene, controller and start, when
+            comparing this run with a reference run (dopri5, or ros2_adaptive on stiff scenes)
+            of the same scene, controller and start, when
             the accuracy screen could not clear the run (:mod:`coopdyn.accuracy`); ``None`` when
             it was not needed (every mode passed the screen, or an error-controlled or exact
             method), not possible, or ``accuracy_check`` was not ``"auto"``.
@@ -365,8 +366,8 @@ class Result:
 
 def _write_csv(path: Path, names: list[str], data: np.ndarray) -> None:
     """``data`` (n, m) as CSV with the column ``names`` as header, each number the shortest
-    decimal that reads back to the same double. Polars' writer (Rust, on every core): about 3×
-    the npz's time for the same run, where pyarrow's took 8× and numpy's savetxt 20–70×
+    decimal that reads back to the same double. Polars' writer (Rust, on every core): 5–7× the
+    npz's time for the same run, where pyarrow's took 8× and numpy's savetxt 20–70×
     (``benchmarks/save_cost.py``)."""
     import polars as pl
 

@@ -28,6 +28,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .. import _validate
 from .._validate import positive
 from .._version import __version__
 from ..errors import CoopdynError, DivergenceError, StepBudgetError, SweepError
@@ -205,22 +206,22 @@ def _bad_params(value: Any) -> dict[str, Any]:
 def _seeds(seeds: Any) -> Sequence[int | None]:
     if seeds is None:
         return [None]
-    if isinstance(seeds, bool | np.timedelta64):
-        raise SweepError(f"seeds must be a count or a list of integers, got {seeds!r}")
-    if isinstance(seeds, int | np.integer):
+    if _validate.integral(seeds):
         if not 1 <= seeds <= MAX_RUNS:
             raise SweepError(
-                f"seeds must be a count from 1 to {MAX_RUNS:.0e} (what one sweep holds) or a list of integers, got {seeds}"
+                f"seeds must be a count from 1 to {MAX_RUNS:.0e} (what one sweep holds) or a list of integers, "
+                f"got {_validate._short(seeds)}"
             )
         return range(int(seeds))  # not a list: a huge count is refused by its length
-    if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes):
+    if isinstance(seeds, Iterable) and not isinstance(seeds, str | bytes | bool | np.timedelta64):
         out = list(seeds)
-        if not out or any(
-            isinstance(s, bool | np.timedelta64) or not isinstance(s, int | np.integer) or not 0 <= s < 2**63 for s in out
-        ):
-            raise SweepError(f"seeds must be a non-empty list of integers from 0 to 2**63 - 1 (a table's integers), got {out!r}")
+        if not out or any(not _validate.integral(s) or not 0 <= s < 2**63 for s in out):
+            raise SweepError(
+                "seeds must be a non-empty list of integers from 0 to 2**63 - 1 (a table's integers), "
+                f"got {_validate._short(out)}"
+            )
         return [int(s) for s in out]
-    raise SweepError(f"seeds must be a count or a list of integers, got {type(seeds).__name__}")
+    raise SweepError(f"seeds must be a count or a list of integers, got {_validate._short(seeds)}")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -189,9 +189,10 @@ def _execute(
     progress: bool,
     resume: bool = False,
 ) -> Any:
-    for flag, value in (("trajectories", trajectories), ("progress", progress), ("resume", resume)):
-        if not isinstance(value, bool):
-            raise SweepError(f"{flag} must be True or False, got {value!r}")
+    trajectories, progress, resume = (
+        _validate.flag(value, name, SweepError)
+        for name, value in (("trajectories", trajectories), ("progress", progress), ("resume", resume))
+    )
     folder = check_folder(out) if out is not None else None
     if trajectories and folder is None:
         raise SweepError("trajectories are saved as files: give out=a folder")
@@ -500,8 +501,7 @@ def rerun(path: str | Path, run: int, *, make_case: Any = None, metrics: Any = N
     Raises:
         SweepError: no such row; a Python sweep's row without ``make_case`` and without ``trust``.
     """
-    if not isinstance(trust, bool):
-        raise SweepError(f"trust must be True or False, got {trust!r}")
+    trust = _validate.flag(trust, "trust", SweepError)
     table = tables.load(path)
     meta = table.attrs["coopdyn.sweep"]
     if isinstance(run, bool) or not isinstance(run, int):
