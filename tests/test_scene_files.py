@@ -153,7 +153,7 @@ def test_the_csv_reads_back_to_the_same_doubles(tmp_path: Path) -> None:
     rng = np.random.default_rng(3)
     special = [0.0, -0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308, 0.1, 1 / 3, np.nextafter(1.0, 2.0)]
     data = np.column_stack([rng.standard_normal(64) * 10.0 ** rng.integers(-300, 300, 64), np.resize(special, 64)])
-    _write_csv(tmp_path / "x.csv", ["a [m]", "b [N]"], data)
+    _write_csv(tmp_path / "x.csv", ["a [m]", "b [N]"], list(data.T))
     back = np.loadtxt(tmp_path / "x.csv", delimiter=",", skiprows=1)
     assert np.array_equal(back, data) and np.array_equal(np.signbit(back), np.signbit(data))
 
