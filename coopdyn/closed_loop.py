@@ -275,13 +275,19 @@ class System:
         return pin.difference(self._model, q0, q1)
 
     def chart_velocity(self, q0: np.ndarray, delta: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ."""
+        """δ̇ = dIntegrate(q₀, δ)⁻¹ v: the chart-coordinate rate for the velocity v at q₀ ⊕ δ.
+
+        NaN on a block whose chart is singular (a rotation of 2π in one trial stage): the stage
+        is then rejected (adaptive) or the run reported non-finite, as in the compiled loop."""
         if not self._chart:
             return v
         J = pin.dIntegrate(self._model, q0, delta, pin.ArgumentPosition.ARG1)
         out = v.copy()
         for s in self._chart:
-            out[s] = np.linalg.solve(J[s, s], v[s])
+            try:
+                out[s] = np.linalg.solve(J[s, s], v[s])
+            except np.linalg.LinAlgError:
+                out[s] = np.nan
         return out
 
 

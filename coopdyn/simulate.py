@@ -601,7 +601,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             if not (out.error <= 1.0):  # also rejects NaN
                 system.dynamics.clear_rotation_alarm()  # a rejected attempt's stages may go anywhere
                 run.n_rejected += 1
-                if h < method.h_min or not np.isfinite(out.error):
+                if h < method.h_min:  # a non-finite error shrinks the step (next_step: 0.2 h) like a large one
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
                     raise SimulationError(
                         f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "

@@ -644,7 +644,7 @@ private:
         fsal_valid_ = false;
         k_.clear_rotation_alarm();
         ++n_rejected_;
-        if (h_ < h_min_ || !std::isfinite(err)) {
+        if (h_ < h_min_) {  // a non-finite error shrinks the step (next_step: 0.2 h) like a large one
           if (diverged(t_ + h_try, q_new_, v_new_, h_try)) return;
           fail_t_ = t_;
           status_ = H_MIN;
