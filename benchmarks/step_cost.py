@@ -81,6 +81,7 @@ def main() -> None:
                         v0=v0,
                         save_every=round(0.01 / dt),
                         loop=loop,
+                        accuracy_check="off",  # timing only: no reference runs
                     )
                     times.setdefault((method, loop), []).append(res.cpu_time / res.n_steps)
                     if loop == "compiled":

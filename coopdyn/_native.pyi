@@ -8,6 +8,7 @@ import numpy as np
 PINOCCHIO_VERSION: str
 ELEMENTS: list[str]
 STATUSES: tuple[str, ...]
+METHODS: tuple[str, ...]
 
 class Kernel:
     def __init__(

@@ -97,10 +97,8 @@ def plan(
     adaptive = bool(spec.get("adaptive", False))
     config = {
         "adaptive": adaptive,
-        "gamma": 0.0,
-        "jacobian_every": 1,
         "error_order": 0,
-        **spec,
+        **spec,  # the method family's name and settings, read by its header in src/native/methods/
         "controller": controller,
         "kp": np.asarray(kp, dtype=float),
         "kd": np.asarray(kd, dtype=float),

@@ -373,3 +373,20 @@ def test_the_advised_methods_are_the_registry_s_with_a_stability_function_of_the
     oscillator = np.array([[0.0, 1.0], [-100.0, -0.1]])  # x'' + 0.1 x' + 100 x = 0
     for name in ADVISED:
         assert 0.0 < INTEGRATORS[name]().spectral_radius(oscillator, 1e-3) <= 1.0 + 1e-9, name
+
+
+@pytest.mark.parametrize(
+    ("tableau", "message"),
+    [
+        ({"A": ((), (0.5,)), "b": (0.5, 0.5), "c": (0.0, 0.4)}, r"rows of A sum to \[0.0, 0.5\], c is \[0.0, 0.4\]"),
+        ({"A": ((1.0,),), "b": (1.0,), "c": (0.0,)}, "must be explicit"),
+        ({"A": ((), (1.0,)), "b": (0.5, 0.6), "c": (0.0, 1.0)}, "b sums to 1.1, not 1"),
+        ({"A": ((), (1.0,)), "b": (0.5, 0.5), "c": (0.0,)}, "one b, c .and b_hat. per row of A: 2 rows, 2 b, 1 c"),
+    ],
+)
+def test_a_butcher_tableau_is_checked_when_it_is_made(tableau: dict[str, object], message: str) -> None:
+    """Explicit, one coefficient per stage, consistent: checked in Python as the compiled loop does."""
+    from coopdyn.integrators.explicit import ButcherTableau
+
+    with pytest.raises(cd.SimulationError, match=message):
+        ButcherTableau(**tableau)  # type: ignore[arg-type]

@@ -17,3 +17,53 @@ def test_no_module_imports_one_that_imports_it_back() -> None:
         }
     )
     assert cycles == []
+
+
+def test_every_compiled_method_family_is_one_registry_entry_on_each_side() -> None:
+    """The Python registry (INTEGRATORS) and the C++ one (src/native/methods/methods.hpp, exported
+    as _native.METHODS) name the same families: every built-in's compiled_spec() names a family
+    the kernel registered, and every registered family has a Python class that uses it."""
+    from coopdyn import _native
+    from coopdyn.integrators import INTEGRATORS
+
+    used = {}
+    for name, cls in INTEGRATORS.items():
+        if "compiled_spec" in cls.__dict__:  # the built-ins with a compiled twin (scipy has none)
+            used[name] = cls().compiled_spec()["method"]
+    assert set(used.values()) == set(_native.METHODS), used
+    assert set(INTEGRATORS) - set(used) == {"scipy"}
+
+
+def test_a_method_family_the_kernel_does_not_know_is_refused_by_name() -> None:
+    """The compiled loop's registry refuses an unknown family, and each family checks its own
+    settings when it is built (a Butcher tableau that is not explicit, a bad generalized-α)."""
+    import numpy as np
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn import compiled
+    from coopdyn.integrators import RK4, GeneralizedAlpha
+
+    scene = cd.scenes.linear_book()
+    dyn = cd.Dynamics(scene)
+    from coopdyn.closed_loop import System
+
+    system = System(dyn)
+    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
+    config = compiled.plan(scene, system, RK4(), energy_check="off", **base).config
+    assert config is not None
+    kernel = dyn._kernel  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="unknown method rk5"):
+        _native_loop(kernel, {**config, "method": "rk5"})
+    with pytest.raises(ValueError, match="the tableau must be explicit"):
+        _native_loop(kernel, {**config, "A": [[0.0, 1.0], [0.5, 0.0]], "b": [0.5, 0.5], "c": [0.0, 0.5]})
+    alpha = compiled.plan(scene, system, GeneralizedAlpha(), energy_check="off", **base).config
+    assert alpha is not None
+    with pytest.raises(ValueError, match="generalized-alpha needs"):
+        _native_loop(kernel, {**alpha, "alpha": [1.0, 0.5, 0.5, 0.25]})
+
+
+def _native_loop(kernel: object, config: dict[str, object]) -> object:
+    from coopdyn import _native
+
+    return _native.make_loop(kernel, config)

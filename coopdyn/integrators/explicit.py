@@ -3,11 +3,13 @@ adaptive Dormand–Prince 5(4) pair. Methods that differ only in coefficients di
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
+from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
 
@@ -37,12 +39,30 @@ class SymplecticEuler(Integrator):
 
 @dataclass(frozen=True)
 class ButcherTableau:
-    """Coefficients of an explicit Runge–Kutta method (``b_hat``: embedded lower-order weights)."""
+    """Coefficients of an explicit Runge–Kutta method (``b_hat``: embedded lower-order weights),
+    checked on construction as the compiled loop checks them (src/native/methods/runge_kutta.hpp):
+    explicit (row i has at most i entries), one b, c (and b_hat) per stage, consistent
+    (Σⱼ aᵢⱼ = cᵢ, Σ b = 1, Σ b_hat = 1, to 1e-12)."""
 
     A: tuple[tuple[float, ...], ...]
     b: tuple[float, ...]
     c: tuple[float, ...]
     b_hat: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        s = len(self.A)
+        if s == 0 or len(self.b) != s or len(self.c) != s or (self.b_hat is not None and len(self.b_hat) != s):
+            raise SimulationError(
+                f"a Butcher tableau needs one b, c (and b_hat) per row of A: {s} rows, {len(self.b)} b, {len(self.c)} c"
+            )
+        if any(len(row) > i for i, row in enumerate(self.A)):
+            raise SimulationError("the tableau must be explicit: row i of A has at most i entries")
+        sums = [math.fsum(row) for row in self.A]
+        if any(abs(a - c) > 1e-12 for a, c in zip(sums, self.c, strict=True)):
+            raise SimulationError(f"inconsistent tableau: the rows of A sum to {sums}, c is {list(self.c)}")
+        for name, w in (("b", self.b), ("b_hat", self.b_hat)):
+            if w is not None and abs(math.fsum(w) - 1.0) > 1e-12:
+                raise SimulationError(f"inconsistent tableau: {name} sums to {math.fsum(w)!r}, not 1")
 
 
 def _combine(coefficients: tuple[float, ...], ks: list[np.ndarray]) -> np.ndarray:

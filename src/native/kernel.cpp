@@ -18,6 +18,7 @@
 
 #include "kernel.hpp"
 #include "loop.hpp"
+#include "methods/methods.hpp"
 
 namespace {
 
@@ -26,31 +27,10 @@ using coopdyn_native::Loop;
 using coopdyn_native::StepMatrixError;
 namespace cn = coopdyn_native;
 
-template <class T> T get(const bp::dict & cfg, const char * key) {
-  if (!cfg.has_key(key)) throw std::invalid_argument(std::string("compiled loop: missing setting ") + key);
-  return bp::extract<T>(cfg[key])();
-}
-
-// A vector setting of exactly n entries (n < 0: any).
-VectorXd vec(const bp::dict & cfg, const char * key, Eigen::Index n) {
-  const VectorXd x = get<VectorXd>(cfg, key);
-  if (n >= 0 && x.size() != n)
-    throw std::invalid_argument(std::string("compiled loop: setting ") + key + " has " + std::to_string(x.size()) +
-                                " entries, expected " + std::to_string(n));
-  return x;
-}
-
-MatrixXd mat3(const bp::dict & cfg, const char * key) {
-  const MatrixXd x = get<MatrixXd>(cfg, key);
-  if (x.rows() != 3 || x.cols() != 3) throw std::invalid_argument(std::string("compiled loop: setting ") + key + " must be 3x3");
-  return x;
-}
-
-std::vector<double> doubles(bp::object seq) {
-  std::vector<double> out;
-  for (bp::ssize_t i = 0; i < bp::len(seq); ++i) out.push_back(bp::extract<double>(seq[i]));
-  return out;
-}
+using cn::doubles;
+using cn::get;
+using cn::mat3;
+using cn::vec;
 
 std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) {
   const std::string kind = get<std::string>(c, "kind");
@@ -120,62 +100,22 @@ std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) 
   throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
 }
 
-// A compiled run of `kernel` as `cfg` describes it (coopdyn/compiled.py writes it).
+// A compiled run of `kernel` as `cfg` describes it (coopdyn/compiled.py writes it): the method
+// family named by cfg["method"] from the registry (methods/methods.hpp), built from cfg.
 std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
-  cn::Tableau tab;
-  const std::string method = get<std::string>(cfg, "method");
-  int m;
-  if (method == "symplectic_euler") m = cn::SYMPLECTIC_EULER;
-  else if (method == "rk") m = cn::RK;
-  else if (method == "implicit_euler") m = cn::IMPLICIT_EULER;
-  else if (method == "rosenbrock") m = cn::ROSENBROCK;
-  else if (method == "exponential") m = cn::EXPONENTIAL;
-  else if (method == "generalized_alpha") m = cn::GENERALIZED_ALPHA;
-  else throw std::invalid_argument("compiled loop: unknown method " + method);
-  if (m == cn::RK) {
-    bp::list A = get<bp::list>(cfg, "A");
-    for (bp::ssize_t i = 0; i < bp::len(A); ++i) tab.A.push_back(doubles(A[i]));
-    tab.b = doubles(cfg["b"]);
-    tab.c = doubles(cfg["c"]);
-    if (cfg.has_key("b_hat")) tab.b_hat = doubles(cfg["b_hat"]);
-  }
+  const std::string family = get<std::string>(cfg, "method");
+  const auto found = cn::method_registry().find(family);
+  if (found == cn::method_registry().end()) throw std::invalid_argument("compiled loop: unknown method " + family);
   const Model & model = kernel.model();
   const Eigen::Index na = kernel.actuated().size();
-  if (m == cn::RK && (tab.A.empty() || tab.b.size() != tab.A.size() || tab.c.size() != tab.A.size() ||
-                      (get<bool>(cfg, "adaptive") && tab.b_hat.size() != tab.A.size())))
-    throw std::invalid_argument("compiled loop: inconsistent Butcher tableau");
-  for (std::size_t i = 0; i < tab.A.size(); ++i)
-    if (tab.A[i].size() > i) throw std::invalid_argument("compiled loop: the tableau must be explicit");
-  if (get<int>(cfg, "jacobian_every") < 1) throw std::invalid_argument("compiled loop: jacobian_every must be >= 1");
   auto loop = std::make_shared<Loop>(
-    kernel, make_controller(kernel, get<bp::dict>(cfg, "controller")), m, std::move(tab), get<bool>(cfg, "adaptive"),
-    get<double>(cfg, "gamma"), get<int>(cfg, "jacobian_every"), get<int>(cfg, "error_order"), vec(cfg, "kp", na),
-    vec(cfg, "kd", na), vec(cfg, "q0", model.nq), vec(cfg, "v0", model.nv), get<double>(cfg, "dt"),
-    get<double>(cfg, "t_final"), get<long>(cfg, "n_steps"), get<long>(cfg, "save_every"), get<double>(cfg, "max_speed"),
-    get<int>(cfg, "energy_mode"), get<long>(cfg, "energy_every"), get<double>(cfg, "energy_rtol"), get<double>(cfg, "rtol"), get<double>(cfg, "atol"),
+    kernel, make_controller(kernel, get<bp::dict>(cfg, "controller")), found->second(cfg, model, na),
+    get<bool>(cfg, "adaptive"), get<int>(cfg, "error_order"), vec(cfg, "kp", na), vec(cfg, "kd", na),
+    vec(cfg, "q0", model.nq), vec(cfg, "v0", model.nv), get<double>(cfg, "dt"), get<double>(cfg, "t_final"),
+    get<long>(cfg, "n_steps"), get<long>(cfg, "save_every"), get<double>(cfg, "max_speed"), get<int>(cfg, "energy_mode"),
+    get<long>(cfg, "energy_every"), get<double>(cfg, "energy_rtol"), get<double>(cfg, "rtol"), get<double>(cfg, "atol"),
     get<double>(cfg, "h_min"));
   loop->set_first_step(get<double>(cfg, "dt"));
-  if (m == cn::EXPONENTIAL) {
-    bp::list steps = get<bp::list>(cfg, "discretisations");
-    for (bp::ssize_t i = 0; i < bp::len(steps); ++i) {
-      bp::tuple d = bp::extract<bp::tuple>(steps[i]);
-      cn::Discretisation x;
-      x.h = bp::extract<double>(d[0]);
-      x.step = bp::extract<MatrixXd>(d[1]);
-      x.p = bp::extract<int>(d[4]);
-      const Eigen::Index nx = 2 * model.nv, nz = nx + na + 1;
-      if (model.nq != model.nv || x.step.rows() != nx || x.step.cols() != nz || x.p < 0)
-        throw std::invalid_argument("compiled loop: an exponential step must be (2nv, 2nv + n_actuated + 1)");
-      if (x.p > 0) {
-        x.predictor = bp::extract<MatrixXd>(d[2]);
-        x.inner = bp::extract<MatrixXd>(d[3]);
-        if (x.predictor.rows() != x.p * nx || x.predictor.cols() != nz || x.inner.rows() != nx || x.inner.cols() != x.p * na)
-          throw std::invalid_argument("compiled loop: the exponential's predictor or inner matrix has the wrong shape");
-      }
-      loop->add_discretisation(std::move(x));
-    }
-  }
-  if (m == cn::GENERALIZED_ALPHA) loop->set_alpha(doubles(cfg["alpha"]));
   if (cfg.has_key("n_factor")) loop->set_factorisations(get<long>(cfg, "n_factor"));
   return loop;
 }
@@ -196,6 +136,9 @@ BOOST_PYTHON_MODULE(_native) {
   bp::list statuses;
   for (const char * name : cn::STATUS_NAMES) statuses.append(name);
   bp::scope().attr("STATUSES") = bp::tuple(statuses);
+  bp::list methods;  // the method families of the compiled loop, by name
+  for (const auto & entry : cn::method_registry()) methods.append(entry.first);
+  bp::scope().attr("METHODS") = bp::tuple(methods);
   step_matrix_error_type = bp::import("coopdyn.errors").attr("StepMatrixError");
   bp::register_exception_translator<StepMatrixError>(&translate_step_matrix_error);
   bp::class_<Kernel, boost::noncopyable>(

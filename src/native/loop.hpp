@@ -1,6 +1,7 @@
-// The compiled step loop: coopdyn.simulate's loop (coopdyn/simulate.py), its built-in integrators
-// (coopdyn/integrators/) and energy monitor (coopdyn/monitor.py) in C++, for runs whose every
-// piece is built in. The same operations in the same order as the Python loop (but for the
+// The compiled step loop: coopdyn.simulate's loop (coopdyn/simulate.py) and energy monitor
+// (coopdyn/monitor.py) in C++, for runs whose every piece is built in. It steps through a Method
+// (methods/: the twins of coopdyn/integrators/, one header per family) and offers the methods its
+// services: the closed loop's evaluations, the chart, the step matrix, the error norm. The same operations in the same order as the Python loop (but for the
 // controllers' note in controllers.hpp), tested equal to round-off (tests/test_compiled_loop.py).
 // It runs in chunks of steps with the GIL released; Python (coopdyn/compiled.py) turns what a
 // chunk reports into samples, warnings and errors.
@@ -8,6 +9,7 @@
 
 #include "controllers.hpp"
 #include "kernel.hpp"
+#include "methods/method.hpp"
 
 #include <pinocchio/algorithm/joint-configuration.hpp>
 
@@ -25,21 +27,6 @@ namespace coopdyn_native {
 // What a chunk reports (coopdyn/compiled.py reads the names from _native.STATUSES).
 enum Status { RUNNING = 0, DONE = 1, DIVERGED = 2, STEP_MATRIX = 3, ENERGY = 4, H_MIN = 5, CONTROLLER = 6, FAILED = 7, SCENE = 8 };
 inline const char * const STATUS_NAMES[] = {"running", "done", "diverged", "step_matrix", "energy", "h_min", "controller", "failed", "scene"};
-
-enum Method { SYMPLECTIC_EULER, RK, IMPLICIT_EULER, ROSENBROCK, EXPONENTIAL, GENERALIZED_ALPHA };
-
-struct Tableau {
-  std::vector<std::vector<double>> A;
-  std::vector<double> b, c, b_hat;
-};
-
-// The exponential integrator's discretisation for one step size (exponential.py: _discrete):
-// x⁺ = step·(x, u₀, 1) + inner·(u₁ … u_p), the uᵢ at the states predictor·(x, u₀, 1).
-struct Discretisation {
-  double h;
-  MatrixXd step, predictor, inner;
-  int p;
-};
 
 struct Event {  // a warning for Python to issue
   int kind;     // 0: rotation alarm (link, theta, t); 1: energy balance (t, dE, work, excess, scale)
@@ -84,14 +71,13 @@ class Loop {
   };
 
 public:
-  Loop(Kernel & kernel, std::unique_ptr<Controller> controller, int method, Tableau tab, bool adaptive, double gamma,
-       int jacobian_every, int error_order, const VectorXd & kp, const VectorXd & kd, const VectorXd & q0,
-       const VectorXd & v0, double dt, double t_final, long n_steps, long save_every, double max_speed,
-       int energy_mode, long energy_every, double energy_rtol, double rtol, double atol, double h_min)
-    : k_(kernel), model_(kernel.model()), ctrl_(std::move(controller)), method_(method), tab_(std::move(tab)),
-      adaptive_(adaptive), gamma_(gamma), jacobian_every_(jacobian_every), error_order_(error_order), kp_(kp),
-      kd_(kd), dt_(dt), t_final_(t_final), n_steps_(n_steps), every_(save_every), max_speed_(max_speed),
-      rtol_(rtol), atol_(atol), h_min_(h_min), q_(q0), v_(v0) {
+  Loop(Kernel & kernel, std::unique_ptr<Controller> controller, std::unique_ptr<Method> method, bool adaptive,
+       int error_order, const VectorXd & kp, const VectorXd & kd, const VectorXd & q0, const VectorXd & v0, double dt,
+       double t_final, long n_steps, long save_every, double max_speed, int energy_mode, long energy_every,
+       double energy_rtol, double rtol, double atol, double h_min)
+    : k_(kernel), model_(kernel.model()), ctrl_(std::move(controller)), method_(std::move(method)), adaptive_(adaptive),
+      error_order_(error_order), kp_(kp), kd_(kd), dt_(dt), t_final_(t_final), n_steps_(n_steps), every_(save_every),
+      max_speed_(max_speed), rtol_(rtol), atol_(atol), h_min_(h_min), q_(q0), v_(v0) {
     const auto nq = model_.nq, nv = model_.nv;
     na_ = kernel.actuated().size();
     act_ = kernel.actuated();
@@ -114,7 +100,6 @@ public:
     V_.reserve(n_save * nv);
     TAU_.reserve(n_save * na_);
     q_new_.setZero(nq);
-    qs_.setZero(nq);
     tmp2_.setZero(nv);
     v_new_.setZero(nv);
     monitor_.on = energy_mode > 0;
@@ -198,15 +183,8 @@ public:
   bp::tuple failure() const { return bp::make_tuple(message_, fail_t_, fail_h_, q_fail_, v_fail_); }
   double time() const { return t_; }
 
-private:
-  // ---------------------------------------------------------------- the closed loop (System)
-  // The kernel's kinematics at (q, v) (with the joint Jacobians for the implicit terms), then τ
-  // into tau_: what every evaluation starts with (Kernel's protocol).
-  void kinematics_and_torque(double t, const VectorXd & q, const VectorXd & v, bool jacobians) {
-    k_.kinematics(q, v, jacobians);
-    torque(t, q, v, true);
-  }
-  // τ at (t, q, v) into tau_; `kinematics_done`: the kernel's kinematics are at (q, v) already.
+  // ---------------------------------------------------------------- services for the methods
+  // τ at (t, q, v) into tau(); `kinematics_done`: the kernel's kinematics are at (q, v) already.
   void torque(double t, const VectorXd & q, const VectorXd & v, bool kinematics_done = false) {
     if (!kinematics_done && ctrl_->reads_kernel()) k_.kinematics(q, v, false);
     ctrl_->torque(t, q, v, tau_);
@@ -221,22 +199,9 @@ private:
       }
     }
   }
-  double net_power(const VectorXd & v) const {
-    double p = 0.0;
-    for (Eigen::Index i = 0; i < na_; ++i) p += tau_[i] * v[act_[i]];
-    return 0.0 + p - k_.last_dissipation();
-  }
-  void record(const VectorXd & v) {
-    const double p = net_power(v);
-    if (!have_first_) {
-      have_first_ = true;
-      first_p_ = p;
-      first_tau_ = tau_;
-    }
-    last_p_ = p;
-    last_tau_ = tau_;
-  }
-  void begin_step() { have_first_ = false; }
+  const VectorXd & tau() const { return tau_; }
+  Eigen::Index n_actuated() const { return na_; }
+  Kernel & kernel() { return k_; }
   // q̈ into `a`: one counted RHS evaluation, recorded.
   void acceleration(double t, const VectorXd & q, const VectorXd & v, VectorXd & a) {
     ++n_rhs_;
@@ -244,6 +209,8 @@ private:
     a = k_.accel(q, v, tau_);
     record(v);
   }
+  // f = M q̈, M, K̃, D̃ at (t, q, v), left in the kernel (f_terms(), mass(), stiffness(),
+  // damping_matrix()): one counted RHS and Jacobian evaluation, recorded.
   void implicit_terms(double t, const VectorXd & q, const VectorXd & v) {
     ++n_rhs_;
     ++n_jac_;
@@ -251,9 +218,30 @@ private:
     k_.terms(q, v, tau_);
     record(v);
   }
+  // Implicit Euler's v⁺ at (t, q, v) in one kernel call: RHS, Jacobian and factorisation, counted.
+  void implicit_euler_velocity(double t, const VectorXd & q, const VectorXd & v, double h, VectorXd & v_new) {
+    ++n_rhs_;
+    ++n_jac_;
+    ++n_factor_;
+    kinematics_and_torque(t, q, v, true);
+    k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new);
+    record(v);
+  }
+  // One factorisation of the step matrix M + gh·D̃ + gh2·K̃ (with the controller's gains), counted.
   void factor(const MatrixXd & M, const MatrixXd & K, const MatrixXd & D, double gh, double gh2) {
     ++n_factor_;
     k_.factor(M, K, D, gh, kp_, kd_, gh2);
+  }
+  void count_rhs(long n) { n_rhs_ += n; }
+  // The torque just computed is the step's start (a method that evaluates τ without q̈).
+  void record_start_torque() {
+    have_first_ = true;
+    first_tau_ = tau_;
+  }
+  // The last evaluation's torque and power start the next attempt (first same as last).
+  void keep_last_record() {
+    fsal_p_ = last_p_;
+    fsal_tau_ = last_tau_;
   }
   void integrate(const VectorXd & q, const VectorXd & dq, VectorXd & out) { pinocchio::integrate(model_, q, dq, out); }
   // δ̇ = dIntegrate(q₀, δ)⁻¹ v on the multi-DOF joints' blocks (a free flyer's block is Jexp6(δ),
@@ -275,204 +263,48 @@ private:
         out.segment(i0, n) = dI_.block(i0, i0, n, n).partialPivLu().solve(v.segment(i0, n));
     }
   }
-
-  // ---------------------------------------------------------------- one step of each method
-  // Σ cᵢ kᵢ over the first n stages' non-zero coefficients (explicit.py: _combine).
-  static void combine(const std::vector<double> & coeffs, const std::vector<VectorXd> & ks, std::size_t n,
-                      VectorXd & out) {
-    out.setZero(ks[0].size());
-    for (std::size_t i = 0; i < coeffs.size() && i < n; ++i)
-      if (coeffs[i] != 0.0) out += coeffs[i] * ks[i];
-  }
-
-  // Explicit Runge–Kutta stages in the chart around q (explicit.py: _stages); with `fsal`, stage 0 is a0_.
-  void rk_stages(double t, const VectorXd & q, const VectorXd & v, double h, bool fsal) {
-    const std::size_t s = tab_.A.size();
-    sd_.resize(s);
-    sa_.resize(s);
-    for (std::size_t i = 0; i < s; ++i) {
-      if (i == 0) {
-        sd_[0] = v;
-        if (fsal)
-          sa_[0] = a0_;
-        else
-          acceleration(t, q, v, sa_[0]);
-        continue;
-      }
-      combine(tab_.A[i], sd_, i, tmp_);
-      delta_ = h * tmp_;
-      combine(tab_.A[i], sa_, i, tmp_);
-      vs_ = v + h * tmp_;
-      integrate(q, delta_, qs_);
-      chart_velocity(q, delta_, vs_, sd_[i]);
-      acceleration(t + tab_.c[i] * h, qs_, vs_, sa_[i]);
-    }
-  }
-
-  // One step (fixed) or attempt (adaptive) from (t, q_, v_) into q_new_, v_new_; the error norm.
-  double step(double t, double h) {
-    const VectorXd & q = q_;
-    const VectorXd & v = v_;
-    switch (method_) {
-      case SYMPLECTIC_EULER:
-        acceleration(t, q, v, tmp_);
-        v_new_ = v + h * tmp_;
-        integrate(q, h * v_new_, q_new_);
-        return 0.0;
-      case RK: {
-        const bool fsal = adaptive_ && fsal_valid_;
-        rk_stages(t, q, v, h, fsal);
-        if (!adaptive_) {
-          combine(tab_.b, sd_, sd_.size(), tmp_);
-          integrate(q, h * tmp_, q_new_);
-          combine(tab_.b, sa_, sa_.size(), tmp_);
-          v_new_ = v + h * tmp_;
-          return 0.0;
-        }
-        q_new_ = qs_;  // the last stage is the solution (first same as last)
-        v_new_ = vs_;
-        std::vector<double> diff(tab_.b.size());
-        for (std::size_t i = 0; i < diff.size(); ++i) diff[i] = tab_.b[i] - tab_.b_hat[i];
-        combine(diff, sd_, sd_.size(), tmp_);
-        e_d_ = h * tmp_;
-        combine(diff, sa_, sa_.size(), tmp_);
-        e_v_ = h * tmp_;
-        a0_ = sa_.back();
-        fsal_p_ = last_p_;
-        fsal_tau_ = last_tau_;
-        return error_norm(q, v, v_new_);
-      }
-      case IMPLICIT_EULER: {
-        if (jacobian_every_ == 1) {
-          ++n_rhs_;
-          ++n_jac_;
-          ++n_factor_;
-          kinematics_and_torque(t, q, v, true);
-          k_.ie_velocity(q, v, tau_, h, kp_, kd_, v_new_);
-          record(v);
-          integrate(q, h * v_new_, q_new_);
-          return 0.0;
-        }
-        if (!w_ready_ || w_count_ >= jacobian_every_ || w_h_ != h) {
-          implicit_terms(t, q, v);
-          f1_ = k_.f_terms();
-          M_ = k_.mass();
-          factor(M_, k_.stiffness(), k_.damping_matrix(), h, h * h);
-          w_count_ = 0;
-          w_h_ = h;
-          w_ready_ = true;
-        } else {
-          acceleration(t, q, v, tmp_);
-          f1_.noalias() = M_ * tmp_;
-        }
-        ++w_count_;
-        k_.solve_into(v, f1_, kq1_, kv1_);
-        v_new_ = v + h * kv1_;
-        integrate(q, h * v_new_, q_new_);
-        return 0.0;
-      }
-      case EXPONENTIAL: {
-        const Discretisation * d = nullptr;
-        for (const Discretisation & x : exp_) if (x.h == h) d = &x;
-        if (!d) throw std::runtime_error("no exponential discretisation for this step size");
-        const Eigen::Index n = q.size();
-        torque(t, q, v);
-        have_first_ = true;
-        first_tau_ = tau_;
-        z_.resize(2 * n + na_ + 1);
-        z_ << q, v, tau_, 1.0;
-        x_ = d->step * z_;
-        ++n_rhs_;
-        if (d->p > 0 && na_ > 0) {
-          X_ = d->predictor * z_;
-          U_.resize(d->p * na_);
-          for (int i = 1; i <= d->p; ++i) {
-            qi_ = X_.segment((i - 1) * 2 * n, n);
-            vi_ = X_.segment((i - 1) * 2 * n + n, n);
-            torque(t + h * i / d->p, qi_, vi_);
-            U_.segment((i - 1) * na_, na_) = tau_;
-          }
-          x_ += d->inner * U_;
-          n_rhs_ += d->p;
-        }
-        q_new_ = x_.head(n);
-        v_new_ = x_.tail(n);
-        return 0.0;
-      }
-      case ROSENBROCK: {
-        implicit_terms(t, q, v);
-        f1_ = k_.f_terms();
-        M_ = k_.mass();
-        factor(M_, k_.stiffness(), k_.damping_matrix(), gamma_ * h, (gamma_ * h) * (gamma_ * h));
-        k_.solve_into(v, f1_, kq1_, kv1_);
-        delta_ = h * kq1_;
-        vs_ = v + h * kv1_;
-        integrate(q, delta_, qs_);
-        acceleration(t + h, qs_, vs_, tmp_);
-        chart_velocity(q, delta_, vs_, tmp2_);
-        tmp2_ -= 2.0 * kq1_;
-        tmp_ -= 2.0 * kv1_;
-        f1_.noalias() = M_ * tmp_;
-        k_.solve_into(tmp2_, f1_, kq2_, kv2_);
-        integrate(q, h * (1.5 * kq1_ + 0.5 * kq2_), q_new_);
-        v_new_ = v + h * (1.5 * kv1_ + 0.5 * kv2_);
-        if (!adaptive_) return 0.0;
-        e_d_ = 0.5 * h * (kq1_ + kq2_);
-        e_v_ = 0.5 * h * (kv1_ + kv2_);
-        return error_norm(q, v, v_new_);
-      }
-      case GENERALIZED_ALPHA: {  // implicit.py: GeneralizedAlpha.step, the same operations
-        const double am = alpha_[0], af = alpha_[1], g = alpha_[2], b = alpha_[3];
-        implicit_terms(t, q, v);
-        f1_ = k_.f_terms();
-        M_ = k_.mass();
-        // The run's steps follow one another, so a carries over from the previous step (Python
-        // checks that the state is the one it left; here it always is).
-        if (!alpha_ready_) {  // a fresh start: a = q̈
-          alpha_a_ = M_.llt().solve(f1_);
-          alpha_ready_ = true;
-        }
-        const double c = h / (1.0 - am), gp = (1.0 - af) * g * c, bp = (1.0 - af) * b * h * c;
-        alpha_dv0_ = (h * (1.0 - g - g * am / (1.0 - am))) * alpha_a_;
-        alpha_dq0_ = h * v + (h * h * (0.5 - b - b * am / (1.0 - am))) * alpha_a_;
-        factor(M_, k_.stiffness(), k_.damping_matrix(), gp, bp);
-        kq1_ = (1.0 - af) * (alpha_dq0_ - (bp / gp) * alpha_dv0_);
-        tmp_.noalias() = M_ * alpha_dv0_;
-        tmp_ = (1.0 - af) * tmp_ + gp * f1_;
-        k_.solve_into(kq1_, tmp_, kq2_, kv1_);
-        xh_ = (kv1_ - (1.0 - af) * alpha_dv0_) / gp;
-        integrate(q, alpha_dq0_ + (b * h * c) * xh_, qs_);
-        vs_ = v + alpha_dv0_ + (g * c) * xh_;
-        acceleration(t + h, qs_, vs_, tmp_);  // the Newton correction's residual
-        tmp_ = (1.0 - af) * tmp_ - xh_;
-        kv2_.noalias() = M_ * tmp_;
-        kv2_ += af * f1_;
-        kq1_.setZero(v.size());
-        k_.solve_into(kq1_, kv2_, kq2_, kv1_);
-        xh_ += kv1_;
-        integrate(q, alpha_dq0_ + (b * h * c) * xh_, q_new_);
-        v_new_ = v + alpha_dv0_ + (g * c) * xh_;
-        alpha_a_ = (xh_ - am * alpha_a_) / (1.0 - am);
-        return 0.0;
-      }
-    }
-    return 0.0;
-  }
-
-  double error_norm(const VectorXd & q0, const VectorXd & v0, const VectorXd & v1) {
+  // RMS of the embedded error (e_d in the chart, e_v) scaled by atol + rtol·|y| (base.py: error_norm).
+  double error_norm(const VectorXd & q0, const VectorXd & v0, const VectorXd & v1, const VectorXd & e_d,
+                    const VectorXd & e_v) {
     pinocchio::difference(model_, neutral_, q0, tmp2_);
     double sum = 0.0;
-    for (Eigen::Index i = 0; i < e_d_.size(); ++i) {
+    for (Eigen::Index i = 0; i < e_d.size(); ++i) {
       const double sc = atol_ + rtol_ * std::abs(tmp2_[i]);
-      sum += (e_d_[i] / sc) * (e_d_[i] / sc);
+      sum += (e_d[i] / sc) * (e_d[i] / sc);
     }
     double sum_v = 0.0;
-    for (Eigen::Index i = 0; i < e_v_.size(); ++i) {
+    for (Eigen::Index i = 0; i < e_v.size(); ++i) {
       const double sc = atol_ + rtol_ * std::max(std::abs(v0[i]), std::abs(v1[i]));
-      sum_v += (e_v_[i] / sc) * (e_v_[i] / sc);
+      sum_v += (e_v[i] / sc) * (e_v[i] / sc);
     }
-    return std::sqrt((sum + sum_v) / double(2 * e_v_.size()));
+    return std::sqrt((sum + sum_v) / double(2 * e_v.size()));
   }
+
+private:
+  // The kernel's kinematics at (q, v) (with the joint Jacobians for the implicit terms), then τ
+  // into tau_: what every evaluation starts with (Kernel's protocol).
+  void kinematics_and_torque(double t, const VectorXd & q, const VectorXd & v, bool jacobians) {
+    k_.kinematics(q, v, jacobians);
+    torque(t, q, v, true);
+  }
+  double net_power(const VectorXd & v) const {
+    double p = 0.0;
+    for (Eigen::Index i = 0; i < na_; ++i) p += tau_[i] * v[act_[i]];
+    return 0.0 + p - k_.last_dissipation();
+  }
+  void record(const VectorXd & v) {
+    const double p = net_power(v);
+    if (!have_first_) {
+      have_first_ = true;
+      first_p_ = p;
+      first_tau_ = tau_;
+    }
+    last_p_ = p;
+    last_tau_ = tau_;
+  }
+  void begin_step() { have_first_ = false; }
+  // One step (fixed) or attempt (adaptive) from (t, q_, v_) into q_new_, v_new_; the error norm.
+  double step(double t, double h) { return method_->step(*this, t, q_, v_, h, q_new_, v_new_); }
 
   double next_step(double h, double error) const {
     if (error == 0.0) return 5.0 * h;
@@ -632,7 +464,7 @@ private:
       begin_step();
       fail_t_ = t_;
       fail_h_ = h_try;
-      const bool reused = method_ == RK && fsal_valid_;
+      const bool reused = method_->reuses_start();
       if (reused) {
         fsal_p_start_ = fsal_p_;
         fsal_tau_start_ = fsal_tau_;
@@ -641,7 +473,7 @@ private:
       settle(t_, reused);
       h_ = next_step(h_try, err);
       if (!(err <= 1.0)) {
-        fsal_valid_ = false;
+        method_->rejected();
         k_.clear_rotation_alarm();
         ++n_rejected_;
         if (h_ < h_min_) {  // a non-finite error shrinks the step (next_step: 0.2 h) like a large one
@@ -652,7 +484,7 @@ private:
         }
         continue;
       }
-      fsal_valid_ = method_ == RK;
+      method_->accepted();
       const double t_new = (h_try == t_out - t_) ? t_out : t_ + h_try;
       if (!accept(t_, t_new, h_try, reused)) return;
       if (t_ >= t_out) {
@@ -665,11 +497,9 @@ private:
   Kernel & k_;
   const Model & model_;
   std::unique_ptr<Controller> ctrl_;
-  int method_;
-  Tableau tab_;
+  std::unique_ptr<Method> method_;
   bool adaptive_;
-  double gamma_;
-  int jacobian_every_, error_order_;
+  int error_order_;
   VectorXd kp_, kd_;
   double dt_, t_final_;
   long n_steps_, every_;
@@ -695,20 +525,8 @@ private:
   // the records of evaluations (System._first / _last)
   VectorXd tau_, first_tau_, last_tau_, fsal_tau_, fsal_tau_start_;
   double first_p_ = 0, last_p_ = 0, fsal_p_ = 0, fsal_p_start_ = 0;
-  bool have_first_ = false, pending_ = false, fsal_valid_ = false;
-  // scratch
-  std::vector<VectorXd> sd_, sa_;  // the stages' chart rates and accelerations
-  VectorXd tmp_, tmp2_, delta_, vs_, qs_, a0_, e_d_, e_v_, f1_, kq1_, kv1_, kq2_, kv2_;
-  MatrixXd M_;
-  std::vector<Discretisation> exp_;
-  VectorXd z_, x_, X_, U_, qi_, vi_;
-  bool w_ready_ = false;
-  int w_count_ = 0;
-  double w_h_ = 0.0;
-  std::vector<double> alpha_;  // generalized-α's (α_m, α_f, γ, β)
-  VectorXd alpha_a_, xh_;      // its algorithmic acceleration, carried between steps, and x̂
-  VectorXd alpha_dv0_, alpha_dq0_;  // the parts of v⁺ − v and q⁺ ⊖ q known at the step's start
-  bool alpha_ready_ = false;
+  bool have_first_ = false, pending_ = false;
+  VectorXd tmp2_;  // scratch of error_norm
   // outputs
   std::vector<double> T_, Q_, V_, TAU_;
   std::vector<Event> events_;
@@ -720,12 +538,6 @@ private:
 
 public:
   void set_first_step(double h) { h_ = h; }
-  void add_discretisation(Discretisation d) { exp_.push_back(std::move(d)); }
-  void set_alpha(const std::vector<double> & alpha) {
-    if (alpha.size() != 4 || !(alpha[0] < 1.0) || !(alpha[2] > 0.0) || !(alpha[3] > 0.0))
-      throw std::invalid_argument("compiled loop: generalized-alpha needs (alpha_m < 1, alpha_f, gamma > 0, beta > 0)");
-    alpha_ = alpha;
-  }
   void set_factorisations(long n) { n_factor_ = n; }
 };
 
