@@ -15,7 +15,7 @@
 #include <boost/python.hpp>
 
 #include "aba.hpp"
-#include "elements.hpp"
+#include "elements/elements.hpp"
 
 #include <algorithm>
 #include <cmath>

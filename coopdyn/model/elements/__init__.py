@@ -3,7 +3,7 @@
 :data:`ELEMENTS` maps an element kind (``Interconnection(..., element=kind)``) to its Python
 class — the reference implementation — and the name of its C++ twin in ``coopdyn._native``
 (``None``: the element runs on the Python path only; a scene using it falls back to the Python
-dynamics with one warning). docs/adding-an-element.md says how to add one.
+dynamics with one warning). docs/extending.md says how to add one.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ at G, in G axes, is ``G_f_G = −[Rᵀ (K p + D ṗ); 0]``: a pure force through
 The reaction on the arm is that force at G, so about T it carries the moment p × f.
 ``S_K = Aᵀ K A`` and ``S_D = Aᵀ D A`` with ``A = [R 0]`` (3, 6). With an isotropic K the arm
 feels no moment either; an anisotropic K turns with the tool. C++ twin:
-``src/native/ball_spring.hpp``.
+``src/native/elements/ball_spring.hpp``.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ so ``d/dt T_M_G = T_M_G ξ^``) [m/s, rad/s]:
 
 Elements are immutable: their constructor validates the parameters and keeps them as read-only
 arrays. The same :meth:`Element.evaluate` serves the dynamics, the implicit terms and every
-readout. docs/adding-an-element.md walks through writing one.
+readout. docs/extending.md walks through writing one.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ class Element(ABC):
         return True
 
     def native_parameters(self) -> tuple[np.ndarray, ...]:
-        """The parameters of the C++ twin, in the order its constructor in src/native/elements.hpp
+        """The parameters of the C++ twin, in the order its constructor in src/native/elements/elements.hpp
         takes them (only elements registered with a twin need it)."""
         raise NotImplementedError(f"{type(self).__name__} has no C++ twin")
 

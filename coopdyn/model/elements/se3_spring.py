@@ -6,7 +6,7 @@ With ``e = log6(T_M_G)`` ([linear; angular] [m, rad]) the elastic energy is ``U 
 plus the damping. ``S_K = Jlog6ᵀ K Jlog6`` and ``S_D = Jlog6ᵀ D Jlog6`` are the Gauss–Newton
 terms (the force-proportional geometric stiffness is left out). K and D are in the tip frame's
 axes, order [x, y, z, rx, ry, rz], blocks [N/m, N·m/rad] and [N·s/m, N·m·s/rad]. C++ twin:
-``src/native/se3_spring.hpp``.
+``src/native/elements/se3_spring.hpp``.
 """
 
 from __future__ import annotations

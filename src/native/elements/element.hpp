@@ -1,7 +1,7 @@
 // The element protocol in C++: the twin of coopdyn/model/elements/base.py.
 #pragma once
 
-#include "lie.hpp"
+#include "../lie.hpp"
 
 #include <memory>
 #include <string>
