@@ -15,7 +15,7 @@ class Kernel:
         self,
         model: Any,
         data: Any,
-        links: list[tuple[str, int, int, tuple[np.ndarray, ...]]],
+        links: list[tuple[str, int, int, dict[str, Any]]],
         damping: np.ndarray,
         actuated: np.ndarray,
         object_frame: int,
@@ -61,4 +61,7 @@ class Loop:
     @property
     def t(self) -> float: ...
 
+def evaluate_element(
+    kind: str, parameters: dict[str, Any], T_M_G: np.ndarray, xi: np.ndarray, jacobians: bool
+) -> tuple[float, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, float]: ...
 def make_loop(kernel: Kernel, config: dict[str, Any]) -> Loop: ...

@@ -13,7 +13,17 @@ import pinocchio as pin
 import pytest
 
 import coopdyn as cd
-from coopdyn.model.elements import ELEMENTS, BallSpring, BeamElement, BeamSegment, Element, ElementEval, SE3Spring, register
+from coopdyn.model.elements import (
+    ELEMENTS,
+    BallSpring,
+    BeamElement,
+    BeamSegment,
+    Element,
+    ElementEval,
+    HardeningSpring,
+    SE3Spring,
+    register,
+)
 from coopdyn.model.elements.lie import jlog6, log6
 
 
@@ -31,12 +41,19 @@ def _element(kind: str, rng: np.random.Generator) -> Element:
         return BeamElement(BeamSegment(cd.Section.rectangle(0.03, 0.01, E=70e9, rho=2700.0, timoshenko=True), 0.1), 1e-4)
     if kind == "ball":
         return BallSpring(_spd(rng, 3, np.full(3, 1e4)), _spd(rng, 3, np.full(3, 10.0)))
+    if kind == "hardening":  # κ|p|² ≈ k at a 10 cm stretch
+        scale = np.r_[np.full(3, 1e4), np.full(3, 1e2)]
+        return HardeningSpring(_spd(rng, 6, scale), _spd(rng, 6, scale * 1e-3), hardening=1e6)
     raise ValueError(f"no test instance for element kind {kind!r}: add one here (a new element is tested as itself)")
 
 
 def _undamped(el: Element) -> Element:
     """The same element without its damping."""
-    return BeamElement(el.segment, None) if isinstance(el, BeamElement) else type(el)(el.K, None)
+    return (
+        BeamElement(el.segment, None)
+        if isinstance(el, BeamElement)
+        else type(el)(el.K, None, "undamped", **el.parameter_values())
+    )
 
 
 def _evaluate(element: Element, oMT: pin.SE3, oMG: pin.SE3, vT: np.ndarray, vG: np.ndarray) -> tuple[ElementEval, np.ndarray]:
@@ -292,3 +309,102 @@ def test_an_arm_with_every_joint_locked_holds_the_object_like_a_fixture(pandas: 
     res = cd.simulate(scene, 0.05, controller=ctrl, integrator="implicit_euler", dt=1e-3)
     assert res.status == "completed" and np.all(np.isfinite(res.wrench(0)))
     assert np.max(np.abs(res.deformation(0)[0])) < 1e-9  # the locked tip sits on its grasp frame
+
+
+# -- the C++ twins, and the parameters declared once -------------------------------------------
+
+
+@pytest.mark.parametrize("kind", sorted(k for k, t in ELEMENTS.items() if t.native is not None))
+def test_every_cpp_twin_evaluates_as_its_python_law(kind: str) -> None:
+    """Built from the Python element's native_parameters() by name, the C++ twin gives the same
+    energy, deformation, wrench, power, S_K, S_D and angle at random poses up to π − 1e-6."""
+    from coopdyn import _native
+
+    rng = np.random.default_rng(5)
+    el = _element(kind, rng)
+    for angle in (1e-8, 0.3, 2.0, np.pi - 1e-6):
+        axis = rng.normal(size=3)
+        R = pin.exp3(angle * axis / np.linalg.norm(axis))
+        T_M_G = pin.SE3(R, 0.1 * rng.normal(size=3))
+        xi = rng.normal(size=6)
+        py = el.evaluate(T_M_G, xi, jacobians=True)
+        cpp = list(_native.evaluate_element(ELEMENTS[kind].native, el.native_parameters(), T_M_G.homogeneous, xi, True))
+        cpp[1] = cpp[1][: el.deformation_size]  # C++ pads the deformation to 6
+        for a, b in zip(cpp, py, strict=True):
+            scale = max(1.0, float(np.max(np.abs(b))))
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-11 * scale)
+
+
+def test_the_cpp_twin_reads_every_parameter_by_name_and_no_other() -> None:
+    """The parameters cross to C++ by name: a missing one and one the twin does not read are
+    both refused, naming it."""
+    from coopdyn import _native
+
+    params = _element("hardening", np.random.default_rng(0)).native_parameters()
+    pose, xi = np.eye(4), np.zeros(6)
+    with pytest.raises(ValueError, match="missing parameter hardening"):
+        _native.evaluate_element("hardening", {k: v for k, v in params.items() if k != "hardening"}, pose, xi, False)
+    with pytest.raises(ValueError, match=r"does not read the parameter\(s\) hardening"):
+        _native.evaluate_element("se3", params, pose, xi, False)
+    with pytest.raises(ValueError, match="the kernel has no element 'toy'"):
+        _native.evaluate_element("toy", params, pose, xi, False)
+
+
+def test_the_hardening_spring_is_duffing_along_a_line() -> None:
+    """Stretched by x along a unit vector u (no rotation): U = ½ k x² + ¼ κ x⁴ and the force on
+    the object is −(k x + κ x³) u, no moment; S_K along u is k + 3 κ x², the force's derivative."""
+    k, kappa = 2e3, 5e6
+    el = HardeningSpring(np.r_[np.full(3, k), np.full(3, 50.0)], hardening=kappa)
+    u = np.array([2.0, -1.0, 2.0]) / 3.0
+    for x in (1e-3, 0.02, 0.1):
+        ev = el.evaluate(pin.SE3(np.eye(3), x * u), np.zeros(6), jacobians=True)
+        assert ev.energy == pytest.approx(0.5 * k * x**2 + 0.25 * kappa * x**4, rel=1e-12)
+        np.testing.assert_allclose(ev.G_f_G[:3], -(k * x + kappa * x**3) * u, rtol=1e-12)
+        np.testing.assert_allclose(ev.G_f_G[3:], 0.0, atol=1e-9 * (k * x + kappa * x**3))
+        assert u @ ev.S_K[:3, :3] @ u == pytest.approx(k + 3.0 * kappa * x**2, rel=1e-12)
+
+
+def test_a_box_hung_on_a_hardening_spring_rests_where_mg_is_kx_plus_kappa_x3() -> None:
+    """A 2 kg box hung from a world fixture by a hardening spring at its centre of mass: its rest
+    is the real root of k x + κ x³ = m g (cd.statics.equilibrium, both backends)."""
+    m, k, kappa, g = 2.0, 1e3, 1e7, 9.81
+    box = cd.RigidObject.box(m, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0])
+    link = cd.Interconnection(None, stiffness=cd.diagonal(k, 10.0), element="hardening", parameters={"hardening": kappa})
+    scene = cd.Scene([], box, [link])
+    roots = np.roots([kappa, 0.0, k, -m * g])
+    x = float(roots[np.abs(roots.imag) < 1e-12].real[0])
+    assert 0.5 * m * g / k < x < m * g / k  # hardening: less than the linear spring's sag
+    from coopdyn.statics import equilibrium
+
+    data = scene.model.createData()
+    for backend in ("native", "python"):
+        rest = equilibrium(scene, backend=backend)
+        pin.framesForwardKinematics(scene.model, data, rest.q)
+        assert 1.0 - data.oMf[scene.object_frame].translation[2] == pytest.approx(x, rel=1e-9), backend
+
+
+def test_an_element_parameter_is_checked_by_name_and_survives_describe_and_build(tmp_path: Any) -> None:
+    """Interconnection.parameters: an unknown name is refused with the element's parameters and
+    units; a described scene builds back with the same parameter; a scene file's table works."""
+    from coopdyn.model.description import build, describe
+
+    box = cd.RigidObject.box(2.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0])
+    bad = cd.Interconnection(None, stiffness=1e3 * np.ones(6), element="hardening", parameters={"hardenin": 1.0})
+    with pytest.raises(cd.SceneError, match=r"no parameter 'hardenin'. Did you mean 'hardening'.* hardening \[N/m³\]"):
+        cd.Scene([], box, [bad])
+    with pytest.raises(cd.SceneError, match="the 'se3' element has no parameter 'hardening'"):
+        cd.Scene([], box, [cd.Interconnection(None, stiffness=1e3 * np.ones(6), parameters={"hardening": 1.0})])
+    good = cd.Interconnection(None, stiffness=1e3 * np.ones(6), element="hardening", parameters={"hardening": 3e6})
+    doc = describe(cd.Scene([], box, [good]))
+    assert doc["interconnections"][0]["parameters"] == {"hardening": 3e6}
+    assert build(doc).links[0].element.hardening == 3e6
+    scene_file = tmp_path / "hung.toml"
+    scene_file.write_text(
+        "[object]\ntype = 'box'\nmass = 2.0\nsize = [0.1, 0.1, 0.1]\npose = [0, 0, 1]\n\n"
+        "[[interconnections]]\nstiffness = 1000.0\nelement = 'hardening'\nparameters = { hardening = 3e6 }\n\n"
+        "[simulation]\nduration = 0.01\nintegrator = 'trapezoid'\ndt = 1e-3\n",
+        encoding="utf-8",
+    )
+    from coopdyn.io.scenefile import load
+
+    assert load(scene_file).scene.links[0].element.hardening == 3e6

@@ -53,6 +53,7 @@ KIND_SCHEMAS: dict[str, dict[str, Any]] = {
     "names": {"oneOf": [{"type": "array", "items": {"type": "string"}}, {"type": "object", "additionalProperties": NUMBER}]},
     "joint_damping": {"oneOf": [NUMBER, NUMBERS, {"const": "urdf"}]},
     "masses": {"type": "object", "additionalProperties": NUMBER},
+    "parameters": {"type": "object", "additionalProperties": NUMBER},
     "paths": {"type": "array", "items": {"type": "string", "minLength": 1}},
 }
 

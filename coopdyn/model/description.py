@@ -21,6 +21,7 @@ against ``base`` (a scene file's folder); :func:`describe` writes absolute ones.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -61,6 +62,7 @@ KINDS = {
     "names": "a list of joint names, or a table joint name = value",
     "joint_damping": "a number, one number per joint, or 'urdf'",
     "masses": "a table joint name = mass",
+    "parameters": "a table: parameter name = number (the element's own parameters, with their units)",
     "paths": "a list of folder paths",
     "section": "a table: shape = 'rectangle' | 'circle' with its dimensions, or the section's properties",
 }
@@ -144,6 +146,9 @@ INTERCONNECTION: dict[str, Field] = {
     "element": Field("string", "the element kind; default 'se3'"),
     "fixture": Field("pose", "without arm: the pose of T in the world [m]; default: G's initial pose"),
     "name": Field("string", "what readouts and messages call it; default the arm's name"),
+    "parameters": Field(
+        "parameters", "the element's own parameters beyond stiffness and damping, e.g. hardening = 1e7 [N/m³]; default none"
+    ),
 }
 
 TABLES = ("gravity", "arms", "object", "interconnections")
@@ -265,6 +270,9 @@ def _describe_link(ic: Interconnection) -> dict[str, Any]:
             out[key] = pose_data(getattr(ic, key), f"{what}: {key}")
     if ic.name is not None:
         out["name"] = ic.name
+    values = ic.law(what).parameter_values()  # the element's own parameters, by its declared names
+    if values:
+        out["parameters"] = values
     return out
 
 
@@ -350,6 +358,12 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         ):
             raise bad()
         return dict(value)
+    if kind == "parameters":
+        if not isinstance(value, Mapping) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value.values()
+        ):
+            raise bad()
+        return {str(k): float(v) for k, v in value.items()}
     if kind == "names":
         if isinstance(value, list) and all(isinstance(v, str) for v in value):
             return value

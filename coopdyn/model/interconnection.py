@@ -9,14 +9,14 @@ registered kind). The element computes the wrenches from the pose of G relative 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .. import _validate
-from ..errors import SceneError
+from ..errors import SceneError, did_you_mean
 from .body import axis_vector
 from .elements import Element, ElementType, lookup
 
@@ -59,6 +59,9 @@ class Interconnection:
         fixture: with ``arm=None``, the pose of T in the world. Default: G's initial world pose
             (the element starts unloaded).
         name: what readouts and messages call it; default ``"<arm>"`` (or ``"fixture"``) plus its index.
+        parameters: the element's own parameters beyond stiffness and damping, by name (e.g.
+            ``{"hardening": 1e7}`` for ``element="hardening"``; the element class's ``parameters``
+            lists them with their units). Default: none.
     """
 
     arm: str | None
@@ -68,6 +71,7 @@ class Interconnection:
     element: str | type[Element] = "se3"
     fixture: Any = None
     name: str | None = None
+    parameters: Mapping[str, Any] | None = None
 
     def element_type(self) -> ElementType:
         """The registered element kind (Python class and C++ twin)."""
@@ -76,4 +80,14 @@ class Interconnection:
     def law(self, what: str | None = None) -> Element:
         """The validated element (its parameters checked); ``what`` names it in messages."""
         label = what or f"interconnection to arm {self.arm!r}"
-        return self.element_type().python(self.stiffness, self.damping, label)
+        cls = self.element_type().python
+        given = self.parameters if self.parameters is not None else {}
+        if not isinstance(given, Mapping) or not all(isinstance(k, str) for k in given):
+            raise SceneError(f"{label}: parameters must be a mapping of names to values, got {_validate._short(given)}")
+        known = {p.name: p for p in cls.parameters}
+        for key in given:
+            if key not in known:
+                listed = ", ".join(f"{p.name} [{p.unit}]" for p in cls.parameters) or "none beyond stiffness and damping"
+                hint = did_you_mean(key, known)
+                raise SceneError(f"{label}: the {cls.kind!r} element has no parameter {key!r}.{hint} Its parameters: {listed}")
+        return cls(self.stiffness, self.damping, label, **given)

@@ -17,11 +17,9 @@ import pinocchio as pin
 
 from .. import _validate
 from ..errors import SceneError
+from .elements import ELEMENTS
 from .elements.rigid import BAUMGARTE_KD, BAUMGARTE_KP
 from .scene import Scene
-
-#: The rigid element that stands for each spring element in the limit.
-RIGID_OF = {"se3": "rigid", "ball": "rigid_point", "rigid": "rigid", "rigid_point": "rigid_point"}
 
 
 def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> Scene:
@@ -53,11 +51,11 @@ def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> 
     pin.framesForwardKinematics(model, data, scene.q0)
     specs, dropped = [], []
     for ic, lk in zip(scene.interconnection_specs, scene.links, strict=True):
-        rigid = RIGID_OF.get(lk.element.kind)
+        rigid = lk.element.rigid
         if rigid is None:
+            known = sorted(kind for kind, t in ELEMENTS.items() if t.python.rigid is not None)
             raise SceneError(
-                f"interconnection {lk.name!r} has element {lk.element.kind!r}, which has no rigid counterpart "
-                f"(known: {sorted(RIGID_OF)})"
+                f"interconnection {lk.name!r} has element {lk.element.kind!r}, which has no rigid counterpart (known: {known})"
             )
         fixture = None if ic.arm is not None else model.frames[lk.tip_frame].placement
         oMT, oMG = data.oMf[lk.tip_frame], data.oMf[lk.grasp_frame]
@@ -69,6 +67,7 @@ def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> 
             dataclasses.replace(
                 ic,
                 element=rigid,
+                parameters=None,  # the spring's own; the rigid element has Baumgarte's gains only
                 stiffness=float(gains[0]),
                 damping=float(gains[1]),
                 grasp=grasp,
@@ -85,7 +84,7 @@ def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> 
     return Scene(list(scene.arm_specs), scene.object, specs, gravity=scene.gravity)
 
 
-__all__ = ["RIGID_OF", "quasi_static", "rigid_limit"]
+__all__ = ["quasi_static", "rigid_limit"]
 
 
 def quasi_static(scene: Scene) -> Scene:

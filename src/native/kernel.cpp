@@ -6,7 +6,7 @@
 //   H(q) q̈ + h(q, q̇) = S τ − B q̇ + Q,   Q = Σ_i Jr_iᵀ G_f_G,i,   Jr_i = J_G − Ad(T_M_G⁻¹) J_T,
 //
 // with LOCAL frame Jacobians of each link's frames T and G, and G_f_G,i the wrench its element
-// (element.hpp; one header per element, registered in elements.hpp) puts on G at the relative
+// (elements/: one header per element, each registering itself) puts on G at the relative
 // pose T_M_G and relative twist ξ = Jr q̇. The explicit right-hand side applies each wrench to the
 // joints carrying T and G as external forces of the articulated-body algorithm (Q without forming
 // Jr; one kinematics pass also gives the gravity-compensating controller its g(q)). Implicit
@@ -18,7 +18,7 @@
 
 #include "kernel.hpp"
 #include "loop.hpp"
-#include "methods/methods.hpp"
+#include "registered.hpp"  // every header of elements/ and methods/ (CMakeLists.txt)
 
 namespace {
 
@@ -101,7 +101,7 @@ std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) 
 }
 
 // A compiled run of `kernel` as `cfg` describes it (coopdyn/compiled.py writes it): the method
-// family named by cfg["method"] from the registry (methods/methods.hpp), built from cfg.
+// family named by cfg["method"] from the registry (methods/), built from cfg.
 std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
   const std::string family = get<std::string>(cfg, "method");
   const auto found = cn::method_registry().find(family);
@@ -118,6 +118,23 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
   loop->set_first_step(get<double>(cfg, "dt"));
   if (cfg.has_key("n_factor")) loop->set_factorisations(get<long>(cfg, "n_factor"));
   return loop;
+}
+
+// One element built from its parameters as the kernel builds it, evaluated at the relative pose
+// T_M_G (4x4) and twist xi: (energy, deformation, G_f_G, power, S_K, S_D, theta), as
+// Element.evaluate gives them in Python (tests compare the twins through it).
+bp::tuple evaluate_element(const std::string & kind, const bp::dict & parameters, const MatrixXd & T_M_G,
+                           const VectorXd & xi, bool jacobians) {
+  if (T_M_G.rows() != 4 || T_M_G.cols() != 4 || xi.size() != 6)
+    throw std::invalid_argument("evaluate_element: T_M_G must be 4x4 and xi 6 values");
+  const std::unique_ptr<coopdyn::Element> element = coopdyn::make_element(kind, parameters);
+  const SE3 pose(Eigen::Matrix3d(T_M_G.topLeftCorner<3, 3>()), Eigen::Vector3d(T_M_G.topRightCorner<3, 1>()));
+  coopdyn::ElementEval ev;
+  ev.SK.setZero();
+  ev.SD.setZero();
+  element->evaluate(pose, Vector6(xi), jacobians, ev);
+  return bp::make_tuple(ev.energy, Vector6(ev.deformation), Vector6(ev.f), ev.power, Matrix6(ev.SK), Matrix6(ev.SD),
+                        ev.theta);
 }
 
 bp::object step_matrix_error_type;
@@ -169,5 +186,6 @@ BOOST_PYTHON_MODULE(_native) {
     .def("counters", &Loop::counters, bp::args("self"))
     .def("failure", &Loop::failure, bp::args("self"))
     .add_property("t", &Loop::time);
+  bp::def("evaluate_element", &evaluate_element, bp::args("kind", "parameters", "T_M_G", "xi", "jacobians"));
   bp::def("make_loop", &make_loop, bp::with_custodian_and_ward_postcall<0, 1>(), bp::args("kernel", "config"));
 }

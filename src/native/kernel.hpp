@@ -15,7 +15,7 @@
 #include <boost/python.hpp>
 
 #include "aba.hpp"
-#include "elements/elements.hpp"
+#include "elements/element.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -81,7 +81,7 @@ public:
       lk.grasp = bp::extract<FrameIndex>(t[2]);
       if (lk.tip >= model_.frames.size() || lk.grasp >= model_.frames.size())
         throw std::invalid_argument("link frame index out of range");
-      lk.element = coopdyn::make_element(kind, bp::extract<bp::tuple>(t[3]));
+      lk.element = coopdyn::make_element(kind, bp::extract<bp::dict>(t[3]));
       links_.push_back(std::move(lk));
     }
     has_damping_ = !damping_.isZero(0.0);

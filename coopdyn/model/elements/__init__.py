@@ -13,8 +13,9 @@ from typing import NamedTuple
 from ..._validate import _short
 from ...errors import SceneError, did_you_mean
 from .ball_spring import BallSpring
-from .base import Element, ElementEval, SpringDamper
+from .base import Element, ElementEval, Parameter, SpringDamper
 from .beam import BeamElement, BeamSegment, Section
+from .hardening_spring import HardeningSpring
 from .rigid import RigidGrasp, RigidPoint
 from .se3_spring import SE3Spring
 
@@ -31,6 +32,7 @@ ELEMENTS: dict[str, ElementType] = {
     "se3": ElementType(SE3Spring, "se3"),
     "ball": ElementType(BallSpring, "ball"),
     "beam": ElementType(BeamElement, "se3"),  # the SE(3) law with the beam's stiffness
+    "hardening": ElementType(HardeningSpring, "hardening"),
     "rigid": ElementType(RigidGrasp, None),
     "rigid_point": ElementType(RigidPoint, None),
 }
@@ -70,6 +72,8 @@ __all__ = [
     "Element",
     "ElementEval",
     "ElementType",
+    "HardeningSpring",
+    "Parameter",
     "RigidGrasp",
     "RigidPoint",
     "SE3Spring",

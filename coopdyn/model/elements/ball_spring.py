@@ -46,6 +46,7 @@ class BallSpring(SpringDamper):
     """
 
     kind: ClassVar[str] = "ball"
+    rigid: ClassVar[str | None] = "rigid_point"
     deformation_size: ClassVar[int] = 3
     linear: ClassVar[bool] = True  # with translations only, the deformation is the relative translation
 

@@ -42,6 +42,14 @@ class ElementEval(NamedTuple):
     theta: float  #: rotation angle of T_M_G [rad] (for the log-map warning near π)
 
 
+class Parameter(NamedTuple):
+    """One of an element's own parameters beyond its stiffness and damping (a scalar [unit])."""
+
+    name: str  #: its keyword: in __init__, Interconnection.parameters, scene files and the C++ twin
+    unit: str  #: e.g. "N/m³"
+    doc: str  #: what it is, for messages and the scene-file schema
+
+
 def read_only(array: np.ndarray) -> np.ndarray:
     """``array`` with its write flag cleared (a parameter of an immutable element)."""
     array.setflags(write=False)
@@ -65,6 +73,13 @@ class Element(ABC):
     #: ``None`` for a force law; ``"6D"`` or ``"3D"`` for a kinematic constraint whose wrench the
     #: constrained dynamics solve for (:mod:`.rigid`).
     constraint: ClassVar[str | None] = None
+    #: the kind of the rigid element that stands for this one in :func:`coopdyn.rigid_limit`
+    #: (``None``: it has no rigid counterpart)
+    rigid: ClassVar[str | None] = None
+    #: its own parameters beyond stiffness and damping, declared once: each is a keyword of
+    #: ``__init__`` and an attribute of the element, a key of ``Interconnection.parameters`` and of
+    #: a scene file's ``parameters`` table, and a field its C++ twin reads by name
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
 
     @abstractmethod
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
@@ -80,9 +95,13 @@ class Element(ABC):
         """Whether the element dissipates (``False`` lets the dynamics skip its S_D term)."""
         return True
 
-    def native_parameters(self) -> tuple[np.ndarray, ...]:
-        """The parameters of the C++ twin, in the order its constructor in src/native/elements/elements.hpp
-        takes them (only elements registered with a twin need it)."""
+    def parameter_values(self) -> dict[str, float]:
+        """The values of :attr:`parameters`, by name."""
+        return {p.name: float(getattr(self, p.name)) for p in self.parameters}
+
+    def native_parameters(self) -> dict[str, Any]:
+        """What the C++ twin (src/native/elements/<name>.hpp) reads, by name; it must read every
+        one (only elements registered with a twin need this)."""
         raise NotImplementedError(f"{type(self).__name__} has no C++ twin")
 
     def __repr__(self) -> str:
@@ -107,8 +126,8 @@ class SpringDamper(Element):
     def has_damping(self) -> bool:
         return self._damped
 
-    def native_parameters(self) -> tuple[np.ndarray, ...]:
-        return (np.asarray(self.K), np.asarray(self.D))
+    def native_parameters(self) -> dict[str, Any]:
+        return {"K": np.asarray(self.K), "D": np.asarray(self.D), **self.parameter_values()}
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(K diag {np.diag(self.K).tolist()}, D diag {np.diag(self.D).tolist()})"

@@ -143,6 +143,7 @@ class BeamElement(SE3Spring):
     """
 
     kind: ClassVar[str] = "beam"
+    rigid: ClassVar[str | None] = None  # a beam's own joints: the rigid limit keeps the beam
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "beam") -> None:
         if not isinstance(stiffness, BeamSegment):

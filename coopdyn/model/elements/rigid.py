@@ -37,6 +37,7 @@ class RigidGrasp(Element):
     """
 
     kind: ClassVar[str] = "rigid"
+    rigid: ClassVar[str | None] = "rigid"
     deformation_size: ClassVar[int] = 6
     constraint: ClassVar[str | None] = "6D"
 
@@ -65,6 +66,7 @@ class RigidPoint(RigidGrasp):
     """A rigid point grasp: G's origin held on T's, rotation free (the ball spring's limit)."""
 
     kind: ClassVar[str] = "rigid_point"
+    rigid: ClassVar[str | None] = "rigid_point"
     deformation_size: ClassVar[int] = 3
     constraint: ClassVar[str | None] = "3D"
 

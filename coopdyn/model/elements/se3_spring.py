@@ -31,6 +31,7 @@ class SE3Spring(SpringDamper):
     """
 
     kind: ClassVar[str] = "se3"
+    rigid: ClassVar[str | None] = "rigid"
     deformation_size: ClassVar[int] = 6
     linear: ClassVar[bool] = True  # log6 of a pure translation is the translation
 

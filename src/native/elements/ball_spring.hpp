@@ -9,6 +9,11 @@ class BallSpring : public Element {
 public:
   BallSpring(const Matrix3 & K, const Matrix3 & D) : K_(K), D_(D), damped_(!D.isZero(0.0)) {}
 
+  // K and D (3x3), by name.
+  static std::unique_ptr<Element> make(Parameters & p) {
+    return std::make_unique<BallSpring>(p.matrix("K", 3, 3), p.matrix("D", 3, 3));
+  }
+
   bool damped() const override { return damped_; }
 
   void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const override {
@@ -40,5 +45,7 @@ private:
   Matrix3 K_, D_;
   bool damped_;
 };
+
+inline const bool ball_registered = register_element("ball", &BallSpring::make);
 
 }  // namespace coopdyn

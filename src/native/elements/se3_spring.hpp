@@ -9,6 +9,11 @@ class SE3Spring : public Element {
 public:
   SE3Spring(const Matrix6 & K, const Matrix6 & D) : K_(K), D_(D), damped_(!D.isZero(0.0)) {}
 
+  // K and D (6x6), by name.
+  static std::unique_ptr<Element> make(Parameters & p) {
+    return std::make_unique<SE3Spring>(p.matrix("K", 6, 6), p.matrix("D", 6, 6));
+  }
+
   bool damped() const override { return damped_; }
 
   void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const override {
@@ -38,5 +43,7 @@ private:
   bool damped_;
   mutable Matrix6 J_;  // scratch
 };
+
+inline const bool se3_registered = register_element("se3", &SE3Spring::make);
 
 }  // namespace coopdyn
