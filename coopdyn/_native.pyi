@@ -9,6 +9,7 @@ PINOCCHIO_VERSION: str
 ELEMENTS: list[str]
 STATUSES: tuple[str, ...]
 METHODS: tuple[str, ...]
+CONTROLLERS: tuple[str, ...]
 
 class Kernel:
     def __init__(

@@ -67,3 +67,25 @@ def _native_loop(kernel: object, config: dict[str, object]) -> object:
     from coopdyn import _native
 
     return _native.make_loop(kernel, config)
+
+
+def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
+    """The built-in controllers' compiled_spec() kinds (and "none" for no controller) are the
+    kinds the kernel's controller registry (src/native/controllers/) holds, no more, no less."""
+    import coopdyn as cd
+    from coopdyn import _native
+    from coopdyn.control import ComputedTorque, GravityCompensationPD
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+    from coopdyn.scenes import object_start
+
+    pandas = cd.scenes.facing_arms("panda", stiffness=1e4)
+    book = cd.scenes.linear_book()
+    built_in = [
+        (GravityCompensationPD(pandas), pandas),
+        (ComputedTorque(pandas), pandas),
+        (ObjectImpedance(pandas), pandas),
+        (ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas))), pandas),
+        (cd.scenes.drives_controller(*cd.scenes.book_task()), book),
+    ]
+    kinds = {"none"} | {ctrl.compiled_spec(scene)["kind"] for ctrl, scene in built_in}
+    assert kinds == set(_native.CONTROLLERS)

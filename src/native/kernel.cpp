@@ -18,7 +18,7 @@
 
 #include "kernel.hpp"
 #include "loop.hpp"
-#include "registered.hpp"  // every header of elements/ and methods/ (CMakeLists.txt)
+#include "registered.hpp"  // every header of controllers/, elements/ and methods/ (CMakeLists.txt)
 
 namespace {
 
@@ -27,77 +27,15 @@ using coopdyn_native::Loop;
 using coopdyn_native::StepMatrixError;
 namespace cn = coopdyn_native;
 
-using cn::doubles;
 using cn::get;
-using cn::mat3;
 using cn::vec;
 
+// The controller `c` describes (its "kind" from the registry in controllers/, built from c).
 std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) {
   const std::string kind = get<std::string>(c, "kind");
-  const Model & model = k.model();
-  if (kind == "none") return std::make_unique<cn::NoTorque>();
-  const Eigen::Index na = k.actuated().size(), nq = model.nq, nv = model.nv;
-  if (kind == "gravity_pd")
-    return std::make_unique<cn::GravityPD>(k, vec(c, "kp", na), vec(c, "kd", na), vec(c, "q_des", nq));
-  if (kind == "computed_torque") {
-    const Eigen::VectorXi q_index = get<Eigen::VectorXi>(c, "q_index");
-    if (q_index.size() != na || (na && (q_index.minCoeff() < 0 || q_index.maxCoeff() >= nq)))
-      throw std::invalid_argument("compiled loop: q_index must hold one configuration index per actuated joint");
-    return std::make_unique<cn::ComputedTorqueHold>(model, k.actuated(), q_index, vec(c, "kp", na), vec(c, "kd", na),
-                                                    vec(c, "q_d", na));
-  }
-  if (kind == "drives") {
-    std::vector<MatrixXd> segments;
-    bp::list drives = get<bp::list>(c, "segments");
-    for (bp::ssize_t i = 0; i < bp::len(drives); ++i) {
-      segments.push_back(bp::extract<MatrixXd>(drives[i]));
-      if (segments.back().cols() != 6 || segments.back().rows() < 1)
-        throw std::invalid_argument("compiled loop: a drive is rows of (start, constant, ramp, amplitude, omega, phase)");
-    }
-    if (static_cast<Eigen::Index>(segments.size()) != na) throw std::invalid_argument("drives: one per actuated joint");
-    return std::make_unique<cn::Drives>(std::move(segments));
-  }
-  if (kind == "object_impedance") {
-    std::vector<cn::ObjectImpedanceLaw::Grasp> grasps;
-    bp::list gl = get<bp::list>(c, "grasps");
-    for (bp::ssize_t i = 0; i < bp::len(gl); ++i) {
-      bp::tuple g = bp::extract<bp::tuple>(gl[i]);
-      cn::ObjectImpedanceLaw::Grasp gr;
-      gr.grasp = bp::extract<pinocchio::FrameIndex>(g[0]);
-      gr.tip = bp::extract<pinocchio::FrameIndex>(g[1]);
-      if (gr.grasp >= model.frames.size() || gr.tip >= model.frames.size())
-        throw std::invalid_argument("compiled loop: grasp frame index out of range");
-      const Eigen::VectorXi vi = bp::extract<Eigen::VectorXi>(g[2]);
-      if (vi.size() && (vi.minCoeff() < 0 || vi.maxCoeff() >= nv))
-        throw std::invalid_argument("compiled loop: arm velocity index out of range");
-      gr.v_index.assign(vi.data(), vi.data() + vi.size());
-      grasps.push_back(std::move(gr));
-    }
-    cn::ObjectTask task;
-    bp::dict t = get<bp::dict>(c, "task");
-    task.hold = get<bool>(t, "hold");
-    task.start = vec(t, "start", 3);
-    task.R = mat3(t, "rotation");
-    if (!task.hold) {
-      task.axis = vec(t, "axis", 3);
-      task.squeeze = get<double>(t, "squeeze");
-      task.t_grip = get<double>(t, "t_grip");
-      task.lift = get<double>(t, "lift");
-      task.t_lift = get<double>(t, "t_lift");
-      task.lift_duration = get<double>(t, "lift_duration");
-      task.amplitude = get<double>(t, "amplitude");
-      task.frequency = get<double>(t, "frequency");
-      task.t_osc = get<double>(t, "t_osc");
-      task.cycles = get<double>(t, "cycles");
-    }
-    const pinocchio::FrameIndex object_frame = get<pinocchio::FrameIndex>(c, "object_frame");
-    if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
-    return std::make_unique<cn::ObjectImpedanceLaw>(
-      model, object_frame, std::move(grasps), std::move(task), get<double>(c, "mass"), vec(c, "com", 3),
-      vec(c, "gravity", 3), vec(c, "Kp", 3), vec(c, "Kr", 3), vec(c, "Dp", 3), vec(c, "Dr", 3),
-      get<double>(c, "joint_damping"), get<double>(c, "null_k"), get<double>(c, "null_d"), vec(c, "q0", nq));
-  }
-  throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
+  const auto found = cn::controller_registry().find(kind);
+  if (found == cn::controller_registry().end()) throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
+  return found->second(c, k);
 }
 
 // A compiled run of `kernel` as `cfg` describes it (coopdyn/compiled.py writes it): the method
@@ -153,6 +91,9 @@ BOOST_PYTHON_MODULE(_native) {
   bp::list statuses;
   for (const char * name : cn::STATUS_NAMES) statuses.append(name);
   bp::scope().attr("STATUSES") = bp::tuple(statuses);
+  bp::list controllers;  // the controllers of the compiled loop, by kind
+  for (const auto & entry : cn::controller_registry()) controllers.append(entry.first);
+  bp::scope().attr("CONTROLLERS") = bp::tuple(controllers);
   bp::list methods;  // the method families of the compiled loop, by name
   for (const auto & entry : cn::method_registry()) methods.append(entry.first);
   bp::scope().attr("METHODS") = bp::tuple(methods);

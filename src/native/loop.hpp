@@ -1,13 +1,14 @@
 // The compiled step loop: coopdyn.simulate's loop (coopdyn/simulate.py) and energy monitor
 // (coopdyn/monitor.py) in C++, for runs whose every piece is built in. It steps through a Method
-// (methods/: the twins of coopdyn/integrators/, one header per family) and offers the methods its
-// services: the closed loop's evaluations, the chart, the step matrix, the error norm. The same operations in the same order as the Python loop (but for the
-// controllers' note in controllers.hpp), tested equal to round-off (tests/test_compiled_loop.py).
-// It runs in chunks of steps with the GIL released; Python (coopdyn/compiled.py) turns what a
-// chunk reports into samples, warnings and errors.
+// (methods/: the twins of coopdyn/integrators/, one header per family), calls a Controller
+// (controllers/) and offers the methods its services: the closed loop's evaluations, the chart,
+// the step matrix, the error norm. The same operations in the same order as the Python loop
+// (but for the gravity note in controllers/gravity_pd.hpp), tested equal to round-off
+// (tests/test_compiled_loop.py). It runs in chunks of steps with the GIL released; Python
+// (coopdyn/compiled.py) turns what a chunk reports into samples, warnings and errors.
 #pragma once
 
-#include "controllers.hpp"
+#include "controllers/controller.hpp"
 #include "kernel.hpp"
 #include "methods/method.hpp"
 

@@ -1,9 +1,7 @@
-// The built-in controllers in C++ for the compiled step loop (loop.hpp): the same laws, in the
-// same operation order, as their Python definitions (coopdyn/control.py, coopdyn/cooperative.py,
-// coopdyn/problems/linear_book.py), tested equal to round-off (tests/test_compiled_loop.py) —
-// except GravityPD's g(q), read off the kernel's kinematics pass (Kernel::actuated_gravity,
-// equal to Pinocchio's RNEA to round-off, tests/test_native.py).
+// ObjectImpedance with its task, hold or GripLiftOscillate (coopdyn/cooperative.py), in C++.
 #pragma once
+
+#include "controller.hpp"
 
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/frames.hpp>
@@ -13,103 +11,14 @@
 #include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/spatial.hpp>
 
-#include "kernel.hpp"
-
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
 
 #include <algorithm>
 #include <cmath>
-#include <memory>
 #include <vector>
 
 namespace coopdyn_native {
-
-using Eigen::MatrixXd;
-using Eigen::VectorXd;
-using pinocchio::Data;
-using pinocchio::Model;
-using Vector3 = Eigen::Vector3d;
-using Matrix3 = Eigen::Matrix3d;
-
-struct Controller {
-  virtual ~Controller() = default;
-  // τ (n_actuated) at (t, q, v).
-  virtual void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) = 0;
-  // Whether torque() reads the kernel's kinematics at (q, v) (Kernel::kinematics first).
-  virtual bool reads_kernel() const { return false; }
-};
-
-struct NoTorque : Controller {
-  void torque(double, const VectorXd &, const VectorXd &, VectorXd & tau) override { tau.setZero(); }
-};
-
-// τ = g(q) + Kp (q_d ⊖ q) − Kd q̇ on the actuated joints (GravityCompensationPD), g(q) read off
-// the kernel's kinematics pass when its joints allow (Kernel::actuated_gravity), else from
-// Pinocchio's generalized gravity.
-struct GravityPD : Controller {
-  GravityPD(Kernel & kernel, VectorXd kp, VectorXd kd, VectorXd q_des)
-    : kernel(kernel), model(kernel.model()), data(model), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
-      q_des(std::move(q_des)), dq(model.nv), g_rnea(act.size()) {}
-  bool reads_kernel() const override { return kernel.kinematic_gravity(); }
-  void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    const VectorXd & g = kernel.kinematic_gravity() ? kernel.actuated_gravity(q) : rnea_gravity(q);
-    pinocchio::difference(model, q, q_des, dq);
-    for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] = (g[i] + kp[i] * dq[act[i]]) - kd[i] * v[act[i]];
-  }
-  // g(q) on the actuated joints by Pinocchio's RNEA, for joints actuated_gravity does not take.
-  const VectorXd & rnea_gravity(const VectorXd & q) {
-    const VectorXd & full = pinocchio::computeGeneralizedGravity(model, data, q);
-    for (Eigen::Index i = 0; i < act.size(); ++i) g_rnea[i] = full[act[i]];
-    return g_rnea;
-  }
-  Kernel & kernel;
-  const Model & model;
-  Data data;
-  Eigen::VectorXi act;
-  VectorXd kp, kd, q_des, dq, g_rnea;
-};
-
-// τ = M(q)(Kp (q_d − q) − Kd q̇) + h(q, q̇), holding q_d (ComputedTorque with its default reference).
-struct ComputedTorqueHold : Controller {
-  ComputedTorqueHold(const Model & model, const Eigen::VectorXi & act, const Eigen::VectorXi & q_index, VectorXd kp,
-                     VectorXd kd, VectorXd q_d)
-    : model(model), data(model), act(act), q_index(q_index), kp(std::move(kp)), kd(std::move(kd)), q_d(std::move(q_d)),
-      e(act.size()), M(act.size(), act.size()) {}
-  void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    pinocchio::crba(model, data, q);
-    data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose().triangularView<Eigen::StrictlyLower>();
-    const VectorXd & h = pinocchio::nonLinearEffects(model, data, q, v);
-    const Eigen::Index n = act.size();
-    for (Eigen::Index i = 0; i < n; ++i) {
-      e[i] = kp[i] * (q_d[i] - q[q_index[i]]) + kd[i] * (0.0 - v[act[i]]);
-      for (Eigen::Index j = 0; j < n; ++j) M(i, j) = data.M(act[i], act[j]);
-    }
-    tau.noalias() = M * e;
-    for (Eigen::Index i = 0; i < n; ++i) tau[i] += h[act[i]];
-  }
-  const Model & model;
-  Data data;
-  Eigen::VectorXi act, q_index;
-  VectorXd kp, kd, q_d, e;
-  MatrixXd M;
-};
-
-// Open-loop drives: τ_i = c + r s + A sin(ω s + φ), s = t − start of the segment in force.
-struct Drives : Controller {
-  // segments[i]: rows (start, constant, ramp, amplitude, omega, phase), increasing start, first at 0.
-  explicit Drives(std::vector<MatrixXd> segments) : segments(std::move(segments)) {}
-  void torque(double t, const VectorXd &, const VectorXd &, VectorXd & tau) override {
-    for (std::size_t i = 0; i < segments.size(); ++i) {
-      const MatrixXd & S = segments[i];
-      Eigen::Index k = 0;  // bisect_right(starts, t) − 1, at least 0
-      while (k + 1 < S.rows() && S(k + 1, 0) <= t) ++k;
-      const double s = t - S(k, 0);
-      tau[i] = S(k, 1) + S(k, 2) * s + S(k, 3) * std::sin(S(k, 4) * s + S(k, 5));
-    }
-  }
-  std::vector<MatrixXd> segments;
-};
 
 // The desired object motion of GripLiftOscillate (or a hold of the initial pose).
 struct ObjectTask {
@@ -153,10 +62,6 @@ struct ObjectTask {
 // commanded squeeze's internal part, tool wrenches through the tip Jacobians, the arms' own
 // nonlinear effects, joint damping and a posture task in the tip Jacobians' null space.
 // A grasp geometry the law cannot use (translated to coopdyn.errors.SceneError).
-struct GraspGeometryError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
 struct ObjectImpedanceLaw : Controller {
   struct Grasp {
     pinocchio::FrameIndex grasp, tip;
@@ -300,5 +205,53 @@ struct ObjectImpedanceLaw : Controller {
   Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt6_;
   Eigen::LLT<MatrixXd> llt_;
 };
+
+// {grasps: (grasp frame, tip frame, arm velocity indices) each, task: {hold, start, rotation, and
+// for GripLiftOscillate its timings}, object_frame, mass, com, gravity, Kp, Kr, Dp, Dr,
+// joint_damping, null_k, null_d, q0}
+inline std::unique_ptr<Controller> make_object_impedance(const bp::dict & c, Kernel & k) {
+  const Model & model = k.model();
+  const Eigen::Index nq = model.nq, nv = model.nv;
+  std::vector<ObjectImpedanceLaw::Grasp> grasps;
+  bp::list gl = get<bp::list>(c, "grasps");
+  for (bp::ssize_t i = 0; i < bp::len(gl); ++i) {
+    bp::tuple g = bp::extract<bp::tuple>(gl[i]);
+    ObjectImpedanceLaw::Grasp gr;
+    gr.grasp = bp::extract<pinocchio::FrameIndex>(g[0]);
+    gr.tip = bp::extract<pinocchio::FrameIndex>(g[1]);
+    if (gr.grasp >= model.frames.size() || gr.tip >= model.frames.size())
+      throw std::invalid_argument("compiled loop: grasp frame index out of range");
+    const Eigen::VectorXi vi = bp::extract<Eigen::VectorXi>(g[2]);
+    if (vi.size() && (vi.minCoeff() < 0 || vi.maxCoeff() >= nv))
+      throw std::invalid_argument("compiled loop: arm velocity index out of range");
+    gr.v_index.assign(vi.data(), vi.data() + vi.size());
+    grasps.push_back(std::move(gr));
+  }
+  ObjectTask task;
+  bp::dict t = get<bp::dict>(c, "task");
+  task.hold = get<bool>(t, "hold");
+  task.start = vec(t, "start", 3);
+  task.R = mat3(t, "rotation");
+  if (!task.hold) {
+    task.axis = vec(t, "axis", 3);
+    task.squeeze = get<double>(t, "squeeze");
+    task.t_grip = get<double>(t, "t_grip");
+    task.lift = get<double>(t, "lift");
+    task.t_lift = get<double>(t, "t_lift");
+    task.lift_duration = get<double>(t, "lift_duration");
+    task.amplitude = get<double>(t, "amplitude");
+    task.frequency = get<double>(t, "frequency");
+    task.t_osc = get<double>(t, "t_osc");
+    task.cycles = get<double>(t, "cycles");
+  }
+  const pinocchio::FrameIndex object_frame = get<pinocchio::FrameIndex>(c, "object_frame");
+  if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
+  return std::make_unique<ObjectImpedanceLaw>(
+    model, object_frame, std::move(grasps), std::move(task), get<double>(c, "mass"), vec(c, "com", 3),
+    vec(c, "gravity", 3), vec(c, "Kp", 3), vec(c, "Kr", 3), vec(c, "Dp", 3), vec(c, "Dr", 3),
+    get<double>(c, "joint_damping"), get<double>(c, "null_k"), get<double>(c, "null_d"), vec(c, "q0", nq));
+}
+
+inline const bool object_impedance_registered = register_controller("object_impedance", &make_object_impedance);
 
 }  // namespace coopdyn_native
