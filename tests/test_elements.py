@@ -243,8 +243,10 @@ class ToyVerticalSpring(Element):
         return (np.array([self.k]),)
 
 
-def test_a_toy_element_simulates_on_the_python_path() -> None:
-    """A box hung from the world by the toy spring bobs at ω = √(k/m) about its static sag m g / k."""
+def test_a_toy_element_without_a_cpp_twin_runs_in_the_compiled_loop() -> None:
+    """A box hung from the world by the toy spring bobs at ω = √(k/m) about its static sag m g / k.
+    The toy has no C++ twin: the kernel calls its Python evaluate (one warning naming it) and the
+    run stays in the compiled loop, equal to the all-Python run to round-off."""
     register(ToyVerticalSpring)
     try:
         m, k = 2.0, 800.0
@@ -253,17 +255,52 @@ def test_a_toy_element_simulates_on_the_python_path() -> None:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = cd.simulate(scene, 1.0, integrator="rk4", dt=1e-3, save_every=10)
-        assert res.backend == "python"
-        assert any("toy_vertical" in str(w.message) for w in caught)  # one warning: no C++ twin
+        assert (res.backend, res.loop) == ("native", "compiled")
+        assert any("toy_vertical" in str(w.message) and "no C++ twin" in str(w.message) for w in caught)
         z = res.object_position()[:, 2] - 1.0
         sag, omega = m * 9.81 / k, np.sqrt(k / m)
         np.testing.assert_allclose(z, -sag * (1.0 - np.cos(omega * res.t)), atol=1e-8)
-        np.testing.assert_allclose(res.deformation(0)[:, 0], z, atol=1e-12)
         np.testing.assert_allclose(res.wrench(0)[:, 2], -k * z, atol=1e-8)
-        with pytest.raises(cd.CoopdynError, match="no C\\+\\+ twin"):
-            cd.simulate(scene, 0.01, backend="native")
+        for method in ("trapezoid", "dopri5"):  # the implicit terms (S_K) and adaptive steps too
+            runs = [
+                cd.simulate(scene, 0.2, integrator=method, dt=1e-3, backend=b, accuracy_check="off") for b in ("native", "python")
+            ]
+            assert runs[0].n_steps == runs[1].n_steps
+            np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0.0, atol=1e-12)
     finally:
         ELEMENTS.pop("toy_vertical", None)
+
+
+def test_a_python_element_that_fails_stops_the_compiled_run_with_its_error() -> None:
+    """An element whose evaluate raises, or returns the wrong shapes, inside the compiled loop:
+    the run stops with a CoopdynError naming the element and what it did."""
+
+    class Broken(ToyVerticalSpring):
+        kind: ClassVar[str] = "toy_broken"
+        fail_at = 0.05
+
+        def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+            if T_M_G.translation[2] < -self.fail_at * 0.1:
+                raise ZeroDivisionError("the toy broke")
+            return super().evaluate(T_M_G, xi, jacobians)
+
+    class WrongShape(ToyVerticalSpring):
+        kind: ClassVar[str] = "toy_wrong"
+
+        def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+            return super().evaluate(T_M_G, xi, jacobians)._replace(G_f_G=np.zeros(3))
+
+    box = cd.RigidObject.box(2.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0], joint="prismatic", axis="z")
+    for cls, message in ((Broken, "ZeroDivisionError: the toy broke"), (WrongShape, "G_f_G that is not 6 values")):
+        register(cls)
+        try:
+            scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=800.0, element=cls.kind)])
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                with pytest.raises(cd.CoopdynError, match=f"{cls.__name__}.*{message}"):
+                    cd.simulate(scene, 0.5, integrator="rk4", dt=1e-3, loop="compiled")
+        finally:
+            ELEMENTS.pop(cls.kind, None)
 
 
 def test_unknown_element_names_the_registered_ones() -> None:

@@ -7,7 +7,9 @@
   the reference the kernel is tested against, and the fallback when the kernel is missing.
 
 The default (``"auto"``) takes the kernel when it imports and was built against the installed
-Pinocchio, else Python with a one-time warning saying why. Choose per object with
+Pinocchio, else Python with a one-time warning saying why. An interconnection element without
+a C++ twin does not send the scene to Python: the kernel calls that element's Python
+``evaluate`` (one warning), and everything else stays compiled. Choose per object with
 ``Dynamics(scene, backend=...)``, or for the process with the environment variable
 ``COOPDYN_BACKEND=native|python|auto``.
 """
@@ -81,13 +83,16 @@ def resolve(backend: str | None = None, scene: Scene | None = None) -> str:
         return "python"
     if scene is not None:
         known = set(getattr(module, "ELEMENTS", ()))
-        missing = sorted({lk.element.kind for lk in scene.elements if lk.native is None or lk.native not in known})
-        if missing:
-            why = f"the interconnection element(s) {missing} have no C++ twin in the kernel"
+        lost = sorted({lk.element.kind for lk in scene.elements if lk.native is not None and lk.native not in known})
+        if lost:  # registered with a twin this build of the kernel lacks
+            why = f"the kernel lacks the C++ twin of the interconnection element(s) {lost}"
             if name == "native":
                 raise BackendError(f"the native backend was requested but {why}; use backend='python'")
             _warn_once(f"{why}; this scene runs on the Python dynamics")
             return "python"
+        python_only = sorted({lk.element.kind for lk in scene.elements if lk.native is None})
+        if python_only:
+            _warn_python_elements(tuple(python_only))
     return "native"
 
 
@@ -97,6 +102,16 @@ def kernel_module() -> ModuleType:
     if module is None:
         raise BackendError(why)
     return module
+
+
+@cache
+def _warn_python_elements(kinds: tuple[str, ...]) -> None:
+    warnings.warn(
+        f"the interconnection element(s) {list(kinds)} have no C++ twin: the compiled kernel calls their Python "
+        "evaluate once per evaluation (the rest of the scene and the step loop stay compiled)",
+        NativeBackendWarning,
+        stacklevel=4,
+    )
 
 
 @cache

@@ -29,7 +29,12 @@ class NativeDynamics(Dynamics):
 
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         super().__init__(scene, backend)
-        links = [(lk.native, lk.tip_frame, lk.grasp_frame, lk.element.native_parameters()) for lk in scene.elements]
+        links = [
+            (lk.native, lk.tip_frame, lk.grasp_frame, lk.element.native_parameters())
+            if lk.native is not None
+            else ("python", lk.tip_frame, lk.grasp_frame, {"element": lk.element})  # evaluated in Python, from C++
+            for lk in scene.elements
+        ]
         actuated = np.asarray(scene.actuated, dtype=np.int32)
         kernel = _backend.kernel_module().Kernel
         self._kernel = self._call("the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame)

@@ -45,7 +45,7 @@ class Link:
     tip_frame: int  #: T (an arm's tool frame, or a fixture frame on the world)
     grasp_frame: int  #: G (on the object)
     element: Element  #: the law (validated, immutable)
-    native: str | None  #: name of the element's C++ twin, or None (Python path only)
+    native: str | None  #: name of the element's C++ twin, or None (the kernel calls its Python evaluate)
 
 
 STATE_LIMIT = 1e6  #: |q|, |v| beyond this [m, rad, m/s, rad/s] is refused (energies would overflow)

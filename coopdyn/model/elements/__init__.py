@@ -2,8 +2,8 @@
 
 :data:`ELEMENTS` maps an element kind (``Interconnection(..., element=kind)``) to its Python
 class — the reference implementation — and the name of its C++ twin in ``coopdyn._native``
-(``None``: the element runs on the Python path only; a scene using it falls back to the Python
-dynamics with one warning). docs/extending.md says how to add one.
+(``None``: the compiled kernel calls the element's Python ``evaluate`` for it, with one
+warning, and keeps the rest of the scene compiled). docs/extending.md says how to add one.
 """
 
 from __future__ import annotations

@@ -49,6 +49,7 @@ public:
     return m;
   }
   double number(const char * name) { return boost::python::extract<double>(value(name))(); }
+  boost::python::object object(const char * name) { return value(name); }
 
   // After the element is built: every given name was read.
   void check_all_read() const {
