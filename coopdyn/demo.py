@@ -7,11 +7,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from . import _validate
 from .cooperative import GripLiftOscillate, ObjectImpedance
 from .errors import DivergenceError, SimulationError, SimulationInterrupted, StepBudgetError
+from .metrics import metric_lines, run_metrics
 from .outputs import check_folder, save_partial, write_outputs
 from .problems.facing_arms import facing_arms, object_start
 from .simulate import MIN_DT, simulate
@@ -56,22 +55,18 @@ def run_demo(
         exc.saved = save_partial(exc, out_dir)  # type: ignore[union-attr]
         raise
     wall = time.perf_counter() - wall0
-    tracking = res.tracking_error(task)
-    squeeze = res.squeeze()
+    metrics, notes = run_metrics(res, task)  # the names sweep tables and scene-file runs use
     summary = {
         "duration_s": t_final,
         "integrator": res.integrator,
         "dt_s": dt,
-        "tracking_error_max_m": float(tracking.max()),
-        "tracking_error_rms_m": float(np.sqrt(np.mean(tracking**2))),
-        "peak_internal_force_N": float(np.max(np.abs(squeeze))),
-        "internal_force_at_end_N": squeeze[-1].tolist(),
+        **metrics,
         "commanded_internal_force_N": SQUEEZE,
         "cpu_s": res.cpu_time,
         "real_time_factor": t_final / wall,
         "wall_s": wall,
         "rhs_evaluations": res.n_rhs,
-        "force_error_estimate_N": res.force_error_estimate,
+        "notes": notes,
     }
 
     def figure(folder: Path) -> Path:
@@ -99,14 +94,10 @@ def format_summary(summary: dict[str, Any]) -> str:
     lines = [
         f"two Pandas, {STIFFNESS:g} N/m interconnections, {summary['integrator']} at dt = {summary['dt_s']:g} s, "
         f"{summary['duration_s']:g} s simulated",
-        f"  object tracking error: max {summary['tracking_error_max_m'] * 1e3:.2f} mm, "
-        f"rms {summary['tracking_error_rms_m'] * 1e3:.2f} mm",
-        f"  internal force: peak {summary['peak_internal_force_N']:.2f} N, at the end "
-        f"{', '.join(f'{s:.3f}' for s in summary['internal_force_at_end_N'])} N (commanded {SQUEEZE:g} N)",
+        *metric_lines(summary, commanded_squeeze=SQUEEZE),
+        *[f"  {note}" for note in summary.get("notes", ())],
         f"  CPU {summary['cpu_s']:.2f} s, wall {summary['wall_s']:.2f} s: real-time factor {summary['real_time_factor']:.2f}",
     ]
-    if summary.get("force_error_estimate_N") is not None:
-        lines.append(f"  interconnection force error against dopri5: max {summary['force_error_estimate_N']:.3g} N")
     lines += [f"output folder: {summary['output_folder']}"]
     lines += [f"  wrote {f}" for f in summary["files"]]
     lines += [f"  not written: {p}" for p in summary.get("problems", ())]

@@ -616,3 +616,33 @@ def test_a_sweep_passes_its_accuracy_check_to_every_run(tmp_path: Path) -> None:
     assert np.isnan(estimate["screen"]) and np.isnan(estimate["off"])
     assert "not checked against a reference run: accuracy_check='screen'" in warned["screen"]
     assert "AccuracyWarning" not in warned["off"]
+
+
+def test_the_demo_a_scene_file_and_a_sweep_report_the_same_metrics_under_the_same_names(tmp_path: Path) -> None:
+    """One set of names (coopdyn.metrics.METRICS) at every front door: the demo's summary, a
+    scene file run's report and a sweep table's columns; the same run gives the same values."""
+    import dataclasses
+
+    from coopdyn.demo import run_demo
+    from coopdyn.io.scenefile import load, run
+    from coopdyn.metrics import METRICS
+
+    demo = run_demo(tmp_path / "demo", t_final=0.3, html=False, progress=False)
+    assert {k for k in demo if k.endswith(("_m", "_N")) and k != "commanded_internal_force_N"} <= set(METRICS)
+    loaded = load(ROOT / "examples" / "scenes" / "two_pandas.toml")
+    loaded = dataclasses.replace(loaded, duration=0.3)
+    report = run(loaded, folder=tmp_path / "file", progress=False)
+    assert set(report.metrics) <= set(METRICS) and "internal_force_end_N" in report.metrics
+    table = cd.sweep(
+        lambda: cd.Case(loaded.scene, controller=loaded.controller, task=loaded.task),
+        {},
+        duration=0.3,
+        dt=loaded.dt,
+        integrator=loaded.integrator,
+        save_every=loaded.save_every,
+        executor="serial",
+        progress=False,
+    )
+    row = table.iloc[0]
+    for name, value in report.metrics.items():
+        assert row[name] == pytest.approx(value, rel=1e-12), name

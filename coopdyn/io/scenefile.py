@@ -28,6 +28,7 @@ from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
 from ..errors import CoopdynError, SceneFileError
 from ..integrators import INTEGRATORS
+from ..metrics import metric_lines, run_metrics
 from ..model.description import DescriptionError, build
 from ..model.scene import Scene
 from ..problems.facing_arms import object_start
@@ -382,6 +383,8 @@ class RunReport:
     result: Any
     written: tuple[Path, ...]
     summary: tuple[str, ...]
+    #: the run's metrics (:func:`coopdyn.metrics.run_metrics`: the demo's and sweep tables' names)
+    metrics: dict[str, float] = field(default_factory=dict)
 
     def __str__(self) -> str:
         return "\n".join([*self.summary, *(f"  wrote {w}" for w in self.written)])
@@ -445,15 +448,11 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
         f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS; "
         f"wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}",
     ]
-    if loaded.task is not None:
-        err = res.tracking_error(loaded.task)
-        summary.append(f"  object tracking error: max {err.max() * 1e3:.2f} mm")
-    if len(loaded.scene.links) > 1:
-        summary.append(f"  internal force at the end: {', '.join(f'{s:.3f}' for s in res.squeeze()[-1])} N")
-    if res.force_error_estimate is not None:
-        summary.append(f"  interconnection force error against dopri5: max {res.force_error_estimate:.3g} N")
+    metrics, notes = run_metrics(res, loaded.task)  # the names the demo and sweep tables use
+    summary += metric_lines(metrics, commanded_squeeze=getattr(loaded.task, "squeeze", None))
+    summary += [f"  {note}" for note in notes]
     summary += [f"  not written: {p}" for p in done.problems]
-    return RunReport(res, tuple(written), tuple(summary))
+    return RunReport(res, tuple(written), tuple(summary), metrics)
 
 
 def load_result(loaded: Run, path: str | Path | None = None) -> Any:

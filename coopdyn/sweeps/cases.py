@@ -32,6 +32,7 @@ from .. import _validate
 from .._validate import positive
 from .._version import __version__
 from ..errors import CoopdynError, DivergenceError, StepBudgetError, SweepError
+from ..metrics import run_metrics
 from ..model.scene import Scene
 from ..simulate import simulate
 
@@ -41,15 +42,6 @@ SETTINGS = ("integrator", "dt_s", "duration_s", "save_every", "loop", "backend")
 COUNTERS = ("t_reached_s", "n_steps", "n_rhs")
 TIMING = ("cpu_s", "wall_s", "worker")  #: what depends on the machine and its load: not reproduced by a rerun
 VERSIONS = ("coopdyn_version", "pinocchio_version", "numpy_version")
-#: the metrics every completed run gets (:func:`default_metrics`; the force ones with interconnections)
-METRICS = (
-    "tracking_error_max_m",
-    "tracking_error_rms_m",
-    "peak_internal_force_N",
-    "internal_force_end_N",
-    "peak_interconnection_force_N",
-    "force_error_estimate_N",
-)
 RESERVED = frozenset((*STATUS, *SETTINGS, *COUNTERS, *TIMING, *VERSIONS, "warnings", "trajectory"))
 #: what a row's status says
 STATUSES = {
@@ -293,34 +285,11 @@ def versions() -> dict[str, str]:
 
 
 def default_metrics(result: Any, case: Case) -> tuple[dict[str, float], list[str]]:
-    """The metrics every completed run gets (and notes on those that could not be computed):
-    object tracking error [m] against the task (max and rms over the samples), peak and final
-    internal (squeeze) force [N] with two or more interconnections, and the peak interconnection
-    force [N]; for a run the accuracy screen could not clear, the force error found against a
-    reference run [N] (``Result.force_error_estimate``; absent, NaN in the table, otherwise)."""
-    out: dict[str, float] = {}
-    notes: list[str] = []
-    scene = result.scene
+    """The metrics every completed run gets (:func:`coopdyn.metrics.run_metrics`, the names the
+    demo and scene-file summaries use), the tracking ones against the case's task, or its
+    controller's reference; absent ones are NaN in the table."""
     reference = case.task if case.task is not None else getattr(case.controller, "reference", None)
-    if callable(reference):
-        try:
-            e = result.tracking_error(reference)
-            out["tracking_error_max_m"] = float(e.max())
-            out["tracking_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
-        except Exception as exc:
-            notes.append(f"tracking error not computed: {type(exc).__name__}: {exc}")
-    try:
-        if len(scene.links) > 1:
-            squeeze = result.squeeze()
-            out["peak_internal_force_N"] = float(np.max(np.abs(squeeze)))
-            out["internal_force_end_N"] = float(np.mean(squeeze[-1]))
-        if scene.links:
-            out["peak_interconnection_force_N"] = float(np.max(np.linalg.norm(result.wrenches()[..., :3], axis=-1)))
-    except Exception as exc:
-        notes.append(f"force metrics not computed: {type(exc).__name__}: {exc}")
-    if result.force_error_estimate is not None:  # the run was checked against a reference run
-        out["force_error_estimate_N"] = float(result.force_error_estimate)
-    return out, notes
+    return run_metrics(result, reference)
 
 
 def source_name(fn: Any) -> str | None:

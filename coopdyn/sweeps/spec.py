@@ -29,7 +29,8 @@ import numpy as np
 from .. import _validate
 from ..errors import CoopdynError, SweepError
 from ..io import scenefile
-from .cases import COUNTERS, METRICS, Case, Item, Settings, _plain, expand
+from ..metrics import METRICS
+from .cases import COUNTERS, Case, Item, Settings, _plain, expand
 
 SWEEP_KEYS = ("grid", "random", "seeds", "folder", "trajectories", "heatmap")
 DISTRIBUTIONS = ("uniform", "loguniform", "normal", "choice")
