@@ -27,7 +27,6 @@ import scipy.linalg
 from . import _validate
 from .dynamics import Dynamics
 from .errors import SimulationError
-from .model.beam import Beam
 from .model.limits import quasi_static, rigid_limit
 from .model.scene import Scene
 from .simulate import simulate
@@ -146,10 +145,7 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the preloads it drops are reported by rigid_limit itself elsewhere
         rigid = rigid_limit(qs)
-    beam = scene.object
-    object_hz = (
-        float(_frequencies(beam.stiffness_matrix(), beam.mass_matrix()).min() / (2 * np.pi)) if isinstance(beam, Beam) else None
-    )
+    object_hz = scene.object.lowest_frequency()  # None: a rigid object, no elastic modes of its own
     grasp = _modes(qs)
     grasp_hz = float(grasp.min() / (2 * np.pi)) if grasp.size else float("inf")
     limit = MODE_SEPARATION * bandwidth
@@ -168,7 +164,7 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
             "model when the squeeze matters"
         )
     models = {"rigid": rigid, "quasi-static": qs, "elastic": scene}
-    if not isinstance(scene.object, Beam):
+    if object_hz is None:
         models.pop("elastic")  # a rigid object's elastic system is its massless grasps: quasi-static already
     modes = {"rigid": np.zeros(0), "quasi-static": grasp}  # computed above; the elastic model's only if it is run
     costs = tuple(_cost(name, s, dt, measure, modes[name] if name in modes else _modes(s)) for name, s in models.items())

@@ -286,8 +286,9 @@ class ObjectImpedance:
 
         self._hold_reference = hold_reference
         self.reference = reference if reference is not None else hold_reference
-        self.mass = scene.object.mass
-        self._com = np.asarray(scene.object.com, dtype=float)
+        mass, com = scene.object.mass_and_com()
+        self.mass = mass
+        self._com = np.asarray(com, dtype=float)
         fixtures = [lk.name for lk in scene.links if lk.arm is None]
         if fixtures or not scene.links:
             raise SceneError(

@@ -19,10 +19,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from .. import _validate
 from ..errors import SceneError
+from .body import RigidObject
 from .elements.beam import BeamElement, BeamSegment, Section, tip_stiffness
+from .fields import Field, pose_data
+from .objects import InternalLink, Placement, SceneObject, Shape
 
 
 def rigid_map(r: np.ndarray) -> np.ndarray:
@@ -35,7 +39,7 @@ MAX_ELEMENTS = 500  #: a beam is a body per node, and its dense stiffness has 6�
 
 
 @dataclass(frozen=True, eq=False)
-class Beam:
+class Beam(SceneObject):
     """A straight, uniform, free elastic beam held by the arms.
 
     Attributes:
@@ -53,9 +57,17 @@ class Beam:
     pose: Any = None
     damping: float = 0.0
     name: str = "beam"
-    #: what a scene's summary calls its root joints (one free flyer per node)
-    joint: ClassVar[str] = "beam of free nodes"
-    size: ClassVar[None] = None  #: (a box's edge lengths; a beam is drawn from its nodes)
+
+    description_types: ClassVar[dict[str, dict[str, Field]]] = {
+        "beam": {
+            "length": Field("number", "length along the beam's x axis [m]", True),
+            "section": Field("section", "material and cross-section", True),
+            "n_elements": Field("integer", "beam elements (nodes = n_elements + 1); default 8"),
+            "pose": Field("pose", "initial pose of the beam frame (x along the beam, origin at its middle) [m]"),
+            "damping": Field("number", "stiffness-proportional damping β [s]; default 0"),
+            "name": Field("string", "prefix of the beam's joints and frames; default 'beam'"),
+        },
+    }
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "length", _validate.positive(self.length, "Beam: length", "m"))
@@ -180,3 +192,147 @@ class Beam:
         for inertia, r in zip(self.node_inertias(), self.node_offsets(), strict=True):
             total += pin.SE3(np.eye(3), r).act(inertia)
         return total
+
+    # -- the object protocol (objects.SceneObject) -----------------------------------------------
+    @property
+    def joint_label(self) -> str:
+        return "beam of free nodes"
+
+    def mass_and_com(self) -> tuple[float, np.ndarray]:
+        return self.mass, self.com
+
+    @classmethod
+    def from_description(cls, type_name: str, values: dict[str, Any]) -> Beam:
+        return cls(**values)
+
+    def describe(self) -> dict[str, Any]:
+        s = self.section
+        section = {k: float(getattr(s, k)) for k in ("E", "G", "rho", "A", "Iy", "Iz", "J")}
+        if s.shear_factor is not None:
+            section["shear_factor"] = float(s.shear_factor)
+        out: dict[str, Any] = {"type": "beam", "length": self.length, "section": section, "n_elements": self.n_elements}
+        out |= {"damping": self.damping, "name": self.name}
+        if self.pose is not None:
+            out["pose"] = pose_data(self.pose, "object pose")
+        return out
+
+    def add_to(self, model: pin.Model) -> Placement:
+        """The nodes as free bodies, in beam axes at rest; the object frame on the reference node."""
+        oMb = pin.SE3.Identity() if self.pose is None else _validate.se3(self.pose, "beam pose")
+        joints, q = [], []
+        for k, (x, inertia) in enumerate(zip(self.node_x(), self.node_inertias(), strict=True)):
+            j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), f"{self.name}/node{k}")
+            model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
+            model.addBodyFrame(f"{self.name}/node{k}", j, pin.SE3.Identity(), 0)
+            joints.append(j)
+            q.append(pin.SE3ToXYZQUAT(oMb * pin.SE3(np.eye(3), np.array([x, 0.0, 0.0]))))
+        ref = joints[self.reference_node]
+        model.addFrame(pin.Frame(self.name, ref, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+        return Placement(ref, tuple(joints), np.concatenate(q))
+
+    def grasp_joint(self, placement: Placement, o_M_G: pin.SE3) -> tuple[int, pin.SE3]:
+        """The node nearest the grasp point, and the grasp frame's placement on it."""
+        offsets = self.node_offsets()
+        k = int(np.argmin(np.linalg.norm(offsets - o_M_G.translation, axis=1)))
+        return placement.joints[k], pin.SE3(np.eye(3), -offsets[k]) * o_M_G
+
+    def internal_links(self, model: pin.Model, placement: Placement) -> list[InternalLink]:
+        """The beam elements: T on node k where node k + 1 rests, G on node k + 1."""
+        h, joints = self.element_length, placement.joints
+        out = []
+        for k in range(self.n_elements):
+            name = f"{self.name}/element{k}"
+            t_id = model.addFrame(
+                pin.Frame(f"{name}/T", joints[k], pin.SE3(np.eye(3), np.array([h, 0.0, 0.0])), pin.FrameType.OP_FRAME)
+            )
+            g_id = model.addFrame(pin.Frame(f"{name}/G", joints[k + 1], pin.SE3.Identity(), pin.FrameType.OP_FRAME))
+            out.append(InternalLink(name, int(t_id), int(g_id), self.element(k), "se3"))
+        return out
+
+    def memory_hint(self, nv: int, fits: int) -> str:
+        most = self.n_elements - math.ceil((nv - fits) / 6)
+        return f"; this beam fits with at most {max(most, 0)} elements" if most >= 1 else "; no beam of free nodes fits"
+
+    def shapes(self, model: pin.Model) -> list[Shape]:
+        """One box per node, an element long (half at the ends): the chain bends with the nodes."""
+        h, width = self.element_length, max(np.sqrt(12 * self.section.Iz / self.section.A), 0.005)
+        height = max(np.sqrt(12 * self.section.Iy / self.section.A), 0.005)
+        out = []
+        for k in range(self.n_nodes):
+            length = h if 0 < k < self.n_elements else h / 2
+            shift = 0.0 if 0 < k < self.n_elements else (h / 4 if k == 0 else -h / 4)
+            out.append(
+                Shape(
+                    f"{self.name}/segment{k}",
+                    model.getJointId(f"{self.name}/node{k}"),
+                    model.getFrameId(f"{self.name}/node{k}"),
+                    pin.SE3(np.eye(3), np.array([shift, 0.0, 0.0])),
+                    (length * 0.96, float(width), float(height)),
+                )
+            )
+        return out
+
+    def lowest_frequency(self) -> float:
+        """The free beam's lowest elastic mode [Hz] (its six rigid-body modes left out)."""
+        w = np.sqrt(np.clip(scipy.linalg.eigh(self.stiffness_matrix(), self.mass_matrix(), eigvals_only=True), 0.0, None))
+        return float(w[w > 1e-6 * max(w.max(), 1.0)].min() / (2 * np.pi))
+
+    def condensed(self, scene: Any) -> tuple[RigidObject, list[Any]]:
+        """Static condensation: the nodes other than the reference one taken as massless and
+        eliminated; the beam becomes one rigid body (its mass and inertia, on the reference
+        node's frame), and each grasp's SE(3) spring the series stiffness of that spring and the
+        beam between its node and the reference node (Schur complement of the assembled linear
+        stiffness, reference node clamped), in the spring's own axes; dampers kept.
+
+        Raises:
+            SceneError: two grasps on the same side of the reference node (their condensed
+                stiffnesses couple, which pairwise springs cannot represent), or an
+                interconnection that is not an SE(3) spring.
+        """
+        import dataclasses
+
+        model = scene.model
+        node_of = {model.getJointId(f"{self.name}/node{k}"): k for k in range(self.n_nodes)}
+        nodes = [node_of[model.frames[lk.grasp_frame].parentJoint] for lk in scene.links]
+        ref = self.reference_node
+        free = [k for k in range(self.n_nodes) if k != ref]
+        K = self.stiffness_matrix()
+        held = sorted(set(nodes) - {ref})
+        a = (6 * np.array(held, dtype=int)[:, None] + np.arange(6)).ravel()  # their coordinates
+        b = (6 * np.array([k for k in free if k not in held], dtype=int)[:, None] + np.arange(6)).ravel()
+        K_held = K[np.ix_(a, a)] - K[np.ix_(a, b)] @ np.linalg.solve(K[np.ix_(b, b)], K[np.ix_(b, a)])
+        for i, j in ((i, j) for i in range(len(held)) for j in range(len(held)) if i != j):
+            if np.abs(K_held[6 * i : 6 * i + 6, 6 * j : 6 * j + 6]).max() > 1e-9 * np.abs(K_held).max():
+                raise SceneError(
+                    f"quasi_static: the grasps at nodes {held[i]} and {held[j]} lie on the same side of the reference node "
+                    f"{ref}; their condensed stiffnesses couple, which springs between each arm and one rigid body cannot "
+                    "represent"
+                )
+        offsets = self.node_offsets()
+        specs = []
+        for ic, lk, k in zip(scene.interconnection_specs, scene.links, nodes, strict=True):
+            if lk.element.kind != "se3":
+                raise SceneError(f"quasi_static condenses SE(3) springs only; {lk.name!r} is {lk.element.kind!r}")
+            P = model.frames[lk.grasp_frame].placement  # G on its node
+            K_ic = np.asarray(lk.element.K)
+            if k == ref:
+                K_tip = K_ic
+            else:
+                i = held.index(k)
+                K_node = K_held[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]
+                R = np.kron(np.eye(2), P.rotation.T)
+                A = R @ rigid_map(P.translation)  # node displacement → G's, in G (= T at rest) axes
+                K_tip = K_ic - K_ic @ A @ np.linalg.solve(A.T @ K_ic @ A + K_node, A.T @ K_ic)
+            grasp = pin.SE3(np.eye(3), offsets[k]) * P
+            specs.append(dataclasses.replace(ic, stiffness=0.5 * (K_tip + K_tip.T), grasp=grasp, element="se3"))
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, scene.q0)
+        inertia = self.spatial_inertia()
+        body = RigidObject(
+            mass=inertia.mass,
+            inertia=inertia.inertia,
+            com=inertia.lever,
+            pose=pin.SE3(data.oMf[scene.object_frame]),
+            name=self.name,
+        )
+        return body, specs

@@ -1,16 +1,18 @@
-"""The held object: a rigid body on its own root joint."""
+"""The held object: a rigid body on its own root joint (a :class:`~.objects.SceneObject`)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
 
 from .. import _validate
 from ..errors import SceneError
+from .fields import Field, numbers, pose_data
+from .objects import Placement, SceneObject, Shape
 
 #: Root joints an object may have, and the Pinocchio joint each one builds.
 OBJECT_JOINTS = ("freeflyer", "prismatic", "planar")
@@ -31,8 +33,21 @@ def axis_vector(axis: str | Sequence[float], name: str) -> np.ndarray:
     return vec / norm
 
 
+_RIGID = {
+    "mass": Field("number", "mass [kg]", True),
+    "pose": Field("pose", "initial pose of the object frame in the world [m]"),
+    "com": Field("vector3", "centre of mass in the object frame [m]; default the origin"),
+    "joint": Field("string", f"root joint: one of {list(OBJECT_JOINTS)}; default freeflyer"),
+    "axis": Field("axis", "slide axis of a prismatic object, in the object frame; default 'z'"),
+    "name": Field("string", "name of the object's joint and frame; default 'object'"),
+}
+
+#: the size drawn for an object that does not say its own [m]
+DEFAULT_SIZE = (0.05, 0.05, 0.05)
+
+
 @dataclass(frozen=True, eq=False)
-class RigidObject:
+class RigidObject(SceneObject):
     """The object the arms hold.
 
     Attributes:
@@ -55,6 +70,17 @@ class RigidObject:
     axis: str | Sequence[float] = "z"
     name: str = "object"
     size: Any = None  #: edge lengths (x, y, z) [m] of a box, for visualisation (set by :meth:`box`)
+
+    description_types: ClassVar[dict[str, dict[str, Field]]] = {
+        "box": {**_RIGID, "size": Field("vector3", "edge lengths x, y, z [m] (a homogeneous box)", True)},
+        "rigid": {
+            **_RIGID,
+            "inertia": Field(
+                "matrix", "rotational inertia about the centre of mass, object axes: 3x3 or 3 principal [kg·m²]", True
+            ),
+            "size": Field("vector3", "edge lengths of the box drawn for it [m] (display only)"),
+        },
+    }
 
     @classmethod
     def box(cls, mass: float, size: Sequence[float], **kwargs: Any) -> RigidObject:
@@ -94,3 +120,68 @@ class RigidObject:
         if self.joint == "planar":
             return pin.JointModelPlanar()
         raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {self.joint!r}")
+
+    # -- the object protocol (objects.SceneObject) -----------------------------------------------
+    @property
+    def joint_label(self) -> str:
+        return self.joint
+
+    @classmethod
+    def from_description(cls, type_name: str, values: dict[str, Any]) -> RigidObject:
+        if "joint" in values and values["joint"] not in OBJECT_JOINTS:
+            raise SceneError(f"joint must be one of {list(OBJECT_JOINTS)}, got {values['joint']!r}")
+        if type_name == "box":
+            box = cls.box(values.pop("mass"), values.pop("size"), **values)
+            box.joint_model()  # (a prismatic box's axis)
+            return box
+        inertia = values["inertia"]
+        if np.ndim(inertia) == 1:
+            values["inertia"] = np.diag(inertia) if len(inertia) == 3 else inertia
+        obj = cls(**values)
+        obj.spatial_inertia()  # checked here, where the message can say so
+        obj.joint_model()
+        return obj
+
+    def mass_and_com(self) -> tuple[float, np.ndarray]:
+        return self.mass, np.asarray(self.com, dtype=float)
+
+    def describe(self) -> dict[str, Any]:
+        out = {"type": "rigid", "mass": float(self.mass), "inertia": numbers(self.inertia, "object inertia")}
+        out |= {"com": numbers(self.com, "object com"), "joint": self.joint, "name": self.name}
+        out["axis"] = self.axis if isinstance(self.axis, str) else numbers(self.axis, "object axis")
+        if self.size is not None:
+            out["size"] = numbers(self.size, "object size")
+        if self.pose is not None:
+            out["pose"] = pose_data(self.pose, "object pose")
+        return out
+
+    def check(self) -> None:
+        if not isinstance(self.joint, str) or self.joint not in OBJECT_JOINTS:
+            raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {self.joint!r}")
+
+    def add_to(self, model: pin.Model) -> Placement:
+        """The object on its own root joint: a free flyer placed at the world origin with the pose
+        in its coordinates, or a prismatic / planar joint placed at the pose."""
+        inertia = self.spatial_inertia()
+        oMo = pin.SE3.Identity() if self.pose is None else _validate.se3(self.pose, "object pose")
+        jmodel = self.joint_model()
+        if self.joint == "freeflyer":
+            placement, q_obj = pin.SE3.Identity(), pin.SE3ToXYZQUAT(oMo)
+        else:
+            placement, q_obj = oMo, _neutral(jmodel)
+        joint = model.addJoint(0, jmodel, placement, self.name)
+        model.appendBodyToJoint(joint, inertia, pin.SE3.Identity())
+        model.addBodyFrame(self.name, joint, pin.SE3.Identity(), 0)
+        return Placement(joint, (joint,), q_obj)
+
+    def shapes(self, model: pin.Model) -> list[Shape]:
+        size = tuple(float(x) for x in (self.size if self.size is not None else DEFAULT_SIZE))
+        frame = model.getFrameId(self.name)
+        return [Shape(f"{self.name}/box", model.frames[frame].parentJoint, frame, pin.SE3.Identity(), size)]  # type: ignore[arg-type]
+
+
+def _neutral(jmodel: pin.JointModel) -> np.ndarray:
+    """The neutral configuration of a single joint."""
+    m = pin.Model()
+    m.addJoint(0, jmodel, pin.SE3.Identity(), "j")
+    return pin.neutral(m)

@@ -33,20 +33,12 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, _robot_name, load_arm
-from .beam import Beam
-from .body import OBJECT_JOINTS, RigidObject
 from .elements import ELEMENTS, Section, lookup
+from .fields import Field, numbers, pose_data
 from .interconnection import Interconnection
+from .object_types import description_types
+from .objects import SceneObject
 from .scene import Scene
-
-
-class Field(NamedTuple):
-    """One key of a description table."""
-
-    kind: str  #: the kind of value (a key of :data:`KINDS`)
-    doc: str  #: what it means, with its unit
-    required: bool = False
-
 
 #: kinds of value, and what each accepts (the schema's wording)
 KINDS = {
@@ -83,31 +75,8 @@ ARM: dict[str, Field] = {
     "package_dirs": Field("paths", "folders holding the ROS packages a URDF's package:// mesh paths name"),
 }
 
-_RIGID = {
-    "mass": Field("number", "mass [kg]", True),
-    "pose": Field("pose", "initial pose of the object frame in the world [m]"),
-    "com": Field("vector3", "centre of mass in the object frame [m]; default the origin"),
-    "joint": Field("string", f"root joint: one of {list(OBJECT_JOINTS)}; default freeflyer"),
-    "axis": Field("axis", "slide axis of a prismatic object, in the object frame; default 'z'"),
-    "name": Field("string", "name of the object's joint and frame; default 'object'"),
-}
-#: ``[object]`` keys, per ``type``
-OBJECT: dict[str, dict[str, Field]] = {
-    "box": {**_RIGID, "size": Field("vector3", "edge lengths x, y, z [m] (a homogeneous box)", True)},
-    "rigid": {
-        **_RIGID,
-        "inertia": Field("matrix", "rotational inertia about the centre of mass, object axes: 3x3 or 3 principal [kg·m²]", True),
-        "size": Field("vector3", "edge lengths of the box drawn for it [m] (display only)"),
-    },
-    "beam": {
-        "length": Field("number", "length along the beam's x axis [m]", True),
-        "section": Field("section", "material and cross-section", True),
-        "n_elements": Field("integer", "beam elements (nodes = n_elements + 1); default 8"),
-        "pose": Field("pose", "initial pose of the beam frame (x along the beam, origin at its middle) [m]"),
-        "damping": Field("number", "stiffness-proportional damping β [s]; default 0"),
-        "name": Field("string", "prefix of the beam's joints and frames; default 'beam'"),
-    },
-}
+#: ``[object]`` keys, per ``type`` (each object class declares its own: object_types.OBJECTS)
+OBJECT: dict[str, dict[str, Field]] = {name: fields for name, (_, fields) in description_types().items()}
 
 #: a beam's ``section`` keys, per ``shape`` ("properties": the section given by its properties)
 SECTION: dict[str, dict[str, Field]] = {
@@ -186,21 +155,9 @@ def describe(scene: Scene) -> dict[str, Any]:
     return {
         "gravity": scene.gravity.tolist(),
         "arms": [_describe_arm(a) for a in scene.arm_specs],
-        "object": _describe_object(scene.object),
+        "object": scene.object.describe(),
         "interconnections": [_describe_link(ic) for ic in scene.interconnection_specs],
     }
-
-
-def pose_data(pose: Any, name: str = "pose") -> list[float] | dict[str, Any]:
-    """A pose as data: its translation alone when it does not rotate, else translation and rotation."""
-    M = _validate.se3(pose, name)
-    if np.array_equal(M.rotation, np.eye(3)):
-        return M.translation.tolist()
-    return {"translation": M.translation.tolist(), "rotation": M.rotation.tolist()}
-
-
-def _numbers(value: Any, name: str) -> Any:
-    return _validate.finite_array(value, name).tolist()
 
 
 def _matrix(value: Any, name: str) -> Any:
@@ -219,36 +176,17 @@ def _describe_arm(arm: Arm) -> dict[str, Any]:
     if arm.base is not None:
         out["base"] = pose_data(arm.base, f"arm {arm.name!r}: base")
     if arm.q0 is not None:
-        out["q0"] = _numbers(arm.q0, f"arm {arm.name!r}: q0")
+        out["q0"] = numbers(arm.q0, f"arm {arm.name!r}: q0")
     if isinstance(arm.locked_joints, Mapping):
         out["locked_joints"] = {str(k): float(v) for k, v in arm.locked_joints.items()}
     elif arm.locked_joints is not None:
         out["locked_joints"] = [str(j) for j in arm.locked_joints]
     damping = arm.joint_damping
-    out["joint_damping"] = damping if isinstance(damping, str) else _numbers(damping, f"arm {arm.name!r}: joint_damping")
+    out["joint_damping"] = damping if isinstance(damping, str) else numbers(damping, f"arm {arm.name!r}: joint_damping")
     if arm.mass_overrides:
         out["mass_overrides"] = {str(k): float(v) for k, v in arm.mass_overrides.items()}
     if arm.package_dirs:
         out["package_dirs"] = [str(Path(p).resolve()) for p in arm.package_dirs]
-    return out
-
-
-def _describe_object(obj: RigidObject | Beam) -> dict[str, Any]:
-    if isinstance(obj, Beam):
-        s = obj.section
-        section = {k: float(getattr(s, k)) for k in ("E", "G", "rho", "A", "Iy", "Iz", "J")}
-        if s.shear_factor is not None:
-            section["shear_factor"] = float(s.shear_factor)
-        out: dict[str, Any] = {"type": "beam", "length": obj.length, "section": section, "n_elements": obj.n_elements}
-        out |= {"damping": obj.damping, "name": obj.name}
-    else:
-        out = {"type": "rigid", "mass": float(obj.mass), "inertia": _numbers(obj.inertia, "object inertia")}
-        out |= {"com": _numbers(obj.com, "object com"), "joint": obj.joint, "name": obj.name}
-        out["axis"] = obj.axis if isinstance(obj.axis, str) else _numbers(obj.axis, "object axis")
-        if obj.size is not None:
-            out["size"] = _numbers(obj.size, "object size")
-    if obj.pose is not None:
-        out["pose"] = pose_data(obj.pose, "object pose")
     return out
 
 
@@ -470,33 +408,20 @@ def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:
     return arm
 
 
-def _build_object(entry: Any) -> RigidObject | Beam:
+def _build_object(entry: Any) -> SceneObject:
     where = Location("object")
     if not isinstance(entry, Mapping):
         raise DescriptionError(f"must be a table, got {_validate._short(entry)}", where)
     kind = entry.get("type")
-    if not isinstance(kind, str) or kind not in OBJECT:
-        raise DescriptionError(f"type must be one of {sorted(OBJECT)}, got {kind!r}", where._replace(key="type"))
-    fields = OBJECT[kind]
+    types = description_types()
+    if not isinstance(kind, str) or kind not in types:
+        raise DescriptionError(f"type must be one of {sorted(types)}, got {kind!r}", where._replace(key="type"))
+    cls, fields = types[kind]
     entry = {k: v for k, v in entry.items() if k != "type"}
     _keys(entry, fields, where)
     kwargs = _values(entry, fields, where)
-    if "joint" in kwargs and kwargs["joint"] not in OBJECT_JOINTS:
-        raise DescriptionError(f"must be one of {list(OBJECT_JOINTS)}, got {kwargs['joint']!r}", where._replace(key="joint"))
     try:
-        if kind == "beam":
-            return Beam(**kwargs)
-        if kind == "box":
-            box = RigidObject.box(kwargs.pop("mass"), kwargs.pop("size"), **kwargs)
-            box.joint_model()  # (a prismatic box's axis)
-            return box
-        inertia = kwargs["inertia"]
-        if np.ndim(inertia) == 1:
-            kwargs["inertia"] = np.diag(inertia) if len(inertia) == 3 else inertia
-        obj = RigidObject(**kwargs)
-        obj.spatial_inertia()  # checked here, where the message can say so
-        obj.joint_model()
-        return obj
+        return cls.from_description(kind, kwargs)
     except SceneError as exc:
         raise DescriptionError(str(exc), where) from None
 

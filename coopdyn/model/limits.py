@@ -90,68 +90,24 @@ __all__ = ["quasi_static", "rigid_limit"]
 def quasi_static(scene: Scene) -> Scene:
     """The scene with its elastic object condensed: the book's quasi-static elastic system.
 
-    A :class:`~coopdyn.model.beam.Beam`'s nodes other than the reference one are taken as
-    massless and eliminated by static condensation: the whole beam becomes one rigid body
-    (its mass and inertia, on the reference node's frame), and each grasp's SE(3) spring is
-    replaced by the series stiffness of that spring and the beam between its node and the
-    reference node (Schur complement of the assembled linear stiffness, reference node
-    clamped), in the spring's own axes. The dampers are kept as they are. A scene with a rigid
-    object is returned unchanged (its interconnections are already massless).
+    The object's own elasticity is condensed into the interconnections that hold it
+    (:meth:`~coopdyn.model.objects.SceneObject.condensed`): a :class:`~coopdyn.model.beam.Beam`'s
+    nodes other than the reference one are taken as massless and eliminated by static
+    condensation, the whole beam becomes one rigid body (its mass and inertia, on the reference
+    node's frame), and each grasp's SE(3) spring is replaced by the series stiffness of that
+    spring and the beam between its node and the reference node, in the spring's own axes; the
+    dampers are kept. A scene with a rigid object is returned unchanged (its interconnections
+    are already massless).
 
     Raises:
         SceneError: two grasps on the same side of the reference node (their condensed
             stiffnesses couple, which pairwise springs cannot represent), or an interconnection
             that is not an SE(3) spring.
     """
-    from .beam import Beam, rigid_map
-    from .body import RigidObject
-
     if not isinstance(scene, Scene):
         raise SceneError(f"quasi_static takes a coopdyn.Scene, got {type(scene).__name__}")
-    beam = scene.object
-    if not isinstance(beam, Beam):
+    condensed = scene.object.condensed(scene)
+    if condensed is None:
         return scene
-    model = scene.model
-    node_of = {model.getJointId(f"{beam.name}/node{k}"): k for k in range(beam.n_nodes)}
-    nodes = [node_of[model.frames[lk.grasp_frame].parentJoint] for lk in scene.links]
-    ref = beam.reference_node
-    free = [k for k in range(beam.n_nodes) if k != ref]
-    K = beam.stiffness_matrix()
-    held = sorted(set(nodes) - {ref})
-    a = (6 * np.array(held, dtype=int)[:, None] + np.arange(6)).ravel()  # their coordinates
-    b = (6 * np.array([k for k in free if k not in held], dtype=int)[:, None] + np.arange(6)).ravel()
-    K_held = K[np.ix_(a, a)] - K[np.ix_(a, b)] @ np.linalg.solve(K[np.ix_(b, b)], K[np.ix_(b, a)])
-    for i, j in ((i, j) for i in range(len(held)) for j in range(len(held)) if i != j):
-        if np.abs(K_held[6 * i : 6 * i + 6, 6 * j : 6 * j + 6]).max() > 1e-9 * np.abs(K_held).max():
-            raise SceneError(
-                f"quasi_static: the grasps at nodes {held[i]} and {held[j]} lie on the same side of the reference node "
-                f"{ref}; their condensed stiffnesses couple, which springs between each arm and one rigid body cannot represent"
-            )
-    offsets = beam.node_offsets()
-    specs = []
-    for ic, lk, k in zip(scene.interconnection_specs, scene.links, nodes, strict=True):
-        if lk.element.kind != "se3":
-            raise SceneError(f"quasi_static condenses SE(3) springs only; {lk.name!r} is {lk.element.kind!r}")
-        P = model.frames[lk.grasp_frame].placement  # G on its node
-        K_ic = np.asarray(lk.element.K)  # type: ignore[attr-defined]
-        if k == ref:
-            K_tip = K_ic
-        else:
-            i = held.index(k)
-            K_node = K_held[6 * i : 6 * i + 6, 6 * i : 6 * i + 6]
-            R = np.kron(np.eye(2), P.rotation.T)
-            A = R @ rigid_map(P.translation)  # node displacement → G's, in G (= T at rest) axes
-            K_tip = K_ic - K_ic @ A @ np.linalg.solve(A.T @ K_ic @ A + K_node, A.T @ K_ic)
-        grasp = pin.SE3(np.eye(3), offsets[k]) * P
-        specs.append(dataclasses.replace(ic, stiffness=0.5 * (K_tip + K_tip.T), grasp=grasp, element="se3"))
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, scene.q0)
-    inertia = beam.spatial_inertia()
-    body = RigidObject(
-        mass=inertia.mass,
-        inertia=inertia.inertia,
-        com=inertia.lever,
-        pose=pin.SE3(data.oMf[scene.object_frame]),
-        name=beam.name,
-    )
+    body, specs = condensed
     return Scene(list(scene.arm_specs), body, specs, gravity=scene.gravity)

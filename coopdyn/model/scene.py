@@ -7,7 +7,6 @@ around explicitly and Pinocchio ``Data`` lives in :class:`coopdyn.dynamics.Dynam
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -18,10 +17,9 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
-from .beam import Beam
-from .body import OBJECT_JOINTS, RigidObject
 from .elements import Element
 from .interconnection import Interconnection
+from .objects import SceneObject
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +74,7 @@ def available_memory() -> float | None:
 MEMORY_SHARE = 0.5  #: the part of the available memory a scene's Pinocchio data may take
 
 
-def check_memory(nv: int, obj: Any) -> None:
+def check_memory(nv: int, obj: SceneObject) -> None:
     """Refuse, before anything big is allocated, a model whose Pinocchio data would not fit."""
     need = DATA_ALIVE * data_bytes(nv)
     available = available_memory()
@@ -86,10 +84,7 @@ def check_memory(nv: int, obj: Any) -> None:
     if need <= have:
         return
     fits = next((n for n in range(nv, 0, -1) if DATA_ALIVE * data_bytes(n) <= have), 0)
-    hint = ""
-    if isinstance(obj, Beam):
-        most = obj.n_elements - math.ceil((nv - fits) / 6)
-        hint = f"; this beam fits with at most {max(most, 0)} elements" if most >= 1 else "; no beam of free nodes fits"
+    hint = obj.memory_hint(nv, fits)
     raise SceneError(
         f"this scene has nv = {nv} velocities: a run holds {DATA_ALIVE} Pinocchio Data of {data_bytes(nv) / 1e9:.3g} GB each "
         f"(four nv×nv×nv tensors), {need / 1e9:.3g} GB in all, more than {MEMORY_SHARE:.0%} of the {available / 1e9:.3g} GB "
@@ -108,7 +103,8 @@ class Scene:
 
     Args:
         arms: the arms (possibly none: an object held by fixtures only); names must be unique.
-        obj: the held object: a :class:`RigidObject`, or an elastic :class:`~coopdyn.model.beam.Beam`.
+        obj: the held object: a :class:`~coopdyn.model.body.RigidObject`, an elastic
+            :class:`~coopdyn.model.beam.Beam`, or any :class:`~coopdyn.model.objects.SceneObject`.
         interconnections: at least one; each names an arm (an arm may have several) or
             ``None`` for a world fixture.
         gravity: gravity acceleration in the world, (3,) [m/s²].
@@ -138,7 +134,7 @@ class Scene:
     arm_specs: tuple[Arm, ...]
     interconnection_specs: tuple[Interconnection, ...]
     loaded_arms: tuple[LoadedArm, ...]
-    object: RigidObject | Beam
+    object: SceneObject
     object_joint: int
     object_frame: int
     object_q: np.ndarray
@@ -152,7 +148,7 @@ class Scene:
     def __init__(
         self,
         arms: Sequence[Arm],
-        obj: RigidObject | Beam,
+        obj: SceneObject,
         interconnections: Sequence[Interconnection],
         gravity: Any = (0.0, 0.0, -9.81),
     ) -> None:
@@ -171,16 +167,17 @@ class Scene:
             raise SceneError(f"arm names must be non-empty strings, got {names!r}")
         if len(set(names)) != len(names):
             raise SceneError(f"arm names must be unique, got {names}")
-        if not isinstance(obj, RigidObject | Beam):
-            raise SceneError(f"obj must be a coopdyn.RigidObject or a coopdyn.Beam, got {type(obj).__name__}")
+        if not isinstance(obj, SceneObject):
+            raise SceneError(
+                f"obj must be a coopdyn object (coopdyn.RigidObject, coopdyn.Beam or a SceneObject), got {type(obj).__name__}"
+            )
         if not isinstance(obj.name, str) or not obj.name:
             raise SceneError(f"the object's name must be a non-empty string, got {obj.name!r}")
         if obj.name == "universe" or any(obj.name == n or obj.name.startswith(f"{n}/") for n in names):
             raise SceneError(
                 f"the object's name {obj.name!r} is taken (by the world frame 'universe' or an arm's frames); rename the object"
             )
-        if isinstance(obj, RigidObject) and (not isinstance(obj.joint, str) or obj.joint not in OBJECT_JOINTS):
-            raise SceneError(f"object joint must be one of {OBJECT_JOINTS}, got {obj.joint!r}")
+        obj.check()
         if len(interconnections) == 0:
             raise SceneError("a scene needs at least one interconnection (arm tip or world fixture ↔ object)")
 
@@ -191,20 +188,8 @@ class Scene:
             model = pin.appendModel(model, la.model, 0, la.base)
         model.gravity = pin.Motion(np.concatenate([_validate.finite_array(gravity, "gravity", (3,)), np.zeros(3)]))
 
-        if isinstance(obj, Beam):
-            obj_joint, node_joints, q_obj = _add_beam(model, obj)
-        else:  # the object on its own root joint
-            inertia = obj.spatial_inertia()
-            oMo = pin.SE3.Identity() if obj.pose is None else _validate.se3(obj.pose, "object pose")
-            jmodel = obj.joint_model()
-            if obj.joint == "freeflyer":
-                placement, q_obj = pin.SE3.Identity(), pin.SE3ToXYZQUAT(oMo)
-            else:
-                placement, q_obj = oMo, _neutral(jmodel)
-            obj_joint = model.addJoint(0, jmodel, placement, obj.name)
-            model.appendBodyToJoint(obj_joint, inertia, pin.SE3.Identity())
-            model.addBodyFrame(obj.name, obj_joint, pin.SE3.Identity(), 0)
-            node_joints = [obj_joint]
+        placed = obj.add_to(model)
+        obj_joint, node_joints, q_obj = placed.reference, list(placed.joints), placed.q0
 
         arm_infos = tuple(_arm_info(model, la) for la in loaded)
         q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
@@ -248,14 +233,16 @@ class Scene:
                     world_M_object * o_M_G if ic.fixture is None else _validate.se3(ic.fixture, f"interconnections[{k}].fixture")
                 )
                 tip = model.addFrame(pin.Frame(f"world/fixture{k}", 0, w_M_T, pin.FrameType.OP_FRAME))
-            g_joint, o_M_G = _grasp_node(obj, node_joints, o_M_G)
+            g_joint, o_M_G = obj.grasp_joint(placed, o_M_G)
             g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", g_joint, o_M_G, pin.FrameType.OP_FRAME))
             links.append(Link(name, i_arm, int(tip), int(g_id), law, element_type.native))
         link_names = [lk.name for lk in links]
         if len(set(link_names)) != len(link_names):  # an arm with several links: number them
             links = [dataclasses.replace(lk, name=f"{lk.name}{k}") for k, lk in enumerate(links)]
 
-        internal = _beam_elements(model, obj, node_joints) if isinstance(obj, Beam) else []
+        internal = [
+            Link(il.name, None, il.tip_frame, il.grasp_frame, il.element, il.native) for il in obj.internal_links(model, placed)
+        ]
         j_first, j_last = model.joints[node_joints[0]], model.joints[node_joints[-1]]
         actuated = np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
         first, n = int(actuated[0]) if actuated.size else 0, actuated.size
@@ -363,7 +350,7 @@ class Scene:
 
     def __repr__(self) -> str:
         arms = ", ".join(a.name for a in self.arms)
-        obj = f"{self.object.name!r} ({self.object.joint})"
+        obj = f"{self.object.name!r} ({self.object.joint_label})"
         return f"Scene(arms=[{arms}], object={obj}, links={len(self.links)}, nq={self.nq}, nv={self.nv})"
 
 
@@ -406,12 +393,6 @@ def _rebuilt(state: dict[str, Any]) -> Scene:
     return scene
 
 
-def _neutral(jmodel: pin.JointModel) -> np.ndarray:
-    m = pin.Model()
-    m.addJoint(0, jmodel, pin.SE3.Identity(), "j")
-    return pin.neutral(m)
-
-
 def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
     joint_names = tuple(la.model.names[i] for i in range(1, la.model.njoints))
     q_index: list[int] = []
@@ -428,41 +409,3 @@ def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
         tip_frame=int(model.getFrameId(la.tip_frame)),
         damping=_frozen(np.array(la.damping, dtype=float)),
     )
-
-
-def _add_beam(model: pin.Model, beam: Beam) -> tuple[int, list[int], np.ndarray]:
-    """A beam's nodes as free bodies: (the reference node's joint, every node's joint, their q)."""
-    oMb = pin.SE3.Identity() if beam.pose is None else _validate.se3(beam.pose, "beam pose")
-    joints, q = [], []
-    for k, (x, inertia) in enumerate(zip(beam.node_x(), beam.node_inertias(), strict=True)):
-        j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), f"{beam.name}/node{k}")
-        model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
-        model.addBodyFrame(f"{beam.name}/node{k}", j, pin.SE3.Identity(), 0)
-        joints.append(j)
-        q.append(pin.SE3ToXYZQUAT(oMb * pin.SE3(np.eye(3), np.array([x, 0.0, 0.0]))))
-    ref = joints[beam.reference_node]
-    model.addFrame(pin.Frame(beam.name, ref, pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-    return ref, joints, np.concatenate(q)
-
-
-def _grasp_node(obj: RigidObject | Beam, joints: list[int], o_M_G: pin.SE3) -> tuple[int, pin.SE3]:
-    """The joint a grasp frame rides on and its placement there: a beam's node nearest the grasp point."""
-    if not isinstance(obj, Beam):
-        return joints[0], o_M_G
-    offsets = obj.node_offsets()
-    k = int(np.argmin(np.linalg.norm(offsets - o_M_G.translation, axis=1)))
-    return joints[k], pin.SE3(np.eye(3), -offsets[k]) * o_M_G
-
-
-def _beam_elements(model: pin.Model, beam: Beam, joints: list[int]) -> list[Link]:
-    """The beam elements as links: T on node k where node k + 1 rests, G on node k + 1."""
-    h = beam.element_length
-    out = []
-    for k in range(beam.n_elements):
-        name = f"{beam.name}/element{k}"
-        t_id = model.addFrame(
-            pin.Frame(f"{name}/T", joints[k], pin.SE3(np.eye(3), np.array([h, 0.0, 0.0])), pin.FrameType.OP_FRAME)
-        )
-        g_id = model.addFrame(pin.Frame(f"{name}/G", joints[k + 1], pin.SE3.Identity(), pin.FrameType.OP_FRAME))
-        out.append(Link(name, None, int(t_id), int(g_id), beam.element(k), "se3"))
-    return out

@@ -76,7 +76,7 @@ def result_figure(result: Result, reference: Any = None, path: str | os.PathLike
     """The figure that suits ``result``: the book's Figure 11 for the book's linear system (two
     interconnections, three prismatic coordinates), :func:`cooperative_figure` otherwise."""
     scene = result.scene
-    if scene.object.joint == "prismatic" and len(scene.links) == 2 and scene.nv == 3:
+    if len(scene.object_v) == 1 and len(scene.links) == 2 and scene.nv == 3:  # a 1-DOF object between two 1-DOF arms
         return book_figure(result, None, path)
     return cooperative_figure(result, reference, path)
 

@@ -166,30 +166,10 @@ def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
             copy.parentFrame = model.getFrameId(frame_name) if model.existFrame(frame_name) else 0
             geom.addGeometryObject(copy)
         del info
-    from ..model.beam import Beam
-
-    obj = scene.object
-    if isinstance(obj, Beam):  # one segment per node, an element long: the chain bends with the nodes
-        h, width = obj.element_length, max(np.sqrt(12 * obj.section.Iz / obj.section.A), 0.005)
-        height = max(np.sqrt(12 * obj.section.Iy / obj.section.A), 0.005)
-        for k in range(obj.n_nodes):
-            joint = model.getJointId(f"{obj.name}/node{k}")
-            length = h if 0 < k < obj.n_elements else h / 2
-            shift = 0.0 if 0 < k < obj.n_elements else (h / 4 if k == 0 else -h / 4)
-            segment = pin.GeometryObject(
-                f"{obj.name}/segment{k}",
-                joint,
-                model.getFrameId(f"{obj.name}/node{k}"),
-                pin.SE3(np.eye(3), np.array([shift, 0.0, 0.0])),
-                coal.Box(length * 0.96, width, height),
-            )
-            segment.meshColor = np.array([0.85, 0.55, 0.2, 1.0])
-            geom.addGeometryObject(segment)
-        return geom
-    size = obj.size if obj.size is not None else (0.05, 0.05, 0.05)
-    box = pin.GeometryObject(f"{obj.name}/box", scene.object_joint, scene.object_frame, pin.SE3.Identity(), coal.Box(*size))
-    box.meshColor = np.array([0.85, 0.55, 0.2, 1.0])
-    geom.addGeometryObject(box)
+    for shape in scene.object.shapes(model):  # the object draws itself (a beam: one box per node)
+        box = pin.GeometryObject(shape.name, shape.joint, shape.frame, shape.placement, coal.Box(*shape.size))
+        box.meshColor = np.array([0.85, 0.55, 0.2, 1.0])
+        geom.addGeometryObject(box)
     return geom
 
 

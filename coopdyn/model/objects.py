@@ -1,0 +1,123 @@
+"""The object protocol: what a scene asks of the object the arms hold.
+
+A :class:`~coopdyn.model.scene.Scene` adds its object to the Pinocchio model, puts the grasp
+frames on it, takes its internal elastic elements, draws it, describes it as data and builds it
+back — all through :class:`SceneObject`, which :class:`~coopdyn.model.body.RigidObject` and
+:class:`~coopdyn.model.beam.Beam` implement; nothing outside the object modules asks which kind
+of object a scene has. A new object is a module with a subclass, its tests and one line in
+:data:`coopdyn.model.object_types.OBJECTS` (docs/extending.md).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from .elements import Element
+from .fields import Field
+
+
+class Placement(NamedTuple):
+    """Where an object went in a scene's model."""
+
+    reference: int  #: the joint the object frame rides on
+    joints: tuple[int, ...]  #: every joint of the object, in order (a rigid object: one)
+    q0: np.ndarray  #: their initial coordinates, in order
+
+
+class InternalLink(NamedTuple):
+    """One of the object's own elastic elements (a beam's elements): between two of its frames."""
+
+    name: str
+    tip_frame: int  #: T
+    grasp_frame: int  #: G
+    element: Element
+    native: str | None  #: the element's C++ twin
+
+
+class Shape(NamedTuple):
+    """A box drawn for the object (the viewer's geometry)."""
+
+    name: str
+    joint: int
+    frame: int
+    placement: pin.SE3  #: in the joint's frame
+    size: tuple[float, float, float]  #: edge lengths x, y, z [m]
+
+
+class SceneObject(ABC):
+    """What a scene asks of its object (see the module docstring).
+
+    A subclass is an immutable dataclass with at least ``name`` and ``pose`` (the initial pose of
+    the object frame in the world, or None) and implements the abstract methods.
+    """
+
+    name: str
+    pose: Any
+    #: its types in a description (scene files, saved results): type name → its keys
+    description_types: ClassVar[dict[str, dict[str, Field]]]
+
+    @property
+    @abstractmethod
+    def joint_label(self) -> str:
+        """What a scene's summary calls the object's joints (``"freeflyer"``, ``"beam of free nodes"``)."""
+
+    @classmethod
+    @abstractmethod
+    def from_description(cls, type_name: str, values: dict[str, Any]) -> SceneObject:
+        """The object a description's ``[object]`` table of ``type_name`` holds (``values``:
+        its keys, checked and converted by kind); raise SceneError when it is not one."""
+
+    @abstractmethod
+    def describe(self) -> dict[str, Any]:
+        """This object as a description's ``[object]`` table (``type`` and its keys)."""
+
+    def check(self) -> None:  # noqa: B027 (a hook: most objects check everything when made)
+        """Refuse (SceneError) what its constructor could not check on its own."""
+
+    @abstractmethod
+    def mass_and_com(self) -> tuple[float, np.ndarray]:
+        """Its mass [kg] and centre of mass in the object frame (3,) [m] (at rest)."""
+
+    @abstractmethod
+    def spatial_inertia(self) -> pin.Inertia:
+        """Its mass, centre of mass and rotational inertia, about the object frame (at rest)."""
+
+    @abstractmethod
+    def add_to(self, model: pin.Model) -> Placement:
+        """Add the object's joints, bodies and its frame (named :attr:`name`) to ``model``."""
+
+    def grasp_joint(self, placement: Placement, o_M_G: pin.SE3) -> tuple[int, pin.SE3]:
+        """The joint a grasp frame at ``o_M_G`` (in the object frame) rides on, and its placement
+        there. Default: the reference joint."""
+        return placement.reference, o_M_G
+
+    def internal_links(self, model: pin.Model, placement: Placement) -> list[InternalLink]:
+        """The object's own elastic elements, their frames added to ``model``. Default: none."""
+        return []
+
+    def memory_hint(self, nv: int, fits: int) -> str:
+        """What of this object would fit when a scene of ``nv`` velocities does not and ``fits`` would
+        (appended to the refusal). Default: nothing."""
+        return ""
+
+    @abstractmethod
+    def shapes(self, model: pin.Model) -> list[Shape]:
+        """The boxes the viewer draws for it."""
+
+    def lowest_frequency(self) -> float | None:
+        """Its own lowest elastic mode when free [Hz]; None for a rigid object (no elastic model of its own)."""
+        return None
+
+    def condensed(self, scene: Any) -> tuple[SceneObject, list[Any]] | None:
+        """The quasi-static model of ``scene`` (this object's scene): the object made one rigid
+        body, and the :class:`~coopdyn.model.interconnection.Interconnection` list that holds
+        it with the object's elasticity condensed into them; None when there is nothing to
+        condense (a rigid object)."""
+        return None
+
+
+__all__ = ["InternalLink", "Placement", "SceneObject", "Shape"]
