@@ -1,4 +1,4 @@
-// ComputedTorque holding q0 (coopdyn/control.py) in C++.
+// ComputedTorque holding q0 (coopdyn/control/joint.py) in C++.
 #pragma once
 
 #include "controller.hpp"

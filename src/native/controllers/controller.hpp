@@ -1,5 +1,5 @@
 // The built-in controllers in C++ for the compiled step loop (loop.hpp): the same laws, in the
-// same operation order, as their Python definitions (coopdyn/control.py, coopdyn/cooperative.py,
+// same operation order, as their Python definitions (coopdyn/control/joint.py, control/cooperative.py,
 // coopdyn/problems/linear_book.py), tested equal to round-off (tests/test_compiled_loop.py).
 // This header is the protocol and the registry: each other header in this folder defines one
 // controller and registers its factory under the "kind" its Python class's compiled_spec()

@@ -1,4 +1,4 @@
-// GravityCompensationPD (coopdyn/control.py) in C++.
+// GravityCompensationPD (coopdyn/control/joint.py) in C++.
 #pragma once
 
 #include "controller.hpp"

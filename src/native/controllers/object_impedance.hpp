@@ -1,4 +1,4 @@
-// ObjectImpedance with its task, hold or GripLiftOscillate (coopdyn/cooperative.py), in C++.
+// ObjectImpedance with its task, hold or GripLiftOscillate (coopdyn/control/cooperative.py), in C++.
 #pragma once
 
 #include "controller.hpp"

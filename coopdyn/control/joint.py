@@ -7,9 +7,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import _validate
-from .errors import SceneError
-from .model.scene import Scene
+from .. import _validate
+from ..errors import SceneError
+from ..model.scene import Scene
 
 
 def _scene(scene: Any, who: str) -> Scene:
