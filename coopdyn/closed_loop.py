@@ -60,6 +60,9 @@ class System:
         self.n_actuated = self._scene.n_actuated
         self.neutral = pin.neutral(self._model)
         self._zero = np.zeros(self.n_actuated)
+        #: [rad/s or m/s] a state faster than this is a runaway (simulate sets its max_speed): a
+        #: controller's non-finite torques there are the state's doing, not the controller's
+        self.max_speed = math.inf
         self.n_rhs = 0
         self.n_jac = 0
         self.n_factor = 0
@@ -129,9 +132,15 @@ class System:
             )
         if not math.isfinite(float(tau @ tau)):  # one dot product; NaN, ±inf (and overflow) fail it
             bad = np.flatnonzero(~np.isfinite(tau)).tolist()
-            if bad:
+            if bad and self._sane(q, v):
                 raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")
+            # at a runaway state (an adaptive method's trial stage far past its stability limit) the
+            # torques carry the state's overflow: the attempt is rejected, or the run reported diverged
         return tau
+
+    def _sane(self, q: np.ndarray, v: np.ndarray) -> bool:
+        """Whether (q, v) is finite and no faster than :attr:`max_speed`."""
+        return bool(np.all(np.isfinite(q)) and np.all(np.isfinite(v)) and (v.size == 0 or np.max(np.abs(v)) <= self.max_speed))
 
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """q̈ (nv,) at (t, q, v); counts one right-hand-side evaluation and records the net power

@@ -160,6 +160,7 @@ def simulate(
     budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
 
     system = System(Dynamics(scene, backend), controller, object_wrench)
+    system.max_speed = max_speed
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
     if stream_to is not None:

@@ -57,6 +57,22 @@ def test_an_adaptive_method_shrinks_a_step_that_goes_non_finite() -> None:
     assert np.allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-9)
 
 
+def test_a_runaway_trial_stage_is_not_the_controllers_fault() -> None:
+    """The held beam under ObjectImpedance, dopri5 with a 1 ms first step: the first attempts'
+    stages reach |v| ~ 1e66, where the compiled controller's torques overflow to NaN (the Python
+    one's to 1e89). A non-finite torque at a state past max_speed is the state's doing: both
+    loops reject the attempt and finish equal to round-off, where the compiled loop reported a
+    ControllerError. At a sane state a NaN torque is still the controller's error (tested above)."""
+    from coopdyn.cooperative import ObjectImpedance
+
+    scene = cd.scenes.held_beam()
+    v0 = np.random.default_rng(1).normal(size=scene.nv) * 0.1
+    settings = {"integrator": "dopri5", "dt": 1e-3, "v0": v0, "progress": False, "accuracy_check": "off"}
+    runs = [cd.simulate(scene, 0.003, controller=ObjectImpedance(scene), loop=lp, **settings) for lp in ("python", "compiled")]
+    assert [r.status for r in runs] == ["completed", "completed"]
+    assert np.allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [

@@ -194,13 +194,19 @@ public:
       std::string bad;
       for (Eigen::Index i = 0; i < tau_.size(); ++i)
         if (!std::isfinite(tau_[i])) bad += (bad.empty() ? "" : ", ") + std::to_string(i);
-      if (!bad.empty()) {
+      // At a runaway state (an adaptive method's trial stage far past its stability limit) the
+      // torques carry the state's overflow: the attempt is rejected, or the run reported diverged.
+      if (!bad.empty() && sane(q, v)) {
         fail_t_ = t;
         throw ControllerFailure("[" + bad + "]");
       }
     }
   }
   const VectorXd & tau() const { return tau_; }
+  // Whether (q, v) is finite and no faster than max_speed (System._sane).
+  bool sane(const VectorXd & q, const VectorXd & v) const {
+    return q.allFinite() && v.allFinite() && (v.size() == 0 || v.cwiseAbs().maxCoeff() <= max_speed_);
+  }
   Eigen::Index n_actuated() const { return na_; }
   Kernel & kernel() { return k_; }
   // q̈ into `a`: one counted RHS evaluation, recorded.
