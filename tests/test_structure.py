@@ -89,3 +89,38 @@ def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
     ]
     kinds = {"none"} | {ctrl.compiled_spec(scene)["kind"] for ctrl, scene in built_in}
     assert kinds == set(_native.CONTROLLERS)
+
+
+def test_every_setting_crosses_to_cpp_by_name_and_a_setting_it_does_not_read_is_refused() -> None:
+    """The round trip of the parameter hand-over: every built-in method's and controller's
+    compiled config is read field by field (the compiled-loop tests would fail otherwise), and a
+    field the kernel does not read — misspelled, or added in Python only — is refused by name,
+    in the loop's settings, a controller's and a nested task's."""
+    import numpy as np
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn import _native, compiled
+    from coopdyn.closed_loop import System
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+    from coopdyn.integrators import Trapezoid
+    from coopdyn.scenes import object_start
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4)
+    dyn = cd.Dynamics(scene, "native")
+    ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene)))
+    system = System(dyn, ctrl)
+    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
+    config = compiled.plan(scene, system, Trapezoid(), energy_check="off", **base).config
+    assert config is not None
+    kernel = dyn._kernel  # type: ignore[attr-defined]
+    _native.make_loop(kernel, config)  # as written: every field read
+    with pytest.raises(ValueError, match=r"compiled loop: the kernel does not read the setting\(s\) gama"):
+        _native.make_loop(kernel, {**config, "gama": 0.5})
+    controller = config["controller"]
+    with pytest.raises(ValueError, match=r"controller 'object_impedance': the kernel does not read the setting\(s\) Kq"):
+        _native.make_loop(kernel, {**config, "controller": {**controller, "Kq": np.ones(3)}})
+    with pytest.raises(ValueError, match=r"controller 'object_impedance': task: the kernel does not read the setting\(s\) lft"):
+        _native.make_loop(kernel, {**config, "controller": {**controller, "task": {**controller["task"], "lft": 0.1}}})
+    with pytest.raises(ValueError, match="controller 'object_impedance': missing setting null_k"):
+        _native.make_loop(kernel, {**config, "controller": {k: v for k, v in controller.items() if k != "null_k"}})

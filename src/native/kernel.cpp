@@ -27,34 +27,39 @@ using coopdyn_native::Loop;
 using coopdyn_native::StepMatrixError;
 namespace cn = coopdyn_native;
 
-using cn::get;
-using cn::vec;
+using cn::Settings;
 
 // The controller `c` describes (its "kind" from the registry in controllers/, built from c).
-std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & c) {
-  const std::string kind = get<std::string>(c, "kind");
+std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & values) {
+  const std::string kind = bp::extract<std::string>(values.get("kind", ""))();
   const auto found = cn::controller_registry().find(kind);
   if (found == cn::controller_registry().end()) throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
-  return found->second(c, k);
+  Settings c("controller '" + kind + "'", values);
+  c.get<std::string>("kind");
+  std::unique_ptr<cn::Controller> out = found->second(c, k);
+  c.check_all_read();
+  return out;
 }
 
-// A compiled run of `kernel` as `cfg` describes it (coopdyn/compiled.py writes it): the method
-// family named by cfg["method"] from the registry (methods/), built from cfg.
-std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict cfg) {
-  const std::string family = get<std::string>(cfg, "method");
+// A compiled run of `kernel` as `values` describes it (coopdyn/compiled.py writes it): the method
+// family named by values["method"] from the registry (methods/), built from the same settings;
+// every setting given must be read by the loop, the method or the controller.
+std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict values) {
+  Settings cfg("compiled loop", values);
+  const std::string family = cfg.get<std::string>("method");
   const auto found = cn::method_registry().find(family);
   if (found == cn::method_registry().end()) throw std::invalid_argument("compiled loop: unknown method " + family);
   const Model & model = kernel.model();
   const Eigen::Index na = kernel.actuated().size();
   auto loop = std::make_shared<Loop>(
-    kernel, make_controller(kernel, get<bp::dict>(cfg, "controller")), found->second(cfg, model, na),
-    get<bool>(cfg, "adaptive"), get<int>(cfg, "error_order"), vec(cfg, "kp", na), vec(cfg, "kd", na),
-    vec(cfg, "q0", model.nq), vec(cfg, "v0", model.nv), get<double>(cfg, "dt"), get<double>(cfg, "t_final"),
-    get<long>(cfg, "n_steps"), get<long>(cfg, "save_every"), get<double>(cfg, "max_speed"), get<int>(cfg, "energy_mode"),
-    get<long>(cfg, "energy_every"), get<double>(cfg, "energy_rtol"), get<double>(cfg, "rtol"), get<double>(cfg, "atol"),
-    get<double>(cfg, "h_min"));
-  loop->set_first_step(get<double>(cfg, "dt"));
-  if (cfg.has_key("n_factor")) loop->set_factorisations(get<long>(cfg, "n_factor"));
+    kernel, make_controller(kernel, cfg.get<bp::dict>("controller")), found->second(cfg, model, na),
+    cfg.get<bool>("adaptive"), cfg.get<int>("error_order"), cfg.vec("kp", na), cfg.vec("kd", na), cfg.vec("q0", model.nq),
+    cfg.vec("v0", model.nv), cfg.get<double>("dt"), cfg.get<double>("t_final"), cfg.get<long>("n_steps"),
+    cfg.get<long>("save_every"), cfg.get<double>("max_speed"), cfg.get<int>("energy_mode"), cfg.get<long>("energy_every"),
+    cfg.get<double>("energy_rtol"), cfg.get<double>("rtol"), cfg.get<double>("atol"), cfg.get<double>("h_min"));
+  loop->set_first_step(cfg.get<double>("dt"));
+  if (cfg.has("n_factor")) loop->set_factorisations(cfg.get<long>("n_factor"));
+  cfg.check_all_read();
   return loop;
 }
 

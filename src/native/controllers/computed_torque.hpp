@@ -34,14 +34,14 @@ struct ComputedTorqueHold : Controller {
 };
 
 // {q_index (one configuration index per actuated joint), kp, kd, q_d (n_actuated)}
-inline std::unique_ptr<Controller> make_computed_torque(const bp::dict & c, Kernel & k) {
+inline std::unique_ptr<Controller> make_computed_torque(Settings & c, Kernel & k) {
   const Model & model = k.model();
   const Eigen::Index na = k.actuated().size();
-  const Eigen::VectorXi q_index = get<Eigen::VectorXi>(c, "q_index");
+  const Eigen::VectorXi q_index = c.get<Eigen::VectorXi>("q_index");
   if (q_index.size() != na || (na && (q_index.minCoeff() < 0 || q_index.maxCoeff() >= model.nq)))
     throw std::invalid_argument("compiled loop: q_index must hold one configuration index per actuated joint");
-  return std::make_unique<ComputedTorqueHold>(model, k.actuated(), q_index, vec(c, "kp", na), vec(c, "kd", na),
-                                              vec(c, "q_d", na));
+  return std::make_unique<ComputedTorqueHold>(model, k.actuated(), q_index, c.vec("kp", na), c.vec("kd", na),
+                                              c.vec("q_d", na));
 }
 
 inline const bool computed_torque_registered = register_controller("computed_torque", &make_computed_torque);

@@ -39,7 +39,7 @@ struct GraspGeometryError : std::runtime_error {
 };
 
 // A controller's constructor from its settings (its compiled_spec()) and the run's kernel.
-using ControllerFactory = std::unique_ptr<Controller> (*)(const bp::dict & settings, Kernel & kernel);
+using ControllerFactory = std::unique_ptr<Controller> (*)(Settings & settings, Kernel & kernel);
 
 inline std::map<std::string, ControllerFactory> & controller_registry() {
   static std::map<std::string, ControllerFactory> registry;
@@ -52,7 +52,7 @@ inline bool register_controller(const char * kind, ControllerFactory make) {
   return true;
 }
 
-inline std::unique_ptr<Controller> make_no_torque(const bp::dict &, Kernel &) { return std::make_unique<NoTorque>(); }
+inline std::unique_ptr<Controller> make_no_torque(Settings &, Kernel &) { return std::make_unique<NoTorque>(); }
 inline const bool no_torque_registered = register_controller("none", &make_no_torque);
 
 }  // namespace coopdyn_native

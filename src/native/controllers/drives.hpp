@@ -25,9 +25,9 @@ struct Drives : Controller {
 };
 
 // {segments: one (rows, 6) matrix per actuated joint}
-inline std::unique_ptr<Controller> make_drives(const bp::dict & c, Kernel & k) {
+inline std::unique_ptr<Controller> make_drives(Settings & c, Kernel & k) {
   std::vector<MatrixXd> segments;
-  bp::list drives = get<bp::list>(c, "segments");
+  bp::list drives = c.get<bp::list>("segments");
   for (bp::ssize_t i = 0; i < bp::len(drives); ++i) {
     segments.push_back(bp::extract<MatrixXd>(drives[i]));
     if (segments.back().cols() != 6 || segments.back().rows() < 1)

@@ -35,9 +35,9 @@ struct GravityPD : Controller {
 };
 
 // {kp, kd (n_actuated), q_des (nq)}
-inline std::unique_ptr<Controller> make_gravity_pd(const bp::dict & c, Kernel & k) {
+inline std::unique_ptr<Controller> make_gravity_pd(Settings & c, Kernel & k) {
   const Eigen::Index na = k.actuated().size();
-  return std::make_unique<GravityPD>(k, vec(c, "kp", na), vec(c, "kd", na), vec(c, "q_des", k.model().nq));
+  return std::make_unique<GravityPD>(k, c.vec("kp", na), c.vec("kd", na), c.vec("q_des", k.model().nq));
 }
 
 inline const bool gravity_pd_registered = register_controller("gravity_pd", &make_gravity_pd);

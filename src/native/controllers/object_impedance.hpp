@@ -209,11 +209,11 @@ struct ObjectImpedanceLaw : Controller {
 // {grasps: (grasp frame, tip frame, arm velocity indices) each, task: {hold, start, rotation, and
 // for GripLiftOscillate its timings}, object_frame, mass, com, gravity, Kp, Kr, Dp, Dr,
 // joint_damping, null_k, null_d, q0}
-inline std::unique_ptr<Controller> make_object_impedance(const bp::dict & c, Kernel & k) {
+inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & k) {
   const Model & model = k.model();
   const Eigen::Index nq = model.nq, nv = model.nv;
   std::vector<ObjectImpedanceLaw::Grasp> grasps;
-  bp::list gl = get<bp::list>(c, "grasps");
+  bp::list gl = c.get<bp::list>("grasps");
   for (bp::ssize_t i = 0; i < bp::len(gl); ++i) {
     bp::tuple g = bp::extract<bp::tuple>(gl[i]);
     ObjectImpedanceLaw::Grasp gr;
@@ -228,28 +228,29 @@ inline std::unique_ptr<Controller> make_object_impedance(const bp::dict & c, Ker
     grasps.push_back(std::move(gr));
   }
   ObjectTask task;
-  bp::dict t = get<bp::dict>(c, "task");
-  task.hold = get<bool>(t, "hold");
-  task.start = vec(t, "start", 3);
-  task.R = mat3(t, "rotation");
+  Settings t = c.sub("task");
+  task.hold = t.get<bool>("hold");
+  task.start = t.vec("start", 3);
+  task.R = t.mat3("rotation");
   if (!task.hold) {
-    task.axis = vec(t, "axis", 3);
-    task.squeeze = get<double>(t, "squeeze");
-    task.t_grip = get<double>(t, "t_grip");
-    task.lift = get<double>(t, "lift");
-    task.t_lift = get<double>(t, "t_lift");
-    task.lift_duration = get<double>(t, "lift_duration");
-    task.amplitude = get<double>(t, "amplitude");
-    task.frequency = get<double>(t, "frequency");
-    task.t_osc = get<double>(t, "t_osc");
-    task.cycles = get<double>(t, "cycles");
+    task.axis = t.vec("axis", 3);
+    task.squeeze = t.get<double>("squeeze");
+    task.t_grip = t.get<double>("t_grip");
+    task.lift = t.get<double>("lift");
+    task.t_lift = t.get<double>("t_lift");
+    task.lift_duration = t.get<double>("lift_duration");
+    task.amplitude = t.get<double>("amplitude");
+    task.frequency = t.get<double>("frequency");
+    task.t_osc = t.get<double>("t_osc");
+    task.cycles = t.get<double>("cycles");
   }
-  const pinocchio::FrameIndex object_frame = get<pinocchio::FrameIndex>(c, "object_frame");
+  t.check_all_read();
+  const pinocchio::FrameIndex object_frame = c.get<pinocchio::FrameIndex>("object_frame");
   if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
   return std::make_unique<ObjectImpedanceLaw>(
-    model, object_frame, std::move(grasps), std::move(task), get<double>(c, "mass"), vec(c, "com", 3),
-    vec(c, "gravity", 3), vec(c, "Kp", 3), vec(c, "Kr", 3), vec(c, "Dp", 3), vec(c, "Dr", 3),
-    get<double>(c, "joint_damping"), get<double>(c, "null_k"), get<double>(c, "null_d"), vec(c, "q0", nq));
+    model, object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
+    c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
+    c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq));
 }
 
 inline const bool object_impedance_registered = register_controller("object_impedance", &make_object_impedance);

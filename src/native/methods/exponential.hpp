@@ -50,9 +50,9 @@ public:
   }
 
   // The discretisations of `settings`: (h, step, predictor, inner, p) each, shapes checked.
-  static std::unique_ptr<Method> make(const bp::dict & settings, const Model & model, Eigen::Index na) {
+  static std::unique_ptr<Method> make(Settings & settings, const Model & model, Eigen::Index na) {
     std::vector<Discretisation> out;
-    bp::list steps = get<bp::list>(settings, "discretisations");
+    bp::list steps = settings.get<bp::list>("discretisations");
     for (bp::ssize_t i = 0; i < bp::len(steps); ++i) {
       bp::tuple d = bp::extract<bp::tuple>(steps[i]);
       Discretisation x;

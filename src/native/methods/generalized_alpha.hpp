@@ -52,8 +52,8 @@ public:
   }
 
   // (α_m < 1, α_f, γ > 0, β > 0) from settings["alpha"].
-  static std::unique_ptr<Method> make(const bp::dict & settings, const Model & model, Eigen::Index) {
-    const std::vector<double> alpha = doubles(get<bp::object>(settings, "alpha"));
+  static std::unique_ptr<Method> make(Settings & settings, const Model & model, Eigen::Index) {
+    const std::vector<double> alpha = settings.doubles("alpha");
     if (alpha.size() != 4 || !(alpha[0] < 1.0) || !(alpha[2] > 0.0) || !(alpha[3] > 0.0))
       throw std::invalid_argument("compiled loop: generalized-alpha needs (alpha_m < 1, alpha_f, gamma > 0, beta > 0)");
     return std::make_unique<GeneralizedAlpha>(alpha[0], alpha[1], alpha[2], alpha[3], model.nq);

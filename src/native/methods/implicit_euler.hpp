@@ -37,8 +37,8 @@ public:
     return 0.0;
   }
 
-  static std::unique_ptr<Method> make(const bp::dict & settings, const Model &, Eigen::Index) {
-    const int every = get<int>(settings, "jacobian_every");
+  static std::unique_ptr<Method> make(Settings & settings, const Model &, Eigen::Index) {
+    const int every = settings.get<int>("jacobian_every");
     if (every < 1) throw std::invalid_argument("compiled loop: jacobian_every must be >= 1");
     return std::make_unique<ImplicitEuler>(every);
   }

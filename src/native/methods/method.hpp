@@ -30,7 +30,7 @@ public:
 };
 
 // A family's constructor from the run's settings (its compiled_spec() merged into the loop's).
-using MethodFactory = std::unique_ptr<Method> (*)(const bp::dict & settings, const Model & model, Eigen::Index n_actuated);
+using MethodFactory = std::unique_ptr<Method> (*)(Settings & settings, const Model & model, Eigen::Index n_actuated);
 
 inline std::map<std::string, MethodFactory> & method_registry() {
   static std::map<std::string, MethodFactory> registry;

@@ -36,10 +36,10 @@ public:
     return L.error_norm(q, v, v_new, e_d_, e_v_);
   }
 
-  static std::unique_ptr<Method> make(const bp::dict & settings, const Model & model, Eigen::Index) {
-    const double gamma = get<double>(settings, "gamma");
+  static std::unique_ptr<Method> make(Settings & settings, const Model & model, Eigen::Index) {
+    const double gamma = settings.get<double>("gamma");
     if (!(gamma >= 0.5 && gamma <= 2.0)) throw std::invalid_argument("compiled loop: a Rosenbrock gamma must lie in [0.5, 2]");
-    return std::make_unique<Rosenbrock>(gamma, get<bool>(settings, "adaptive"), model.nq);
+    return std::make_unique<Rosenbrock>(gamma, settings.get<bool>("adaptive"), model.nq);
   }
 
 private:

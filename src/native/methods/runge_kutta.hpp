@@ -45,14 +45,14 @@ public:
   void rejected() override { fsal_valid_ = false; }
 
   // The tableau of `settings` (A, b, c, and b_hat when adaptive), checked explicit and consistent.
-  static std::unique_ptr<Method> make(const bp::dict & settings, const Model & model, Eigen::Index) {
+  static std::unique_ptr<Method> make(Settings & settings, const Model & model, Eigen::Index) {
     Tableau tab;
-    bp::list A = get<bp::list>(settings, "A");
-    for (bp::ssize_t i = 0; i < bp::len(A); ++i) tab.A.push_back(doubles(A[i]));
-    tab.b = doubles(settings["b"]);
-    tab.c = doubles(settings["c"]);
-    if (settings.has_key("b_hat")) tab.b_hat = doubles(settings["b_hat"]);
-    const bool adaptive = get<bool>(settings, "adaptive");
+    bp::list A = settings.get<bp::list>("A");
+    for (bp::ssize_t i = 0; i < bp::len(A); ++i) tab.A.push_back(to_doubles(A[i]));
+    tab.b = settings.doubles("b");
+    tab.c = settings.doubles("c");
+    if (settings.has("b_hat")) tab.b_hat = settings.doubles("b_hat");
+    const bool adaptive = settings.get<bool>("adaptive");
     if (tab.A.empty() || tab.b.size() != tab.A.size() || tab.c.size() != tab.A.size() ||
         (adaptive && tab.b_hat.size() != tab.A.size()))
       throw std::invalid_argument("compiled loop: inconsistent Butcher tableau");

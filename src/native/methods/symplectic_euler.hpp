@@ -15,7 +15,7 @@ public:
     return 0.0;
   }
 
-  static std::unique_ptr<Method> make(const bp::dict &, const Model &, Eigen::Index) {
+  static std::unique_ptr<Method> make(Settings &, const Model &, Eigen::Index) {
     return std::make_unique<SymplecticEuler>();
   }
 
