@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..dynamics.backend import resolve
+from ..integrators import INTEGRATORS
 from .cases import Case, Row, linear_case, panda_case
 from .measure import _implicit_cost, peer_rows, rhs_timing, single_threaded_blas, stability_sweep, work_precision
 from .report import (
@@ -68,17 +69,7 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
     out_dir.mkdir(parents=True, exist_ok=True)
     stiffnesses = [1e4, 1e5, 1e6]
     cases = [linear_case(3.0)] + [panda_case(k, 0.1 if quick else 0.2) for k in stiffnesses]
-    methods = [
-        "symplectic_euler",
-        "rk4",
-        "dopri5",
-        "implicit_euler",
-        "ros2",
-        "ros2_adaptive",
-        "trapezoid",
-        "generalized_alpha",
-        "exponential",
-    ]
+    methods = [name for name, cls in INTEGRATORS.items() if "compiled_spec" in cls.__dict__]  # the built-ins (not scipy)
     with single_threaded_blas():
         rows = work_precision(cases, methods, quick=quick, repeats=1 if quick else 5, progress=progress)
         rows += peer_rows(cases[0], quick=quick, repeats=1 if quick else 5, progress=progress)
