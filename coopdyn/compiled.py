@@ -10,11 +10,13 @@ the progress bar, issues the warnings the chunk reported, and can be interrupted
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from ._spec import CompiledSpec, ExponentialSpec
 from .closed_loop import System
 from .errors import ControllerError, CoopdynError
 from .integrators import Integrator
@@ -34,18 +36,23 @@ FIRST_CHUNK = 64
 _ENERGY_MODES = {"off": 0, "warn": 1, "raise": 2}
 
 
-def _own_spec(obj: Any, *args: Any) -> dict[str, Any] | None:
+def _own_spec(obj: Any, *args: Any) -> CompiledSpec | None:
     """``obj.compiled_spec(*args)`` when obj's own class defines it (a subclass that changes the
     behaviour runs in Python), else None."""
     spec = type(obj).__dict__.get("compiled_spec")
     if spec is None:
         return None
     try:
-        return spec(obj, *args)
+        out = spec(obj, *args)
     except (CoopdynError, KeyboardInterrupt):
         raise
     except Exception as exc:  # a user's class: say whose hook failed
         raise ControllerError(f"{type(obj).__name__}.compiled_spec raised {type(exc).__name__}: {exc}") from exc
+    if out is not None and not isinstance(out, CompiledSpec):
+        raise ControllerError(
+            f"{type(obj).__name__}.compiled_spec returned {type(out).__name__}; it must return a spec from coopdyn._spec, or None"
+        )
+    return out
 
 
 class Plan(NamedTuple):
@@ -80,25 +87,23 @@ def plan(
     if system.controller is None:
         controller: dict[str, Any] | None = {"kind": "none"}
     else:
-        controller = _own_spec(system.controller, scene)
+        controller_spec = _own_spec(system.controller, scene)
+        controller = controller_spec.fields() if controller_spec is not None else None
         if controller is None:
             return Plan(
                 None,
                 f"the controller {type(system.controller).__name__} has no compiled version for this run (Python code, "
                 "a Python reference or drive, or built for another scene)",
             )
-    if spec["method"] == "exponential":  # discretised here, once per step size the run takes
+    if isinstance(spec, ExponentialSpec):  # discretised here, once per step size the run takes
         ws = method.workspace(system)
         last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}
         steps = sorted({min(dt, t_final - k * dt) for k in last})
-        spec["discretisations"] = [(h, *method.discretisation(system, h, ws)) for h in steps]  # type: ignore[attr-defined]
-        spec["n_factor"] = system.n_factor
+        discretisations = [(h, *method.discretisation(system, h, ws)) for h in steps]  # type: ignore[attr-defined]
+        spec = dataclasses.replace(spec, discretisations=discretisations, n_factor=system.n_factor)
     kp, kd = system.gains
-    adaptive = bool(spec.get("adaptive", False))
     config = {
-        "adaptive": adaptive,
-        "error_order": 0,
-        **spec,  # the method family's name and settings, read by its header in src/native/methods/
+        **spec.fields(),  # the method family's name and settings, read by its header in src/native/methods/
         "controller": controller,
         "kp": np.asarray(kp, dtype=float),
         "kd": np.asarray(kd, dtype=float),

@@ -29,7 +29,7 @@ def test_every_compiled_method_family_is_one_registry_entry_on_each_side() -> No
     used = {}
     for name, cls in INTEGRATORS.items():
         if "compiled_spec" in cls.__dict__:  # the built-ins with a compiled twin (scipy has none)
-            used[name] = cls().compiled_spec()["method"]
+            used[name] = cls().compiled_spec().name
     assert set(used.values()) == set(_native.METHODS), used
     assert set(INTEGRATORS) - set(used) == {"scipy"}
 
@@ -87,7 +87,7 @@ def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
         (ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas))), pandas),
         (cd.scenes.drives_controller(*cd.scenes.book_task()), book),
     ]
-    kinds = {"none"} | {ctrl.compiled_spec(scene)["kind"] for ctrl, scene in built_in}
+    kinds = {"none"} | {ctrl.compiled_spec(scene).name for ctrl, scene in built_in}
     assert kinds == set(_native.CONTROLLERS)
 
 
@@ -124,3 +124,30 @@ def test_every_setting_crosses_to_cpp_by_name_and_a_setting_it_does_not_read_is_
         _native.make_loop(kernel, {**config, "controller": {**controller, "task": {**controller["task"], "lft": 0.1}}})
     with pytest.raises(ValueError, match="controller 'object_impedance': missing setting null_k"):
         _native.make_loop(kernel, {**config, "controller": {k: v for k, v in controller.items() if k != "null_k"}})
+
+
+def test_a_compiled_spec_is_a_typed_spec_and_a_dict_is_refused_by_name() -> None:
+    """compiled_spec returns a dataclass of coopdyn._spec (its fields are what C++ reads, checked
+    both ways by make_loop); a user's class returning a plain dict is told so."""
+    import dataclasses
+
+    import numpy as np
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn import _spec
+    from coopdyn.control import GravityCompensationPD
+
+    spec = GravityCompensationPD(cd.scenes.linear_book()).compiled_spec(cd.scenes.linear_book())
+    assert spec is None  # another scene: not this controller's
+    book = cd.scenes.linear_book()
+    spec = GravityCompensationPD(book).compiled_spec(book)
+    assert isinstance(spec, _spec.GravityPDSpec) and dataclasses.is_dataclass(spec)
+    assert set(spec.fields()) == {"kind", "kp", "kd", "q_des"}
+
+    class DictSpec(GravityCompensationPD):
+        def compiled_spec(self, scene: cd.Scene) -> dict[str, object]:  # type: ignore[override]
+            return {"kind": "gravity_pd", "kp": self.kp, "kd": self.kd, "q_des": self.q_des}
+
+    with pytest.raises(cd.errors.ControllerError, match=r"DictSpec\.compiled_spec returned dict; it must return a spec"):
+        cd.simulate(book, 0.01, controller=DictSpec(book), integrator="rk4", dt=1e-3, loop="compiled", v0=np.zeros(book.nv))

@@ -28,6 +28,7 @@ import pinocchio as pin
 from scipy.linalg import cho_solve
 
 from .. import _validate
+from .._spec import ObjectImpedanceSpec
 from ..errors import SceneError
 from ..grasp import squeeze_directions
 from ..model.scene import Scene
@@ -353,7 +354,7 @@ class ObjectImpedance:
             out.append(tau)
         return np.concatenate(out)
 
-    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+    def compiled_spec(self, scene: Scene) -> ObjectImpedanceSpec | None:
         """This law for the compiled step loop: with the default hold or a :class:`GripLiftOscillate`
         reference (None for a Python reference, which runs in Python)."""
         if scene is not self.scene:
@@ -374,20 +375,22 @@ class ObjectImpedance:
             }
         else:
             return None
-        return {
-            "kind": "object_impedance",
-            "object_frame": int(scene.object_frame),
-            "grasps": [(int(g), int(t), np.asarray(arm.v_index, dtype=np.int32)) for g, t, arm in self._links],
-            "task": task,
-            "mass": float(self.mass),
-            "com": self._com.copy(),
-            "gravity": np.asarray(scene.gravity, dtype=float),
-            **{name: getattr(self, name).copy() for name in ("Kp", "Kr", "Dp", "Dr")},
-            "joint_damping": float(self.joint_damping),
-            "null_k": float(self.null_stiffness),
-            "null_d": float(self.null_damping),
-            "q0": scene.q0.copy(),
-        }
+        return ObjectImpedanceSpec(
+            object_frame=int(scene.object_frame),
+            grasps=[(int(g), int(t), np.asarray(arm.v_index, dtype=np.int32)) for g, t, arm in self._links],
+            task=task,
+            mass=float(self.mass),
+            com=self._com.copy(),
+            gravity=np.asarray(scene.gravity, dtype=float),
+            Kp=self.Kp.copy(),
+            Kr=self.Kr.copy(),
+            Dp=self.Dp.copy(),
+            Dr=self.Dr.copy(),
+            joint_damping=float(self.joint_damping),
+            null_k=float(self.null_stiffness),
+            null_d=float(self.null_damping),
+            q0=scene.q0.copy(),
+        )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint damping added by the controller, for implicit integrators [N·m/rad], [N·m·s/rad]."""

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from .. import _validate
+from .._spec import ComputedTorqueSpec, GravityPDSpec
 from ..errors import SceneError
 from ..model.scene import Scene
 
@@ -49,11 +50,11 @@ class GravityCompensationPD:
         adds to the joints, for implicit integrators and :func:`coopdyn.advise`."""
         return self.kp, self.kd
 
-    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+    def compiled_spec(self, scene: Scene) -> GravityPDSpec | None:
         """This law for the compiled step loop (None: the scene is not this controller's)."""
         if scene is not self.scene:
             return None
-        return {"kind": "gravity_pd", "kp": self.kp.copy(), "kd": self.kd.copy(), "q_des": self.q_des.copy()}
+        return GravityPDSpec(kp=self.kp.copy(), kd=self.kd.copy(), q_des=self.q_des.copy())
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         act, model = self.scene.actuated_index, self.scene.model
@@ -104,17 +105,13 @@ class ComputedTorque:
         h = pin.nonLinearEffects(model, data, q, v)[act]
         return M @ (a_d + self.kp * (q_d - q[self._q_index]) + self.kd * (v_d - v[act])) + h
 
-    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+    def compiled_spec(self, scene: Scene) -> ComputedTorqueSpec | None:
         """This law for the compiled step loop, when it holds q0 (a Python reference runs in Python)."""
         if scene is not self.scene or self.reference is not self._hold_reference:
             return None
-        return {
-            "kind": "computed_torque",
-            "q_index": self._q_index.astype(np.int32),
-            "kp": self.kp.copy(),
-            "kd": self.kd.copy(),
-            "q_d": self._hold.copy(),
-        }
+        return ComputedTorqueSpec(
+            q_index=self._q_index.astype(np.int32), kp=self.kp.copy(), kd=self.kd.copy(), q_d=self._hold.copy()
+        )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """Approximate joint stiffness/damping [N·m/rad], [N·m·s/rad]: diag(M)·(Kp, Kd) at q0."""

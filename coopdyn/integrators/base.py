@@ -23,6 +23,8 @@ from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
+from .._spec import MethodSpec
+
 
 class Problem(Protocol):
     """The closed loop as integrators see it (:class:`coopdyn.closed_loop.System` implements it).
@@ -116,7 +118,7 @@ class Integrator(ABC):
         """Advance from (t, q, v) by ``h`` [s]; return the new (q, v). ``ws``: this method's
         workspace for the run (:meth:`workspace`), or None."""
 
-    def compiled_spec(self) -> dict[str, Any] | None:
+    def compiled_spec(self) -> MethodSpec | None:
         """What the compiled step loop needs to run this method, or None (the Python loop runs it).
 
         Only the built-in classes define it; :func:`coopdyn.simulate` uses it only when the

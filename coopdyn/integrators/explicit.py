@@ -3,12 +3,14 @@ adaptive Dormand–Prince 5(4) pair. Methods that differ only in coefficients di
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
+from .._spec import RungeKuttaSpec, SymplecticEulerSpec
 from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
@@ -25,8 +27,8 @@ class SymplecticEuler(Integrator):
         v_new = v + h * system.acceleration(t, q, v)
         return system.integrate(q, h * v_new), v_new
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "symplectic_euler"}
+    def compiled_spec(self) -> SymplecticEulerSpec:
+        return SymplecticEulerSpec()
 
     def spectral_radius(self, A: np.ndarray, h: float) -> float:
         """The method is partitioned (no scalar R(z)): use its step matrix on x' = A x."""
@@ -95,11 +97,9 @@ def _stages(
     return kd, ka, last
 
 
-def _tableau_spec(tab: ButcherTableau) -> dict[str, Any]:
-    spec: dict[str, Any] = {"method": "rk", "A": [list(row) for row in tab.A], "b": list(tab.b), "c": list(tab.c)}
-    if tab.b_hat is not None:
-        spec["b_hat"] = list(tab.b_hat)
-    return spec
+def _tableau_spec(tab: ButcherTableau) -> RungeKuttaSpec:
+    b_hat = list(tab.b_hat) if tab.b_hat is not None else None
+    return RungeKuttaSpec(A=[list(row) for row in tab.A], b=list(tab.b), c=list(tab.c), b_hat=b_hat)
 
 
 def _rk_stability(tab: ButcherTableau, z: np.ndarray, weights: tuple[float, ...]) -> np.ndarray:
@@ -145,7 +145,7 @@ class RK4(ExplicitRungeKutta):
         c=(0.0, 0.5, 0.5, 1.0),
     )
 
-    def compiled_spec(self) -> dict[str, Any]:
+    def compiled_spec(self) -> RungeKuttaSpec:
         return _tableau_spec(self.tableau)
 
 
@@ -186,8 +186,8 @@ class DormandPrince(AdaptiveIntegrator):
         b_hat=(5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40),
     )
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {**_tableau_spec(self.tableau), "adaptive": True, "error_order": self.error_order}
+    def compiled_spec(self) -> RungeKuttaSpec:
+        return dataclasses.replace(_tableau_spec(self.tableau), adaptive=True, error_order=self.error_order)
 
     def workspace(self, system: Problem) -> _FirstSameAsLast:
         return _FirstSameAsLast()

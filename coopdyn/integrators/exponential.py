@@ -17,6 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.linalg
 
+from .._spec import ExponentialSpec
 from ..errors import SimulationError
 from .base import Integrator, Problem
 
@@ -92,8 +93,8 @@ class Exponential(Integrator):
             raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {hold!r}")
         self.hold = hold
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "exponential"}
+    def compiled_spec(self) -> ExponentialSpec:
+        return ExponentialSpec()
 
     def workspace(self, system: Problem) -> _Discretisations:
         return _Discretisations()

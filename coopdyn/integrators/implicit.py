@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
+from .._spec import GeneralizedAlphaSpec, ImplicitEulerSpec, RosenbrockSpec
 from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 
@@ -57,8 +58,8 @@ class LinearlyImplicitEuler(Integrator):
             raise SimulationError(f"jacobian_every must be an integer >= 1, got {jacobian_every!r}")
         self.jacobian_every = jacobian_every
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "implicit_euler", "jacobian_every": self.jacobian_every}
+    def compiled_spec(self) -> ImplicitEulerSpec:
+        return ImplicitEulerSpec(jacobian_every=self.jacobian_every)
 
     def workspace(self, system: Problem) -> _Reuse | None:
         return _Reuse() if self.jacobian_every > 1 else None
@@ -143,8 +144,8 @@ class ROS2(Integrator):
         delta, v_new, _, _ = _ros2(system, t, q, v, h)
         return system.integrate(q, delta), v_new
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "rosenbrock", "gamma": GAMMA}
+    def compiled_spec(self) -> RosenbrockSpec:
+        return RosenbrockSpec(gamma=GAMMA)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
@@ -174,8 +175,8 @@ class AdaptiveROS2(AdaptiveIntegrator):
         delta, v_new, e_d, e_v = _ros2(system, t, q, v, h)
         return Attempt(system.integrate(q, delta), v_new, self.error_norm(system, e_d, e_v, q, v, v_new))
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "rosenbrock", "gamma": GAMMA, "adaptive": True, "error_order": self.error_order}
+    def compiled_spec(self) -> RosenbrockSpec:
+        return RosenbrockSpec(gamma=GAMMA, adaptive=True, error_order=self.error_order)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z)
@@ -222,8 +223,8 @@ class Trapezoid(Integrator):
         delta, v_new, _, _ = _ros2(system, t, q, v, h, self.gamma)
         return system.integrate(q, delta), v_new
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "rosenbrock", "gamma": self.gamma}
+    def compiled_spec(self) -> RosenbrockSpec:
+        return RosenbrockSpec(gamma=self.gamma)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _ros2_stability(z, self.gamma)
@@ -352,8 +353,8 @@ class GeneralizedAlpha(Integrator):
             ws.a, ws.q, ws.v = (xh - am * a) / (1.0 - am), q1, v1
         return q1, v1
 
-    def compiled_spec(self) -> dict[str, Any]:
-        return {"method": "generalized_alpha", "alpha": [self.alpha_m, self.alpha_f, self.gamma, self.beta]}
+    def compiled_spec(self) -> GeneralizedAlphaSpec:
+        return GeneralizedAlphaSpec(alpha=(self.alpha_m, self.alpha_f, self.gamma, self.beta))
 
     def spectral_radius(self, A: np.ndarray, h: float) -> float:
         n = A.shape[0] // 2

@@ -27,6 +27,7 @@ import numpy as np
 import scipy.linalg
 
 from .. import _validate
+from .._spec import DrivesSpec
 from ..errors import SceneError
 from ..model.arm import Arm
 from ..model.body import RigidObject
@@ -383,16 +384,13 @@ class DrivesController:
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.array([d(t) for d in self.drives])
 
-    def compiled_spec(self, scene: Scene) -> dict[str, Any] | None:
+    def compiled_spec(self, scene: Scene) -> DrivesSpec | None:
         """The drives' segments for the compiled step loop: rows (start, constant, ramp,
         amplitude, omega, phase)."""
         if len(self.drives) != scene.n_actuated or any(type(d) is not Drive for d in self.drives):
             return None  # another callable (or a Drive subclass) runs in Python
         fields = ("start", "constant", "ramp", "amplitude", "omega", "phase")
-        return {
-            "kind": "drives",
-            "segments": [np.array([[float(getattr(s, f)) for f in fields] for s in d.segments]) for d in self.drives],
-        }
+        return DrivesSpec(segments=[np.array([[float(getattr(s, f)) for f in fields] for s in d.segments]) for d in self.drives])
 
 
 def drives_controller(*drives: Drive) -> DrivesController:
