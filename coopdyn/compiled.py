@@ -55,6 +55,24 @@ def _own_spec(obj: Any, *args: Any) -> CompiledSpec | None:
     return out
 
 
+class PythonCallback:
+    """A Python controller as the compiled loop calls it: ``System.torque`` (read-only q and v,
+    the shape and finiteness checks and their messages), with what it raises kept in
+    :attr:`error` and None returned, so that the loop stops and :func:`coopdyn.simulate`
+    re-raises it (src/native/controllers/python_controller.hpp)."""
+
+    def __init__(self, system: System) -> None:
+        self.system = system
+        self.error: BaseException | None = None
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+        try:
+            return self.system.torque(t, q, v)
+        except BaseException as exc:  # Ctrl-C too: re-raised by simulate once the loop has stopped
+            self.error = exc
+            return None
+
+
 class Plan(NamedTuple):
     """The compiled loop's configuration, or None and why the run stays in Python."""
 
@@ -88,13 +106,11 @@ def plan(
         controller: dict[str, Any] | None = {"kind": "none"}
     else:
         controller_spec = _own_spec(system.controller, scene)
-        controller = controller_spec.fields() if controller_spec is not None else None
-        if controller is None:
-            return Plan(
-                None,
-                f"the controller {type(system.controller).__name__} has no compiled version for this run (Python code, "
-                "a Python reference or drive, or built for another scene)",
-            )
+        # a controller without a compiled version for this run (Python code, a Python reference or
+        # drive, or built for another scene) is called from the compiled loop
+        controller = (
+            controller_spec.fields() if controller_spec is not None else {"kind": "python", "callback": PythonCallback(system)}
+        )
     if isinstance(spec, ExponentialSpec):  # discretised here, once per step size the run takes
         ws = method.workspace(system)
         last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}

@@ -84,14 +84,15 @@ def simulate(
             world axes, at the object frame origin (disturbances, loads, contacts).
         backend: ``"native"`` (the compiled kernel), ``"python"`` or ``"auto"`` (see
             :mod:`coopdyn.backend`); ``None`` reads ``COOPDYN_BACKEND`` (default ``"auto"``).
-        loop: ``"auto"`` (default) runs the steps in the compiled loop when every piece is built
-            in — native backend, an integrator from ``INTEGRATORS`` (all but ``scipy``), no
-            controller or a built-in one (``GravityCompensationPD``,
+        loop: ``"auto"`` (default) runs the steps in the compiled loop when it can — native
+            backend, an integrator from ``INTEGRATORS`` (all but ``scipy``), no ``object_wrench``
+            — and in Python otherwise. A built-in controller (``GravityCompensationPD``,
             ``ComputedTorque`` holding q0, ``ObjectImpedance`` holding or with
-            ``GripLiftOscillate``, ``drives_controller``), no ``object_wrench`` — and in Python
-            otherwise; ``"compiled"`` requires the compiled loop (SimulationError saying which
-            piece is Python); ``"python"`` forces the Python loop. Both give the same result to
-            round-off; ``Result.loop`` says which ran.
+            ``GripLiftOscillate``, ``drives_controller``) runs compiled too; any other callable is
+            called from the compiled loop at each evaluation (Python code, with the GIL taken
+            for the call). ``"compiled"`` requires the compiled loop (SimulationError saying
+            which piece keeps it in Python); ``"python"`` forces the Python loop. Both give the
+            same result to round-off; ``Result.loop`` says which ran.
         max_steps: refuse a run whose ``t_final / dt`` exceeds this many steps, before it starts
             (the message estimates its CPU time); for adaptive methods, also the most steps
             (accepted and rejected) they may take (:class:`StepBudgetError` past it). ``None``:
@@ -556,6 +557,9 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
             f"the step fell below h_min = {method.h_min:g} s"  # type: ignore[attr-defined]
         )
     if status == compiled.CONTROLLER:
+        callback = config["controller"].get("callback")
+        if callback is not None and callback.error is not None:  # a Python controller raised: its own error
+            raise callback.error
         raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {message})")
     if status == compiled.SCENE:
         raise SceneError(f"{message} (at t = {t:.6g} s)")

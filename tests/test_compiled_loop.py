@@ -146,8 +146,8 @@ def test_gravity_compensation_on_a_joint_the_kinematic_gravity_does_not_take(tmp
 
 
 def test_python_pieces_run_in_the_python_loop(pandas: cd.Scene) -> None:
-    """A Python controller, a subclass of a built-in method, an object wrench: the Python loop,
-    chosen automatically; loop='compiled' says which piece is Python."""
+    """A subclass of a built-in method, an object wrench: the Python loop, chosen automatically;
+    loop='compiled' says which piece is Python. A Python controller runs compiled (called back)."""
 
     def ctrl(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.zeros(pandas.n_actuated)
@@ -155,13 +155,61 @@ def test_python_pieces_run_in_the_python_loop(pandas: cd.Scene) -> None:
     class MyRK4(RK4):
         pass
 
-    assert cd.simulate(pandas, 0.01, controller=ctrl).loop == "python"
+    assert cd.simulate(pandas, 0.01, controller=ctrl).loop == "compiled"
     assert cd.simulate(pandas, 0.01, integrator=MyRK4()).loop == "python"
     assert cd.simulate(pandas, 0.01, object_wrench=lambda t: np.zeros(6)).loop == "python"
     assert cd.simulate(pandas, 0.01, backend="python").loop == "python"
     assert cd.simulate(pandas, 0.01).loop == "compiled"
-    with pytest.raises(cd.SimulationError, match=r"cannot run this simulation: the controller function has no compiled version"):
-        cd.simulate(pandas, 0.01, controller=ctrl, loop="compiled")
+    with pytest.raises(cd.SimulationError, match=r"cannot run this simulation: the integrator MyRK4.* has no compiled version"):
+        cd.simulate(pandas, 0.01, integrator=MyRK4(), loop="compiled")
+
+
+@pytest.mark.parametrize("method", METHODS, ids=str)
+def test_a_python_controller_called_from_the_compiled_loop_gives_the_python_loops_result(
+    pandas: cd.Scene, method: object
+) -> None:
+    """A user's PD + gravity compensation written in Python (no compiled twin): called back from
+    the compiled loop at every evaluation, the same steps, samples, torques and counters as the
+    Python loop, to round-off."""
+    law = GravityCompensationPD(pandas)
+
+    def users_controller(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return law(t, q, v)
+
+    v0 = np.random.default_rng(1).normal(size=pandas.nv) * 0.3
+    py, co = _both(pandas, 0.1, controller=users_controller, integrator=method, dt=1e-3, v0=v0, save_every=3)
+    _assert_same(py, co)
+
+
+def test_a_python_controller_that_fails_in_the_compiled_loop_raises_as_in_python(pandas: cd.Scene) -> None:
+    """Its exception, NaN torques, a wrong shape, writing into q: the same ControllerError and
+    message from both loops (the compiled loop re-raises what the controller did)."""
+    law = GravityCompensationPD(pandas)
+
+    def raises(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        if t > 0.005:
+            raise ValueError("boom")
+        return law(t, q, v)
+
+    def nan(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return law(t, q, v) * (np.nan if t > 0.005 else 1.0)
+
+    def short(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return law(t, q, v)[:-1]
+
+    def writes(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        q[0] = 0.0
+        return law(t, q, v)
+
+    for ctrl, message in (
+        (raises, r"the controller raised ValueError at t = 0.0055 s: boom"),
+        (nan, r"non-finite torques at t = 0.0055 s"),
+        (short, r"returned shape \(13,\)"),
+        (writes, r"read-only \(q and v are read-only"),
+    ):
+        for loop in ("python", "compiled"):
+            with pytest.raises(cd.errors.ControllerError, match=message):
+                cd.simulate(pandas, 0.02, controller=ctrl, integrator="rk4", dt=1e-3, loop=loop, accuracy_check="off")
     with pytest.raises(cd.SimulationError, match=r"loop must be one of \['auto', 'compiled', 'python'\], got 'fast'"):
         cd.simulate(pandas, 0.01, loop="fast")
 
@@ -275,19 +323,21 @@ def test_a_step_matrix_failure_names_the_same_time_and_step_in_both_loops(pandas
     _assert_same(errors[0].result, errors[1].result)
 
 
-def test_python_references_stay_in_python(damped: cd.Scene, book: cd.Scene) -> None:
+def test_python_references_are_called_never_compiled_as_the_default(damped: cd.Scene, book: cd.Scene) -> None:
     """A reference or drive assigned after construction is Python code: never compiled as the
-    default it replaced."""
+    default it replaced — the controller is called back from the compiled loop, with the same
+    result as the Python loop."""
     ctrl = ComputedTorque(damped)
     q0 = ctrl.reference(0.0)[0] + 0.01
     ctrl.reference = lambda t: (q0, np.zeros_like(q0), np.zeros_like(q0))
-    assert cd.simulate(damped, 0.01, controller=ctrl, integrator="implicit_euler").loop == "python"
+    assert ctrl.compiled_spec(damped) is None
+    py, co = _both(damped, 0.01, controller=ctrl, integrator="implicit_euler")
+    _assert_same(py, co)
     d1, _ = cd.scenes.book_task()
     drives = cd.scenes.drives_controller(d1, lambda t: 300.0)
+    assert drives.compiled_spec(book) is None
     res = cd.simulate(book, 0.01, controller=drives)
-    assert res.loop == "python" and res.tau[-1, 1] == 300.0
-    with pytest.raises(cd.SimulationError, match=r"ComputedTorque has no compiled version for this run"):
-        cd.simulate(damped, 0.01, controller=ctrl, loop="compiled")
+    assert res.loop == "compiled" and res.tau[-1, 1] == 300.0
 
 
 @pytest.mark.parametrize(

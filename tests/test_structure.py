@@ -87,7 +87,7 @@ def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
         (ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas))), pandas),
         (cd.scenes.drives_controller(*cd.scenes.book_task()), book),
     ]
-    kinds = {"none"} | {ctrl.compiled_spec(scene).name for ctrl, scene in built_in}
+    kinds = {"none", "python"} | {ctrl.compiled_spec(scene).name for ctrl, scene in built_in}  # python: any other callable
     assert kinds == set(_native.CONTROLLERS)
 
 

@@ -129,6 +129,8 @@ public:
         run_fixed(budget);
     } catch (const ControllerFailure & e) {
       fail(CONTROLLER, e.what());
+    } catch (const CallbackError & e) {
+      fail(CONTROLLER, e.what());
     } catch (const StepMatrixError & e) {
       fail(STEP_MATRIX, e.what());
     } catch (const GraspGeometryError & e) {
@@ -416,10 +418,12 @@ private:
         torque(T_.back(), Eigen::Map<const VectorXd>(&Q_[Q_.size() - model_.nq], model_.nq),
                Eigen::Map<const VectorXd>(&V_[V_.size() - model_.nv], model_.nv));
         std::copy(tau_.data(), tau_.data() + na_, TAU_.end() - na_);
-      } catch (const std::exception &) {  // a controller that fails here failed in the step already
+        pending_ = false;
+      } catch (const std::exception &) {
+        // left pending: Python evaluates it again, and a completed run (e.g. one of zero length,
+        // whose only call is this one) raises the controller's error instead of keeping a zero
       }
       fail_t_ = t;
-      pending_ = false;
     }
   }
 

@@ -47,6 +47,8 @@ public:
 
   std::vector<double> doubles(const char * key) { return to_doubles(value(key)); }
 
+  bp::object object(const char * key) { return value(key); }
+
   // A nested table, read by its own Settings (check it with its own check_all_read()).
   Settings sub(const char * key) { return Settings(what_ + ": " + key, get<bp::dict>(key)); }
 

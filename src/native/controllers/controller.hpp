@@ -38,6 +38,11 @@ struct GraspGeometryError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A Python controller failed (python_controller.hpp): Python holds its exception and re-raises it.
+struct CallbackError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // A controller's constructor from its settings (its compiled_spec()) and the run's kernel.
 using ControllerFactory = std::unique_ptr<Controller> (*)(Settings & settings, Kernel & kernel);
 
