@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from ... import _validate
 from .base import ElementEval, Parameter
-from .lie import jlog6, log6
+from .lie import jlog6
 from .se3_spring import SE3Spring
 
 
@@ -45,26 +45,18 @@ class HardeningSpring(SE3Spring):
         self.hardening = _validate.non_negative(hardening, f"{name}: hardening", "N/m³")
 
     def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
-        e, theta = log6(T_M_G)
-        J = jlog6(T_M_G, e, theta)
-        p = e[:3]
+        """The SE(3) spring's evaluation plus the hardening term's energy, wrench and stiffness."""
+        ev = super().evaluate(T_M_G, xi, jacobians)
+        if self.hardening == 0.0:
+            return ev
+        J = jlog6(T_M_G, ev.deformation, ev.theta)[:3]  # d(p)/dξ: the translational rows
+        p = ev.deformation[:3]
         p2 = float(p @ p)
-        w = self.K @ e
-        w[:3] += self.hardening * p2 * p
-        power = 0.0
-        if self._damped:
-            e_dot = J @ xi
-            D_e_dot = self.D @ e_dot
-            power = float(e_dot @ D_e_dot)
-            w = w + D_e_dot
-        S_K = S_D = None
-        if jacobians:
-            H = self.K.copy()
-            H[:3, :3] += self.hardening * (p2 * np.eye(3) + 2.0 * np.outer(p, p))
-            S_K = J.T @ H @ J
-            S_D = J.T @ self.D @ J
-        energy = 0.5 * float(e @ self.K @ e) + 0.25 * self.hardening * p2 * p2
-        return ElementEval(energy, e, -(J.T @ w), power, S_K, S_D, theta)
+        G_f_G = ev.G_f_G - J.T @ (self.hardening * p2 * p)
+        S_K = None
+        if ev.S_K is not None:
+            S_K = ev.S_K + J.T @ (self.hardening * (p2 * np.eye(3) + 2.0 * np.outer(p, p))) @ J
+        return ev._replace(energy=ev.energy + 0.25 * self.hardening * p2 * p2, G_f_G=G_f_G, S_K=S_K)
 
     def __repr__(self) -> str:
         return f"{super().__repr__()[:-1]}, hardening {self.hardening:g} N/m³)"
