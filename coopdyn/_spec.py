@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class CompiledSpec:
     """Base of the specs: :meth:`fields` is what crosses to C++ (``None`` fields are left out)."""
 
@@ -21,12 +21,21 @@ class CompiledSpec:
     name: ClassVar[str]
 
     def fields(self) -> dict[str, Any]:
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if getattr(self, f.name) is not None}
-        return {self.key: self.name, **out}
+        return {self.key: self.name, **_fields(self)}
+
+
+def _fields(spec: Any) -> dict[str, Any]:
+    """A spec's fields by name (nested specs as tables; ``None`` fields left out)."""
+    out = {}
+    for f in dataclasses.fields(spec):
+        value = getattr(spec, f.name)
+        if value is not None:
+            out[f.name] = _fields(value) if dataclasses.is_dataclass(value) else value
+    return out
 
 
 # -- integrator families (src/native/methods/) ----------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class MethodSpec(CompiledSpec):
     """A method family; ``adaptive`` and ``error_order`` are also the loop's step control."""
 
@@ -35,86 +44,132 @@ class MethodSpec(CompiledSpec):
     error_order: int = 0  #: the embedded error's order (the step controller's exponent is 1/(p+1))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class SymplecticEulerSpec(MethodSpec):
     name: ClassVar[str] = "symplectic_euler"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RungeKuttaSpec(MethodSpec):
     """An explicit Butcher tableau (rows of A, b, c; b_hat for an embedded error)."""
 
     name: ClassVar[str] = "rk"
-    A: list[list[float]] = dataclasses.field(default_factory=list)
-    b: list[float] = dataclasses.field(default_factory=list)
-    c: list[float] = dataclasses.field(default_factory=list)
+    A: list[list[float]]  #: row i has i entries (explicit)
+    b: list[float]
+    c: list[float]
     b_hat: list[float] | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ImplicitEulerSpec(MethodSpec):
     name: ClassVar[str] = "implicit_euler"
     jacobian_every: int = 1  #: steps between step-matrix factorisations
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RosenbrockSpec(MethodSpec):
     name: ClassVar[str] = "rosenbrock"
-    gamma: float = 0.0  #: the stages' γ (ROS2: 1 + 1/√2; the trapezoid: ½ … )
+    gamma: float  #: the stages' γ in [½, 2] (ROS2: 1 + 1/√2; the trapezoid: ½ to 1 + 1/√2 by ρ∞)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ExponentialSpec(MethodSpec):
     """Filled in by coopdyn.compiled.plan: one discretisation per step size the run takes."""
 
     name: ClassVar[str] = "exponential"
-    discretisations: list[tuple[Any, ...]] | None = None  #: (h, step, predictor, inner, p) each
+    #: (h [s], step (2nv, 2nv + n_actuated + 1), predictor (p·2nv, same), inner (2nv, p·n_actuated), p) each
+    discretisations: list[tuple[Any, ...]] | None = None
     n_factor: int | None = None  #: factorisations already made in Python (a counter)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class GeneralizedAlphaSpec(MethodSpec):
     name: ClassVar[str] = "generalized_alpha"
-    alpha: tuple[float, float, float, float] = (0.0, 0.0, 0.5, 0.25)  #: (α_m, α_f, γ, β)
+    alpha: tuple[float, float, float, float]  #: (α_m < 1, α_f, γ > 0, β > 0)
 
 
 # -- controllers (src/native/controllers/) --------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ControllerSpec(CompiledSpec):
     key: ClassVar[str] = "kind"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class NoControllerSpec(ControllerSpec):
+    """No controller: zero torques."""
+
+    name: ClassVar[str] = "none"
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PythonControllerSpec(ControllerSpec):
+    """A controller without a compiled twin, called back (coopdyn.compiled.PythonCallback)."""
+
+    name: ClassVar[str] = "python"
+    callback: Any
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class GravityPDSpec(ControllerSpec):
     name: ClassVar[str] = "gravity_pd"
     kp: np.ndarray  #: (n_actuated,) [N·m/rad or N/m]
     kd: np.ndarray  #: (n_actuated,) [N·m·s/rad or N·s/m]
-    q_des: np.ndarray  #: (nq,) the configuration held
+    q_des: np.ndarray  #: (nq,) the configuration held [rad, m]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ComputedTorqueSpec(ControllerSpec):
     name: ClassVar[str] = "computed_torque"
     q_index: np.ndarray  #: (n_actuated,) int32: each actuated joint's configuration index
     kp: np.ndarray  #: (n_actuated,) [1/s²]
     kd: np.ndarray  #: (n_actuated,) [1/s]
-    q_d: np.ndarray  #: (n_actuated,) the joint positions held
+    q_d: np.ndarray  #: (n_actuated,) the joint positions held [rad or m]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class DrivesSpec(ControllerSpec):
     name: ClassVar[str] = "drives"
-    segments: list[np.ndarray]  #: per actuated joint, rows (start [s], constant, ramp, amplitude, ω [rad/s], phase [rad])
+    #: per actuated joint, rows (start [s], constant [N·m or N], ramp [N·m/s or N/s], amplitude [N·m or N],
+    #: ω [rad/s], phase [rad])
+    segments: list[np.ndarray]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
+class HoldTaskSpec:
+    """ObjectImpedance's default task: hold the object's initial pose."""
+
+    hold: bool = dataclasses.field(default=True, init=False)
+    start: np.ndarray  #: (3,) the object frame's position held [m]
+    rotation: np.ndarray  #: (3, 3) its orientation held
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class GripLiftOscillateTaskSpec:
+    """coopdyn.cooperative.GripLiftOscillate's timings (its docstring says what each does)."""
+
+    hold: bool = dataclasses.field(default=False, init=False)
+    start: np.ndarray  #: (3,) [m]
+    rotation: np.ndarray  #: (3, 3)
+    axis: np.ndarray  #: (3,) unit, the oscillation's direction
+    squeeze: float  #: [N]
+    t_grip: float  #: [s]
+    lift: float  #: [m]
+    t_lift: float  #: [s]
+    lift_duration: float  #: [s]
+    amplitude: float  #: [m]
+    frequency: float  #: [Hz]
+    t_osc: float  #: [s]
+    cycles: float
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ObjectImpedanceSpec(ControllerSpec):
-    """ObjectImpedance; ``task`` is {hold, start, rotation} or GripLiftOscillate's timings too."""
+    """ObjectImpedance with its task."""
 
     name: ClassVar[str] = "object_impedance"
     object_frame: int
     grasps: list[tuple[int, int, np.ndarray]]  #: (grasp frame, tip frame, arm velocity indices) each
-    task: dict[str, Any]
+    task: HoldTaskSpec | GripLiftOscillateTaskSpec
     mass: float  #: [kg]
     com: np.ndarray  #: (3,) [m], object frame
     gravity: np.ndarray  #: (3,) [m/s²]

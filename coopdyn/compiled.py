@@ -1,6 +1,7 @@
 """The compiled step loop (src/native/loop.hpp): :func:`coopdyn.simulate` runs a simulation there
-when every piece of it is built in — the native dynamics, a built-in integrator and a built-in
-controller (or none), no ``object_wrench`` callable — and through the Python loop otherwise.
+when the native dynamics, a built-in integrator and no ``object_wrench`` callable allow it — a
+built-in controller as its C++ twin, any other controller called back — and through the Python
+loop otherwise.
 Both loops take the same steps with the same operations; results agree to round-off
 (tests/test_compiled_loop.py).
 
@@ -16,9 +17,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ._spec import CompiledSpec, ExponentialSpec
+from ._spec import CompiledSpec, ExponentialSpec, NoControllerSpec, PythonControllerSpec
 from .closed_loop import System
-from .errors import ControllerError, CoopdynError
+from .errors import ControllerError, CoopdynError, SimulationError
 from .integrators import Integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL
@@ -36,9 +37,9 @@ FIRST_CHUNK = 64
 _ENERGY_MODES = {"off": 0, "warn": 1, "raise": 2}
 
 
-def _own_spec(obj: Any, *args: Any) -> CompiledSpec | None:
+def _own_spec(obj: Any, *args: Any, error: type[CoopdynError] = ControllerError) -> CompiledSpec | None:
     """``obj.compiled_spec(*args)`` when obj's own class defines it (a subclass that changes the
-    behaviour runs in Python), else None."""
+    behaviour runs in Python), else None; ``error``: what a failing hook raises."""
     spec = type(obj).__dict__.get("compiled_spec")
     if spec is None:
         return None
@@ -47,10 +48,11 @@ def _own_spec(obj: Any, *args: Any) -> CompiledSpec | None:
     except (CoopdynError, KeyboardInterrupt):
         raise
     except Exception as exc:  # a user's class: say whose hook failed
-        raise ControllerError(f"{type(obj).__name__}.compiled_spec raised {type(exc).__name__}: {exc}") from exc
+        raise error(f"{type(obj).__name__}.compiled_spec raised {type(exc).__name__}: {exc}") from exc
     if out is not None and not isinstance(out, CompiledSpec):
-        raise ControllerError(
-            f"{type(obj).__name__}.compiled_spec returned {type(out).__name__}; it must return a spec from coopdyn._spec, or None"
+        raise error(
+            f"{type(obj).__name__}.compiled_spec returned {type(out).__name__}; it must return a typed spec (a subclass of "
+            "coopdyn._spec.CompiledSpec, see docs/extending.md), or None"
         )
     return out
 
@@ -99,18 +101,15 @@ def plan(
         return Plan(None, "the dynamics run on the Python backend")
     if system.has_object_wrench:
         return Plan(None, "an object_wrench callable is Python code")
-    spec = _own_spec(method)
+    spec = _own_spec(method, error=SimulationError)
     if spec is None:
         return Plan(None, f"the integrator {method!r} has no compiled version")
-    if system.controller is None:
-        controller: dict[str, Any] | None = {"kind": "none"}
-    else:
-        controller_spec = _own_spec(system.controller, scene)
-        # a controller without a compiled version for this run (Python code, a Python reference or
-        # drive, or built for another scene) is called from the compiled loop
-        controller = (
-            controller_spec.fields() if controller_spec is not None else {"kind": "python", "callback": PythonCallback(system)}
-        )
+    # a controller without a compiled version for this run (Python code, a Python reference or
+    # drive, or built for another scene) is called back from the compiled loop
+    controller_spec = NoControllerSpec() if system.controller is None else _own_spec(system.controller, scene)
+    if controller_spec is None:
+        controller_spec = PythonControllerSpec(callback=PythonCallback(system))
+    controller = controller_spec.fields()
     if isinstance(spec, ExponentialSpec):  # discretised here, once per step size the run takes
         ws = method.workspace(system)
         last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}

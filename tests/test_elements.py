@@ -1,6 +1,7 @@
 """Interconnection elements: each law is the exact gradient of its energy, obeys action =
 reaction, vanishes unloaded and under a common rigid motion; the SE(3) logarithm is accurate at
-every angle; a toy element defined here runs through the whole pipeline on the Python path."""
+every angle; the C++ twins agree with their laws; a toy element defined here runs through the whole
+pipeline, called from the compiled kernel."""
 
 from __future__ import annotations
 
@@ -239,9 +240,6 @@ class ToyVerticalSpring(Element):
             S_K[:3, :3] = self.k * np.outer(R[2], R[2])
         return ElementEval(0.5 * self.k * z * z, np.array([z]), f, 0.0, S_K, np.zeros((6, 6)) if jacobians else None, 0.0)
 
-    def native_parameters(self) -> tuple[np.ndarray, ...]:
-        return (np.array([self.k]),)
-
 
 def test_a_toy_element_without_a_cpp_twin_runs_in_the_compiled_loop() -> None:
     """A box hung from the world by the toy spring bobs at ω = √(k/m) about its static sag m g / k.
@@ -445,3 +443,31 @@ def test_an_element_parameter_is_checked_by_name_and_survives_describe_and_build
     from coopdyn.io.scenefile import load
 
     assert load(scene_file).scene.links[0].element.hardening == 3e6
+
+
+def test_ctrl_c_inside_a_python_element_stops_the_compiled_run_with_its_partial_result() -> None:
+    """A Ctrl-C that lands inside a Python-only element's evaluate (called from the compiled
+    kernel) is the user's interrupt: SimulationInterrupted with the samples so far, not a kernel
+    error; the Python loop on the native dynamics says the same."""
+
+    class Interrupted(ToyVerticalSpring):
+        kind: ClassVar[str] = "toy_interrupted"
+
+        def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+            if T_M_G.translation[2] < -0.005:  # about 0.03 s into the fall
+                raise KeyboardInterrupt
+            return super().evaluate(T_M_G, xi, jacobians)
+
+    register(Interrupted)
+    try:
+        box = cd.RigidObject.box(2.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0], joint="prismatic", axis="z")
+        scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=800.0, element=Interrupted.kind)])
+        for loop in ("compiled", "python"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                with pytest.raises(cd.errors.SimulationInterrupted) as info:
+                    cd.simulate(scene, 0.5, integrator="rk4", dt=1e-3, loop=loop, accuracy_check="off", progress=False)
+            partial = info.value.result
+            assert partial is not None and 0.02 < partial.t[-1] < 0.06, loop
+    finally:
+        ELEMENTS.pop(Interrupted.kind, None)

@@ -149,5 +149,42 @@ def test_a_compiled_spec_is_a_typed_spec_and_a_dict_is_refused_by_name() -> None
         def compiled_spec(self, scene: cd.Scene) -> dict[str, object]:  # type: ignore[override]
             return {"kind": "gravity_pd", "kp": self.kp, "kd": self.kd, "q_des": self.q_des}
 
-    with pytest.raises(cd.errors.ControllerError, match=r"DictSpec\.compiled_spec returned dict; it must return a spec"):
+    with pytest.raises(cd.errors.ControllerError, match=r"DictSpec\.compiled_spec returned dict; it must return a typed spec"):
         cd.simulate(book, 0.01, controller=DictSpec(book), integrator="rk4", dt=1e-3, loop="compiled", v0=np.zeros(book.nv))
+
+
+def test_an_integrator_whose_compiled_spec_fails_is_a_simulation_error_not_a_controller_error() -> None:
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn.integrators import RK4
+
+    class Broken(RK4):
+        def compiled_spec(self) -> dict[str, object]:  # type: ignore[override]
+            return {"method": "rk"}
+
+    with pytest.raises(cd.SimulationError, match=r"Broken\.compiled_spec returned dict") as info:
+        cd.simulate(cd.scenes.linear_book(), 0.01, integrator=Broken(), dt=1e-3, loop="compiled")
+    assert not isinstance(info.value, cd.errors.ControllerError)
+
+
+def test_the_compiled_loop_refuses_an_inconsistent_tableau_as_python_does() -> None:
+    """A tableau whose rows do not sum to c (or weights to 1) is refused by the C++ reader too."""
+    import numpy as np
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn import _native, compiled
+    from coopdyn.closed_loop import System
+    from coopdyn.integrators import RK4
+
+    scene = cd.scenes.linear_book()
+    dyn = cd.Dynamics(scene, "native")
+    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
+    config = compiled.plan(scene, System(dyn), RK4(), energy_check="off", **base).config
+    assert config is not None
+    kernel = dyn._kernel  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match=r"inconsistent tableau \(a row of A does not sum to c\)"):
+        _native.make_loop(kernel, {**config, "c": [0.0, 0.4, 0.5, 1.0]})
+    with pytest.raises(ValueError, match=r"inconsistent tableau \(weights do not sum to 1\)"):
+        _native.make_loop(kernel, {**config, "b": [0.2, 0.3, 0.3, 0.1]})

@@ -28,7 +28,7 @@ import pinocchio as pin
 from scipy.linalg import cho_solve
 
 from .. import _validate
-from .._spec import ObjectImpedanceSpec
+from .._spec import GripLiftOscillateTaskSpec, HoldTaskSpec, ObjectImpedanceSpec
 from ..errors import SceneError
 from ..grasp import squeeze_directions
 from ..model.scene import Scene
@@ -361,18 +361,17 @@ class ObjectImpedance:
             return None
         ref = self.reference
         if self._hold is not None and ref is self._hold_reference:
-            task: dict[str, Any] = {"hold": True, "start": self._hold.position, "rotation": self._hold.rotation}
+            task: HoldTaskSpec | GripLiftOscillateTaskSpec = HoldTaskSpec(start=self._hold.position, rotation=self._hold.rotation)
         elif type(ref) is GripLiftOscillate:
             axis = np.asarray(ref.axis, dtype=float)
-            task = {
-                "hold": False,
-                "start": np.asarray(ref.start, dtype=float),
-                "rotation": np.eye(3) if ref.rotation is None else np.asarray(ref.rotation, dtype=float),
-                "axis": axis / np.linalg.norm(axis),
-                "cycles": float(ref.cycles),
+            task = GripLiftOscillateTaskSpec(
+                start=np.asarray(ref.start, dtype=float),
+                rotation=np.eye(3) if ref.rotation is None else np.asarray(ref.rotation, dtype=float),
+                axis=axis / np.linalg.norm(axis),
+                cycles=float(ref.cycles),
                 **{k: float(getattr(ref, k)) for k in ("squeeze", "t_grip", "lift", "t_lift", "lift_duration")},
                 **{k: float(getattr(ref, k)) for k in ("amplitude", "frequency", "t_osc")},
-            }
+            )
         else:
             return None
         return ObjectImpedanceSpec(

@@ -7,6 +7,7 @@ in C++) and :class:`~coopdyn.errors.KernelError` for refused arguments.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -29,26 +30,35 @@ class NativeDynamics(Dynamics):
 
     def __init__(self, scene: Scene, backend: str | None = None) -> None:
         super().__init__(scene, backend)
+        #: what a Python-only element raised inside the kernel (re-raised once the kernel returns)
+        self.python_error: BaseException | None = None
         links = [
             (lk.native, lk.tip_frame, lk.grasp_frame, lk.element.native_parameters())
             if lk.native is not None
-            else ("python", lk.tip_frame, lk.grasp_frame, {"element": lk.element})  # evaluated in Python, from C++
+            else ("python", lk.tip_frame, lk.grasp_frame, {"element": lk.element, "evaluate": _ElementCallback(lk.element, self)})
             for lk in scene.elements
         ]
         actuated = np.asarray(scene.actuated, dtype=np.int32)
         kernel = _backend.kernel_module().Kernel
         self._kernel = self._call("the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame)
 
-    @staticmethod
-    def _call(what: str, method: Any, *args: Any) -> Any:
+    def _call(self, what: str, method: Any, *args: Any) -> Any:
         """``method(*args)`` on the kernel, what it raises turned into a :class:`CoopdynError`
-        (ValueError for sizes, Boost.Python.ArgumentError for types, RuntimeError)."""
+        (ValueError for sizes, Boost.Python.ArgumentError for types, RuntimeError) — or, when a
+        Python-only element raised inside it, that element's own exception (a Ctrl-C too)."""
         try:
             return method(*args)
         except CoopdynError:
             raise
         except Exception as exc:
+            self.reraise_python_error()
             raise _kernel_error(exc, what) from exc
+
+    def reraise_python_error(self) -> None:
+        """Raise what a Python-only element raised inside the kernel, if it did (and forget it)."""
+        error, self.python_error = getattr(self, "python_error", None), None
+        if error is not None:
+            raise error
 
     @property
     def last_dissipation(self) -> float:
@@ -116,7 +126,7 @@ class NativeDynamics(Dynamics):
         return out
 
     def _elastic(self) -> np.ndarray:
-        return self._kernel.elastic_energies()
+        return self._call("elastic_energies()", self._kernel.elastic_energies)
 
     def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:
         Q, V = np.asarray(Q, dtype=float), np.asarray(V, dtype=float)
@@ -142,3 +152,26 @@ class NativeDynamics(Dynamics):
 KINDS["native"] = NativeDynamics
 
 __all__ = ["NativeDynamics"]
+
+
+class _ElementCallback:
+    """A Python-only element's ``evaluate`` as the kernel calls it (src/native/elements/
+    python_element.hpp): its evaluation, or None after keeping what it raised in the dynamics'
+    :attr:`NativeDynamics.python_error`, for Python to re-raise once the kernel has returned."""
+
+    def __init__(self, element: Any, dynamics: NativeDynamics) -> None:
+        self.element = element
+        self.dynamics = weakref.ref(dynamics)
+
+    def __call__(self, T_M_G: Any, xi: np.ndarray, jacobians: bool) -> Any:
+        try:
+            return self.element.evaluate(T_M_G, xi, jacobians)
+        except BaseException as exc:  # Ctrl-C and coopdyn's own errors as they are; the rest named
+            if not isinstance(exc, KeyboardInterrupt | CoopdynError):
+                named = KernelError(f"the Python element {type(self.element).__name__} raised {type(exc).__name__}: {exc}")
+                named.__cause__ = exc
+                exc = named
+            dynamics = self.dynamics()
+            if dynamics is not None and dynamics.python_error is None:
+                dynamics.python_error = exc
+            return None

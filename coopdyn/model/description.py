@@ -239,7 +239,8 @@ def build(doc: Mapping[str, Any], base: str | os.PathLike[str] | None = None) ->
                 f"arm names must be unique; arms[{names.index(name)}] is named {name!r} too", Location("arms", k, "name")
             )
     if "object" not in doc:
-        raise DescriptionError("missing: the held object (a table with type = 'box', 'rigid' or 'beam')", Location("object"))
+        types = ", ".join(repr(t) for t in description_types())
+        raise DescriptionError(f"missing: the held object (a table with type = one of {types})", Location("object"))
     obj = _build_object(doc["object"])
     entries = _tables(doc.get("interconnections", []), "interconnections")
     if not entries:

@@ -143,7 +143,7 @@ def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
     """Display geometry of the whole scene on ``scene.model``: every arm's URDF ``meshes``
     ("collision": compact, the default — an arm whose URDF has none shows its visual meshes;
     "visual": the full meshes, several MB of HTML per arm) and a box for the object
-    (``RigidObject.size``, or a 5 cm cube)."""
+    (its own boxes: ``SceneObject.shapes``)."""
     import coal
 
     geom = pin.GeometryModel()

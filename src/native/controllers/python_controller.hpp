@@ -21,16 +21,16 @@ public:
       PyGILState_STATE state = PyGILState_Ensure();
       ~Gil() { PyGILState_Release(state); }
     } gil;
-    bp::object out;
+    VectorXd result;
     try {
-      out = callback_(t, q, v);
-    } catch (const bp::error_already_set &) {  // the wrapper records everything; this is a bug in it
+      const bp::object out = callback_(t, q, v);
+      if (out.is_none()) throw CallbackError("the Python controller raised (re-raised by Python)");
+      result = bp::extract<VectorXd>(out);
+    } catch (const bp::error_already_set &) {  // the wrapper keeps what the controller raises: a bug in it
       PyErr_Clear();
-      throw CallbackError("the Python controller's wrapper raised");
+      throw std::runtime_error("coopdyn's Python-controller wrapper failed (a bug: please report it)");
     }
-    if (out.is_none()) throw CallbackError("the Python controller raised");
-    const VectorXd result = bp::extract<VectorXd>(out);
-    if (result.size() != na_) throw CallbackError("the Python controller's wrapper returned the wrong size");
+    if (result.size() != na_) throw std::runtime_error("coopdyn's Python-controller wrapper returned the wrong size (a bug)");
     tau = result;
   }
 

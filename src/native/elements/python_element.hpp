@@ -1,7 +1,9 @@
 // An element without a C++ twin, evaluated in Python from the kernel: the scene's other elements,
 // its dynamics and the compiled loop stay in C++, and each evaluation of this element calls its
 // Python `evaluate` (coopdyn/model/elements/base.py), taking the GIL for the call (the compiled
-// loop runs without it). coopdyn/dynamics/native.py passes {"element": the Python element}.
+// loop runs without it). coopdyn/dynamics/native.py passes {"element": the Python element,
+// "evaluate": a wrapper that returns its evaluation, or None after keeping what it raised — a
+// Ctrl-C too — for Python to re-raise once the kernel has returned}.
 #pragma once
 
 #include "element.hpp"
@@ -15,14 +17,16 @@ namespace coopdyn {
 
 class PythonElement : public Element {
 public:
-  explicit PythonElement(boost::python::object element)
-    : element_(std::move(element)), evaluate_(element_.attr("evaluate")),
+  PythonElement(boost::python::object element, boost::python::object evaluate)
+    : element_(std::move(element)), evaluate_(std::move(evaluate)),
       damped_(boost::python::extract<bool>(element_.attr("has_damping"))()),
       size_(boost::python::extract<int>(element_.attr("deformation_size"))()) {
     if (size_ < 0 || size_ > 6) throw std::invalid_argument("a Python element's deformation_size must be 0 to 6");
   }
 
-  static std::unique_ptr<Element> make(Parameters & p) { return std::make_unique<PythonElement>(p.object("element")); }
+  static std::unique_ptr<Element> make(Parameters & p) {
+    return std::make_unique<PythonElement>(p.object("element"), p.object("evaluate"));
+  }
 
   bool damped() const override { return damped_; }
 
@@ -34,6 +38,7 @@ public:
     } gil;
     try {
       const bp::object ev = evaluate_(T_M_G, Eigen::VectorXd(xi), jacobians);
+      if (ev.is_none()) throw std::runtime_error("the Python element " + describe() + " raised (re-raised by Python)");
       out.energy = bp::extract<double>(ev[0]);
       const Eigen::VectorXd deformation = bp::extract<Eigen::VectorXd>(ev[1]);
       if (deformation.size() != size_) throw std::invalid_argument("evaluate returned a deformation of the wrong size");

@@ -1,6 +1,6 @@
 // The compiled loop's integrators as a registry: each method family is one header in this folder
 // that defines a Method and registers its factory under the name its Python twin's
-// compiled_spec()["method"] gives (coopdyn/integrators/); CMakeLists.txt includes every header of
+// compiled_spec() names (coopdyn/_spec.py: MethodSpec.name); CMakeLists.txt includes every header of
 // the folder, so a new family is a new file here. The loop (loop.hpp) steps through the Method
 // it was given and knows no family.
 #pragma once

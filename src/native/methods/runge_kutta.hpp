@@ -58,6 +58,16 @@ public:
       throw std::invalid_argument("compiled loop: inconsistent Butcher tableau");
     for (std::size_t i = 0; i < tab.A.size(); ++i)
       if (tab.A[i].size() > i) throw std::invalid_argument("compiled loop: the tableau must be explicit");
+    // consistent, as explicit.py's ButcherTableau checks it: rows of A sum to c, weights to 1
+    const auto sum = [](const std::vector<double> & x) {
+      double s = 0.0;
+      for (double v : x) s += v;
+      return s;
+    };
+    for (std::size_t i = 0; i < tab.A.size(); ++i)
+      if (std::abs(sum(tab.A[i]) - tab.c[i]) > 1e-12) throw std::invalid_argument("compiled loop: inconsistent tableau (a row of A does not sum to c)");
+    if (std::abs(sum(tab.b) - 1.0) > 1e-12 || (!tab.b_hat.empty() && std::abs(sum(tab.b_hat) - 1.0) > 1e-12))
+      throw std::invalid_argument("compiled loop: inconsistent tableau (weights do not sum to 1)");
     return std::make_unique<RungeKutta>(std::move(tab), adaptive, model.nq);
   }
 
