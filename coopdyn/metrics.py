@@ -8,7 +8,7 @@ Each name carries its unit: ``_m`` metres, ``_N`` newtons.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -27,7 +27,14 @@ METRICS = (
 )
 
 
-def run_metrics(result: Result, reference: Callable[[float], Any] | None = None) -> tuple[dict[str, float], list[str]]:
+class Metrics(NamedTuple):
+    """What :func:`run_metrics` found (unpacks as ``values, notes``)."""
+
+    values: dict[str, float]  #: by the names of :data:`METRICS`; those that could not be computed absent
+    notes: list[str]  #: why an absent one is absent
+
+
+def run_metrics(result: Result, reference: Callable[[float], Any] | None = None) -> Metrics:
     """The metrics of ``result`` (and notes on those that could not be computed): object
     tracking error [m] against ``reference(t)`` (max and rms over the samples), peak and final
     internal (squeeze) force [N] with two or more interconnections (the final one the mean over
@@ -54,7 +61,7 @@ def run_metrics(result: Result, reference: Callable[[float], Any] | None = None)
         notes.append(f"force metrics not computed: {type(exc).__name__}: {exc}")
     if result.force_error_estimate is not None:
         out["force_error_estimate_N"] = float(result.force_error_estimate)
-    return out, notes
+    return Metrics(out, notes)
 
 
 def metric_lines(metrics: dict[str, Any], commanded_squeeze: float | None = None) -> list[str]:
@@ -73,9 +80,9 @@ def metric_lines(metrics: dict[str, Any], commanded_squeeze: float | None = None
         )
     if "peak_interconnection_force_N" in metrics:
         lines.append(f"  peak interconnection force: {metrics['peak_interconnection_force_N']:.2f} N")
-    if metrics.get("force_error_estimate_N") is not None:
+    if "force_error_estimate_N" in metrics and metrics["force_error_estimate_N"] is not None:
         lines.append(f"  interconnection force error against the reference run: max {metrics['force_error_estimate_N']:.3g} N")
     return lines
 
 
-__all__ = ["METRICS", "metric_lines", "run_metrics"]
+__all__ = ["METRICS", "Metrics", "metric_lines", "run_metrics"]

@@ -188,3 +188,32 @@ def test_the_compiled_loop_refuses_an_inconsistent_tableau_as_python_does() -> N
         _native.make_loop(kernel, {**config, "c": [0.0, 0.4, 0.5, 1.0]})
     with pytest.raises(ValueError, match=r"inconsistent tableau \(weights do not sum to 1\)"):
         _native.make_loop(kernel, {**config, "b": [0.2, 0.3, 0.3, 0.1]})
+
+
+def test_a_setting_of_the_wrong_type_or_an_unknown_name_is_refused_naming_it() -> None:
+    """The C++ readers name the field whose value has the wrong type, and an unknown method,
+    controller or element comes with the registered names."""
+    import numpy as np
+    import pytest
+
+    import coopdyn as cd
+    from coopdyn import _native, compiled
+    from coopdyn.closed_loop import System
+    from coopdyn.integrators import RK4
+
+    with pytest.raises(ValueError, match="element 'se3': parameter K must be a matrix of numbers"):
+        _native.evaluate_element("se3", {"K": "stiff", "D": np.eye(6)}, np.eye(4), np.zeros(6), False)
+    with pytest.raises(ValueError, match=r"no element 'toy' \(registered: ball, hardening, python, se3\)"):
+        _native.evaluate_element("toy", {}, np.eye(4), np.zeros(6), False)
+    scene = cd.scenes.linear_book()
+    dyn = cd.Dynamics(scene, "native")
+    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
+    config = compiled.plan(scene, System(dyn), RK4(), energy_check="off", **base).config
+    assert config is not None
+    kernel = dyn._kernel  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="compiled loop: setting dt has the wrong type"):
+        _native.make_loop(kernel, {**config, "dt": "fast"})
+    with pytest.raises(ValueError, match=r"unknown method rk5 \(registered: exponential, generalized_alpha, implicit_euler, rk,"):
+        _native.make_loop(kernel, {**config, "method": "rk5"})
+    with pytest.raises(ValueError, match=r"unknown controller kind pid \(registered: computed_torque, drives, gravity_pd,"):
+        _native.make_loop(kernel, {**config, "controller": {"kind": "pid"}})

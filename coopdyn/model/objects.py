@@ -25,7 +25,7 @@ class Placement(NamedTuple):
 
     reference: int  #: the joint the object frame rides on
     joints: tuple[int, ...]  #: every joint of the object, in order (a rigid object: one)
-    q0: np.ndarray  #: their initial coordinates, in order
+    q0: np.ndarray  #: their initial coordinates, in order (the joints' nq summed,)
 
 
 class InternalLink(NamedTuple):
@@ -84,7 +84,8 @@ class SceneObject(ABC):
 
     @abstractmethod
     def spatial_inertia(self) -> pin.Inertia:
-        """Its mass, centre of mass and rotational inertia, about the object frame (at rest)."""
+        """Its mass [kg], centre of mass (3,) [m] in the object frame and rotational inertia about
+        that centre of mass (3, 3) [kg·m²], at rest: Pinocchio's ``Inertia(mass, lever, inertia)``."""
 
     @abstractmethod
     def add_to(self, model: pin.Model) -> Placement:
@@ -100,8 +101,9 @@ class SceneObject(ABC):
         return []
 
     def memory_hint(self, nv: int, fits: int) -> str:
-        """What of this object would fit when a scene of ``nv`` velocities does not and ``fits`` would
-        (appended to the refusal). Default: nothing."""
+        """A hint appended to the refusal of a scene too big for memory: it has ``nv`` velocities and
+        at most ``fits`` would fit; the text starts with ``"; "`` (the beam: "; this beam fits with
+        at most 12 elements"). Default: no hint."""
         return ""
 
     @abstractmethod

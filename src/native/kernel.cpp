@@ -33,7 +33,11 @@ using cn::Settings;
 std::unique_ptr<cn::Controller> make_controller(Kernel & k, const bp::dict & values) {
   const std::string kind = bp::extract<std::string>(values.get("kind", ""))();
   const auto found = cn::controller_registry().find(kind);
-  if (found == cn::controller_registry().end()) throw std::invalid_argument("compiled loop: unknown controller kind " + kind);
+  if (found == cn::controller_registry().end()) {
+    std::string known;
+    for (const auto & entry : cn::controller_registry()) known += (known.empty() ? "" : ", ") + entry.first;
+    throw std::invalid_argument("compiled loop: unknown controller kind " + kind + " (registered: " + known + ")");
+  }
   Settings c("controller '" + kind + "'", values);
   c.get<std::string>("kind");
   std::unique_ptr<cn::Controller> out = found->second(c, k);
@@ -48,7 +52,11 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict values) {
   Settings cfg("compiled loop", values);
   const std::string family = cfg.get<std::string>("method");
   const auto found = cn::method_registry().find(family);
-  if (found == cn::method_registry().end()) throw std::invalid_argument("compiled loop: unknown method " + family);
+  if (found == cn::method_registry().end()) {
+    std::string known;
+    for (const auto & entry : cn::method_registry()) known += (known.empty() ? "" : ", ") + entry.first;
+    throw std::invalid_argument("compiled loop: unknown method " + family + " (registered: " + known + ")");
+  }
   const Model & model = kernel.model();
   const Eigen::Index na = kernel.actuated().size();
   auto loop = std::make_shared<Loop>(

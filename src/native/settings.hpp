@@ -28,7 +28,11 @@ public:
 
   bool has(const char * key) const { return values_.has_key(key); }
 
-  template <class T> T get(const char * key) { return bp::extract<T>(value(key))(); }
+  template <class T> T get(const char * key) {
+    bp::extract<T> x(value(key));
+    if (!x.check()) throw std::invalid_argument(what_ + ": setting " + key + " has the wrong type");
+    return x();
+  }
 
   // A vector setting of exactly n entries (n < 0: any).
   VectorXd vec(const char * key, Eigen::Index n) {

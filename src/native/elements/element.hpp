@@ -42,13 +42,19 @@ public:
   Parameters(std::string kind, boost::python::dict values) : kind_(std::move(kind)), values_(std::move(values)) {}
 
   Eigen::MatrixXd matrix(const char * name, Eigen::Index rows, Eigen::Index cols) {
-    const Eigen::MatrixXd m = boost::python::extract<Eigen::MatrixXd>(value(name))();
+    boost::python::extract<Eigen::MatrixXd> x(value(name));
+    if (!x.check()) throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be a matrix of numbers");
+    const Eigen::MatrixXd m = x();
     if (m.rows() != rows || m.cols() != cols)
       throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be " + std::to_string(rows) + "x" +
                                   std::to_string(cols));
     return m;
   }
-  double number(const char * name) { return boost::python::extract<double>(value(name))(); }
+  double number(const char * name) {
+    boost::python::extract<double> x(value(name));
+    if (!x.check()) throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be a number");
+    return x();
+  }
   boost::python::object object(const char * name) { return value(name); }
 
   // After the element is built: every given name was read.
@@ -90,7 +96,11 @@ inline bool register_element(const char * kind, ElementFactory make) {
 // The element `kind` built from its parameters (every one read).
 inline std::unique_ptr<Element> make_element(const std::string & kind, const boost::python::dict & values) {
   const auto found = element_registry().find(kind);
-  if (found == element_registry().end()) throw std::invalid_argument("the kernel has no element '" + kind + "'");
+  if (found == element_registry().end()) {
+    std::string known;
+    for (const auto & entry : element_registry()) known += (known.empty() ? "" : ", ") + entry.first;
+    throw std::invalid_argument("the kernel has no element '" + kind + "' (registered: " + known + ")");
+  }
   Parameters parameters(kind, values);
   std::unique_ptr<Element> out = found->second(parameters);
   parameters.check_all_read();
