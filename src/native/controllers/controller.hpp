@@ -6,6 +6,7 @@
 // gives (CMakeLists.txt includes every header of the folder).
 #pragma once
 
+#include "../kernel.hpp"
 #include "../settings.hpp"
 
 #include <map>

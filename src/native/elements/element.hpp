@@ -4,6 +4,7 @@
 #pragma once
 
 #include "../lie.hpp"
+#include "../settings.hpp"
 
 #include <boost/python.hpp>
 
@@ -35,50 +36,9 @@ public:
 };
 
 // An element's parameters as its Python twin gives them (Element.native_parameters(): a dict of
-// name → number or matrix), read by name. Every name given must be read: a parameter the C++
-// twin does not know (misspelled, or added in Python only) is an error, not ignored.
-class Parameters {
-public:
-  Parameters(std::string kind, boost::python::dict values) : kind_(std::move(kind)), values_(std::move(values)) {}
-
-  Eigen::MatrixXd matrix(const char * name, Eigen::Index rows, Eigen::Index cols) {
-    boost::python::extract<Eigen::MatrixXd> x(value(name));
-    if (!x.check()) throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be a matrix of numbers");
-    const Eigen::MatrixXd m = x();
-    if (m.rows() != rows || m.cols() != cols)
-      throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be " + std::to_string(rows) + "x" +
-                                  std::to_string(cols));
-    return m;
-  }
-  double number(const char * name) {
-    boost::python::extract<double> x(value(name));
-    if (!x.check()) throw std::invalid_argument("element '" + kind_ + "': parameter " + name + " must be a number");
-    return x();
-  }
-  boost::python::object object(const char * name) { return value(name); }
-
-  // After the element is built: every given name was read.
-  void check_all_read() const {
-    const boost::python::list keys = values_.keys();
-    std::string unread;
-    for (boost::python::ssize_t i = 0; i < boost::python::len(keys); ++i) {
-      const std::string key = boost::python::extract<std::string>(keys[i]);
-      if (!read_.count(key)) unread += (unread.empty() ? "" : ", ") + key;
-    }
-    if (!unread.empty())
-      throw std::invalid_argument("element '" + kind_ + "': its C++ twin does not read the parameter(s) " + unread);
-  }
-
-private:
-  boost::python::object value(const char * name) {
-    if (!values_.has_key(name)) throw std::invalid_argument("element '" + kind_ + "': missing parameter " + name);
-    read_.insert(name);
-    return values_[name];
-  }
-  std::string kind_;
-  boost::python::dict values_;
-  std::set<std::string> read_;
-};
+// name → number or matrix), read by name through the settings reader (../settings.hpp): every
+// name given must be read, so a parameter the C++ twin does not know is an error, not ignored.
+using Parameters = coopdyn_native::Settings;
 
 using ElementFactory = std::unique_ptr<Element> (*)(Parameters & parameters);
 
@@ -101,7 +61,7 @@ inline std::unique_ptr<Element> make_element(const std::string & kind, const boo
     for (const auto & entry : element_registry()) known += (known.empty() ? "" : ", ") + entry.first;
     throw std::invalid_argument("the kernel has no element '" + kind + "' (registered: " + known + ")");
   }
-  Parameters parameters(kind, values);
+  Parameters parameters("element '" + kind + "'", values, "parameter");
   std::unique_ptr<Element> out = found->second(parameters);
   parameters.check_all_read();
   return out;

@@ -5,6 +5,7 @@
 // it was given and knows no family.
 #pragma once
 
+#include "../kernel.hpp"
 #include "../settings.hpp"
 
 #include <map>
