@@ -541,9 +541,7 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
         run.n_accepted, run.n_rejected = samples.n_accepted, samples.n_rejected
     if status == compiled.DONE:
         return
-    reraise = getattr(run.system.dynamics, "reraise_python_error", None)
-    if reraise is not None:  # a Python-only element raised inside the loop (a Ctrl-C too): its own error
-        reraise()
+    run.system.dynamics.reraise_python_error()  # a Python-only element raised inside the loop (a Ctrl-C too)
     if status == compiled.BUDGET:
         error = run.over_budget(native.t)
         assert error is not None

@@ -37,30 +37,35 @@ def test_every_compiled_method_family_is_one_registry_entry_on_each_side() -> No
 def test_a_method_family_the_kernel_does_not_know_is_refused_by_name() -> None:
     """The compiled loop's registry refuses an unknown family, and each family checks its own
     settings when it is built (a Butcher tableau that is not explicit, a bad generalized-α)."""
-    import numpy as np
     import pytest
 
     import coopdyn as cd
-    from coopdyn import compiled
     from coopdyn.integrators import RK4, GeneralizedAlpha
 
     scene = cd.scenes.linear_book()
-    dyn = cd.Dynamics(scene)
-    from coopdyn.closed_loop import System
-
-    system = System(dyn)
-    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
-    config = compiled.plan(scene, system, RK4(), energy_check="off", **base).config
-    assert config is not None
-    kernel = dyn._kernel  # type: ignore[attr-defined]
+    kernel, config = _compiled_config(scene, RK4())
     with pytest.raises(ValueError, match="unknown method rk5"):
         _native_loop(kernel, {**config, "method": "rk5"})
     with pytest.raises(ValueError, match="the tableau must be explicit"):
         _native_loop(kernel, {**config, "A": [[0.0, 1.0], [0.5, 0.0]], "b": [0.5, 0.5], "c": [0.0, 0.5]})
-    alpha = compiled.plan(scene, system, GeneralizedAlpha(), energy_check="off", **base).config
-    assert alpha is not None
+    _, alpha = _compiled_config(scene, GeneralizedAlpha())
     with pytest.raises(ValueError, match="generalized-alpha needs"):
         _native_loop(kernel, {**alpha, "alpha": [1.0, 0.5, 0.5, 0.25]})
+
+
+def _compiled_config(scene: object, method: object, controller: object = None) -> tuple[object, dict[str, object]]:
+    """The kernel of ``scene`` and the compiled loop's settings for a 10-step run of ``method``."""
+    import numpy as np
+
+    import coopdyn as cd
+    from coopdyn import compiled
+    from coopdyn.closed_loop import System
+
+    dyn = cd.Dynamics(scene, "native")  # type: ignore[arg-type]
+    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)  # type: ignore[attr-defined]
+    config = compiled.plan(scene, System(dyn, controller), method, energy_check="off", **base).config  # type: ignore[arg-type]
+    assert config is not None
+    return dyn._kernel, config  # type: ignore[attr-defined]
 
 
 def _native_loop(kernel: object, config: dict[str, object]) -> object:
@@ -100,20 +105,13 @@ def test_every_setting_crosses_to_cpp_by_name_and_a_setting_it_does_not_read_is_
     import pytest
 
     import coopdyn as cd
-    from coopdyn import _native, compiled
-    from coopdyn.closed_loop import System
+    from coopdyn import _native
     from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
     from coopdyn.integrators import Trapezoid
     from coopdyn.scenes import object_start
 
     scene = cd.scenes.facing_arms("panda", stiffness=1e4)
-    dyn = cd.Dynamics(scene, "native")
-    ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene)))
-    system = System(dyn, ctrl)
-    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
-    config = compiled.plan(scene, system, Trapezoid(), energy_check="off", **base).config
-    assert config is not None
-    kernel = dyn._kernel  # type: ignore[attr-defined]
+    kernel, config = _compiled_config(scene, Trapezoid(), ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene))))
     _native.make_loop(kernel, config)  # as written: every field read
     with pytest.raises(ValueError, match=r"compiled loop: the kernel does not read the setting\(s\) gama"):
         _native.make_loop(kernel, {**config, "gama": 0.5})
@@ -170,20 +168,13 @@ def test_an_integrator_whose_compiled_spec_fails_is_a_simulation_error_not_a_con
 
 def test_the_compiled_loop_refuses_an_inconsistent_tableau_as_python_does() -> None:
     """A tableau whose rows do not sum to c (or weights to 1) is refused by the C++ reader too."""
-    import numpy as np
     import pytest
 
     import coopdyn as cd
-    from coopdyn import _native, compiled
-    from coopdyn.closed_loop import System
+    from coopdyn import _native
     from coopdyn.integrators import RK4
 
-    scene = cd.scenes.linear_book()
-    dyn = cd.Dynamics(scene, "native")
-    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
-    config = compiled.plan(scene, System(dyn), RK4(), energy_check="off", **base).config
-    assert config is not None
-    kernel = dyn._kernel  # type: ignore[attr-defined]
+    kernel, config = _compiled_config(cd.scenes.linear_book(), RK4())
     with pytest.raises(ValueError, match=r"inconsistent tableau \(a row of A does not sum to c\)"):
         _native.make_loop(kernel, {**config, "c": [0.0, 0.4, 0.5, 1.0]})
     with pytest.raises(ValueError, match=r"inconsistent tableau \(weights do not sum to 1\)"):
@@ -197,20 +188,14 @@ def test_a_setting_of_the_wrong_type_or_an_unknown_name_is_refused_naming_it() -
     import pytest
 
     import coopdyn as cd
-    from coopdyn import _native, compiled
-    from coopdyn.closed_loop import System
+    from coopdyn import _native
     from coopdyn.integrators import RK4
 
     with pytest.raises(ValueError, match="element 'se3': parameter K must be a matrix of numbers"):
         _native.evaluate_element("se3", {"K": "stiff", "D": np.eye(6)}, np.eye(4), np.zeros(6), False)
     with pytest.raises(ValueError, match=r"no element 'toy' \(registered: ball, hardening, python, se3\)"):
         _native.evaluate_element("toy", {}, np.eye(4), np.zeros(6), False)
-    scene = cd.scenes.linear_book()
-    dyn = cd.Dynamics(scene, "native")
-    base = dict(q0=scene.q0, v0=np.zeros(scene.nv), dt=1e-3, t_final=0.01, n_steps=10, save_every=1, max_speed=1e4)
-    config = compiled.plan(scene, System(dyn), RK4(), energy_check="off", **base).config
-    assert config is not None
-    kernel = dyn._kernel  # type: ignore[attr-defined]
+    kernel, config = _compiled_config(cd.scenes.linear_book(), RK4())
     with pytest.raises(ValueError, match="compiled loop: setting dt has the wrong type"):
         _native.make_loop(kernel, {**config, "dt": "fast"})
     with pytest.raises(ValueError, match=r"unknown method rk5 \(registered: exponential, generalized_alpha, implicit_euler, rk,"):

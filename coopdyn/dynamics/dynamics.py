@@ -196,6 +196,10 @@ class Dynamics:
         """Forget a raised rotation alarm."""
         raise NotImplementedError
 
+    def reraise_python_error(self) -> None:
+        """Raise what a Python-only element raised inside a compiled evaluation, if one did (the
+        native backend keeps it; in Python it was raised where it happened)."""
+
     # -- built on the interface ------------------------------------------------------------------
     def add_joint_gains(self, K: np.ndarray, D: np.ndarray, kp: np.ndarray, kd: np.ndarray) -> None:
         """Add joint PD gains (n_actuated,) to the diagonals of K̃ and D̃ (nv, nv), in place."""

@@ -56,7 +56,7 @@ class NativeDynamics(Dynamics):
 
     def reraise_python_error(self) -> None:
         """Raise what a Python-only element raised inside the kernel, if it did (and forget it)."""
-        error, self.python_error = getattr(self, "python_error", None), None
+        error, self.python_error = self.python_error, None
         if error is not None:
             raise error
 

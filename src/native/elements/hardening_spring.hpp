@@ -1,55 +1,35 @@
 // The hardening SE(3) spring: the C++ twin of coopdyn/model/elements/hardening_spring.py.
-// U = ½ eᵀ K e + ¼ κ |p|⁴ with e = log6(T_M_G), p = e[:3].
+// U = ½ eᵀ K e + ¼ κ |p|⁴ with e = log6(T_M_G), p = e[:3]: the SE(3) spring's evaluation plus the
+// κ term's energy, wrench and Gauss–Newton stiffness.
 #pragma once
 
 #include "element.hpp"
+#include "se3_spring.hpp"
 
 namespace coopdyn {
 
-class HardeningSpring : public Element {
+class HardeningSpring : public SE3Spring {
 public:
-  HardeningSpring(const Matrix6 & K, const Matrix6 & D, double hardening)
-    : K_(K), D_(D), kappa_(hardening), damped_(!D.isZero(0.0)) {}
+  HardeningSpring(const Matrix6 & K, const Matrix6 & D, double hardening) : SE3Spring(K, D), kappa_(hardening) {}
 
   // K and D (6x6) and the hardening κ [N/m³], by name.
   static std::unique_ptr<Element> make(Parameters & p) {
     return std::make_unique<HardeningSpring>(p.matrix("K", 6, 6), p.matrix("D", 6, 6), p.number("hardening"));
   }
 
-  bool damped() const override { return damped_; }
-
   void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const override {
-    Vector6 e;
-    out.theta = log6(T_M_G, e);
-    jlog6(T_M_G, e, out.theta, J_);
-    const Vector3 p = e.head<3>();
+    SE3Spring::evaluate(T_M_G, xi, jacobians, out);  // leaves Jlog6 in J_
+    if (kappa_ == 0.0) return;
+    const Vector3 p = out.deformation.head<3>();
     const double p2 = p.dot(p);
-    Vector6 w = K_ * e;
-    w.head<3>() += kappa_ * p2 * p;
-    out.power = 0.0;
-    if (damped_) {
-      const Vector6 e_dot = J_ * xi;
-      const Vector6 De = D_ * e_dot;
-      out.power = e_dot.dot(De);
-      w += De;
-    }
-    out.energy = 0.5 * e.dot(K_ * e) + 0.25 * kappa_ * p2 * p2;
-    out.deformation = e;
-    out.f.noalias() = -J_.transpose() * w;
-    if (jacobians) {
-      Matrix6 H = K_;
-      H.topLeftCorner<3, 3>() += kappa_ * (p2 * Matrix3::Identity() + 2.0 * p * p.transpose());
-      out.SK.noalias() = J_.transpose() * (H * J_);
-      if (damped_) out.SD.noalias() = J_.transpose() * (D_ * J_);
-      else out.SD.setZero();
-    }
+    const auto Jp = J_.topRows<3>();  // dp/dξ
+    out.energy += 0.25 * kappa_ * p2 * p2;
+    out.f.noalias() -= Jp.transpose() * (kappa_ * p2 * p);
+    if (jacobians) out.SK.noalias() += Jp.transpose() * (kappa_ * (p2 * Matrix3::Identity() + 2.0 * p * p.transpose())) * Jp;
   }
 
 private:
-  Matrix6 K_, D_;
   double kappa_;
-  bool damped_;
-  mutable Matrix6 J_;  // scratch
 };
 
 inline const bool hardening_registered = register_element("hardening", &HardeningSpring::make);

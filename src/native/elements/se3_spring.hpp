@@ -38,10 +38,10 @@ public:
     }
   }
 
-private:
+protected:
   Matrix6 K_, D_;
   bool damped_;
-  mutable Matrix6 J_;  // scratch
+  mutable Matrix6 J_;  // scratch: Jlog6 at the last evaluation (hardening_spring.hpp reads it)
 };
 
 inline const bool se3_registered = register_element("se3", &SE3Spring::make);
