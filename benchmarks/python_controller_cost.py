@@ -7,10 +7,14 @@ on the book's linear system (drives, 3 s):
 * ``built-in``: the built-in controller (GravityCompensationPD; the book's drives), compiled;
 * ``Python, called back``: the same law as a plain Python function (what a user writes), called
   from the compiled loop at every evaluation;
-* ``Python loop``: the same function with ``loop="python"`` (where such a controller ran before).
+* ``Python loop``: the same function with ``loop="python"`` (where such a controller ran before);
+* ``Python at 1 kHz``: the Python function sampled at 1 kHz with a zero-order hold
+  (``control_dt=1e-3``: one call per millisecond, as a robot's controller runs), and
+  ``built-in at 1 kHz``, the built-in law sampled the same way.
 
-Prints CPU per step and the ratios to the built-in run, with the load average; the three runs of
-each give the same trajectory to round-off (checked here).
+Prints CPU per step and the ratios to the built-in run (called at every evaluation), with the
+load average. The first three runs of each case give the same trajectory to round-off, and the
+two sampled runs give the same (sampled) trajectory to round-off (checked here).
 
     .venv/bin/python benchmarks/python_controller_cost.py [--repeats 5]
 """
@@ -57,37 +61,46 @@ def _cases() -> list[tuple[str, cd.Scene, Any, dict[str, Any]]]:
     ]
 
 
+#: the table's columns, one per variant (each 17 characters wide)
+HEADS = tuple(f"{h:>17s}" for h in ("built-in", "Python, called", "Python loop", "Python at 1 kHz", "built-in at 1 kHz"))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="runs of each variant (default 5)")
     args = parser.parse_args()
     print(f"CPU per step [µs], median of {args.repeats} interleaved runs; load average {os.getloadavg()[0]:.2f}")
-    print(f"{'case':28s} {'built-in':>9s} {'Python, called back':>20s} {'Python loop':>12s} {'max |Δq|':>10s}")
+    print(f"{'case':28s} " + " ".join(f"{h:>17s}" for h in HEADS) + f" {'max |Δq|':>10s}")
     with single_threaded_blas(), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name, scene, law, settings in _cases():
             users_controller = _UsersController(law)
             variants = {
-                "built-in": (law, "auto"),
-                "called back": (users_controller, "auto"),
-                "python": (users_controller, "python"),
+                "built-in": (law, "auto", None),
+                "called back": (users_controller, "auto", None),
+                "python": (users_controller, "python", None),
+                "Python 1 kHz": (users_controller, "auto", 1e-3),
+                "built-in 1 kHz": (law, "auto", 1e-3),
             }
             settings = dict(settings)
             t_final = settings.pop("t_final")
             cpu: dict[str, list[float]] = {k: [] for k in variants}
             runs: dict[str, cd.Result] = {}
             for _ in range(args.repeats):
-                for key, (ctrl, loop) in variants.items():
+                for key, (ctrl, loop, control_dt) in variants.items():
                     res = cd.simulate(
-                        scene, t_final, controller=ctrl, loop=loop, accuracy_check="off", progress=False, **settings
-                    )
+                        scene, t_final, controller=ctrl, loop=loop, control_dt=control_dt, accuracy_check="off", progress=False,
+                        **settings,
+                    )  # fmt: skip
                     cpu[key].append(res.cpu_time / res.n_steps)
                     runs[key] = res
-            assert (runs["built-in"].loop, runs["called back"].loop, runs["python"].loop) == ("compiled", "compiled", "python")
+            loops = tuple(runs[k].loop for k in variants)
+            assert loops == ("compiled", "compiled", "python", "compiled", "compiled"), loops
             base = statistics.median(cpu["built-in"])
-            dq = max(float(np.max(np.abs(r.q - runs["built-in"].q))) for r in runs.values())
-            cells = [f"{statistics.median(cpu[k]) * 1e6:7.2f} ({statistics.median(cpu[k]) / base:4.1f}×)" for k in variants]
-            print(f"{name:28s} {cells[0]:>9s} {cells[1]:>20s} {cells[2]:>12s} {dq:10.1e}")
+            dq = max(float(np.max(np.abs(runs[k].q - runs["built-in"].q))) for k in ("called back", "python"))
+            dq = max(dq, float(np.max(np.abs(runs["Python 1 kHz"].q - runs["built-in 1 kHz"].q))))
+            cells = [f"{statistics.median(cpu[k]) * 1e6:7.2f} ({statistics.median(cpu[k]) / base:4.2f}×)" for k in variants]
+            print(f"{name:28s} " + " ".join(f"{c:>{len(h)}s}" for c, h in zip(cells, HEADS, strict=True)) + f" {dq:10.1e}")
 
 
 if __name__ == "__main__":

@@ -31,6 +31,12 @@ class System:
             [N·m·s/rad]) has its joint PD gains included in the implicit methods' Jacobian.
         object_wrench: ``object_wrench(t) -> (6,)`` external wrench on the object [N, N·m],
             world axes, at the object frame origin (a disturbance, a contact, a load).
+        control_dt: the controller's sample period [s], or ``None`` (default): called at every
+            evaluation, a continuous-time controller. With a period, the controller is called at
+            the first step start on or after each instant ``k·control_dt`` (the loops make steps
+            land there) and its output is held until the next sample (a zero-order hold, as a
+            digital controller runs); the implicit methods then leave its gains out of their
+            matrix (the held torque does not depend on the stage's state).
 
     Attributes:
         n_rhs, n_jac, n_factor: right-hand-side evaluations, Jacobian (stiffness) evaluations
@@ -40,7 +46,11 @@ class System:
     """
 
     def __init__(
-        self, dynamics: Dynamics, controller: Controller | None = None, object_wrench: Callable[[float], np.ndarray] | None = None
+        self,
+        dynamics: Dynamics,
+        controller: Controller | None = None,
+        object_wrench: Callable[[float], np.ndarray] | None = None,
+        control_dt: float | None = None,
     ) -> None:
         if controller is not None and not callable(controller):
             raise ControllerError(
@@ -72,8 +82,16 @@ class System:
         self._first: _Record | None = None
         self._last: _Record | None = None
         self._previous_last: _Record | None = None
+        self.control_dt = control_dt
+        self._held: np.ndarray | None = None  # the torque held since the last sample (control_dt)
+        self._next_sample = 0  # the index k of the next sample instant k·control_dt
+        self._jump = self._zero  # the last sample's change of the held torque, and its time [s]
+        self._sampled_at = math.nan
+        #: whether the current step's start took a new sample (a method carrying the last step's
+        #: derivative, first-same-as-last, must evaluate afresh)
+        self.new_sample = False
         gains = getattr(controller, "gains", None)
-        self._gains = None
+        self._own_gains: tuple[np.ndarray, np.ndarray] | None = None
         if callable(gains):
             try:
                 raw = gains()
@@ -81,12 +99,19 @@ class System:
                 raise
             except Exception as exc:
                 raise ControllerError(f"the controller's gains() raised {type(exc).__name__}: {exc}") from exc
-            self._gains = _checked_gains(raw, self.n_actuated)
+            self._own_gains = _checked_gains(raw, self.n_actuated)
 
     @property
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
-        """The controller's joint (Kp, Kd) (n_actuated,) the implicit methods add to their matrix (zero without ``gains()``)."""
-        return self._gains if self._gains is not None else (self._zero, self._zero)
+        """The controller's joint (Kp, Kd) (n_actuated,) (zero without ``gains()``): the closed
+        loop's linearisation (the accuracy screen, the stability advice) includes them."""
+        return self._own_gains if self._own_gains is not None else (self._zero, self._zero)
+
+    @property
+    def matrix_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gains the implicit methods add to their step matrix: :attr:`gains`, or zero under
+        a ``control_dt`` hold (the held torque does not depend on the stage's state)."""
+        return (self._zero, self._zero) if self.control_dt is not None else self.gains
 
     @property
     def has_object_wrench(self) -> bool:
@@ -103,7 +128,40 @@ class System:
         return self._scene.nonlinearity()
 
     def torque(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """The controller output, checked: (n_actuated,) finite floats."""
+        """The controller output, checked: (n_actuated,) finite floats (under a ``control_dt``
+        hold: the output of the last sample)."""
+        if self._held is not None:
+            return self._held
+        return self._controller_output(t, q, v)
+
+    def sample(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """With a ``control_dt``: call the controller at (t, q, v) and hold its output when t is
+        on or past the next sample instant (to 1e-9 of the period); else nothing. (A run's last
+        saved state keeps the held torque: no sample is taken at its end.)"""
+        self.new_sample = False
+        period = self.control_dt
+        if period is None or t < (self._next_sample - 1e-9) * period:
+            return
+        before = self._zero if self._held is None else self._held
+        self._held = None
+        self._held = self._controller_output(t, q, v)
+        self._jump = self._held - before
+        self._sampled_at = t
+        self._next_sample = math.floor(t / period + 1e-9) + 1
+        self.new_sample = True
+
+    def power_jump(self, t: float, v: np.ndarray) -> float:
+        """[W] how much a sample taken at t changed the torques' power at the velocity v
+        (``Δτ·q̇``; 0 when no sample was taken at t): the energy monitor ends the last hold's
+        work integral on the power before the jump."""
+        return float(self._jump @ v[self._act]) if t == self._sampled_at else 0.0
+
+    def next_sample_time(self) -> float:
+        """[s] the next sample instant a step must land on (inf without ``control_dt``)."""
+        return math.inf if self.control_dt is None else self._next_sample * self.control_dt
+
+    def _controller_output(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The controller's output at (t, q, v), checked."""
         if self.controller is None:
             return self._zero
         q_seen, v_seen = q.view(), v.view()  # read-only: a controller cannot change the state it is shown
@@ -200,10 +258,13 @@ class System:
         except ControllerError as exc:
             raise ControllerError(f"{exc} at t = {t:.6g} s; it must return 6 finite real numbers [N, N·m]") from None
 
-    def begin_step(self) -> None:
-        """Mark the start of a step (for :meth:`power_at` and :meth:`recorded_torque`); the
-        simulation loops call it before every step or attempt."""
+    def begin_step(self, t: float | None = None, q: np.ndarray | None = None, v: np.ndarray | None = None) -> None:
+        """Mark the start of a step from (t, q, v) (for :meth:`power_at` and
+        :meth:`recorded_torque`) and take the controller's sample there when one is due
+        (:meth:`sample`); the simulation loops call it before every step or attempt."""
         self._previous_last, self._first = self._last, None
+        if t is not None and q is not None and v is not None:
+            self.sample(t, q, v)
 
     def power_at(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
         """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
@@ -237,7 +298,7 @@ class System:
             StepMatrixError: the matrix is not positive definite.
         """
         self.n_factor += 1
-        kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
+        kp, kd = self.matrix_gains
         self.dynamics.factor(M, K, D, gh, kp, kd, gh2)
 
     def solve(self, f_q: np.ndarray, Mf_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -255,17 +316,18 @@ class System:
         self.n_jac += 1
         self.n_factor += 1
         tau, w = self._inputs(t, q, v)
-        kp, kd = self._gains if self._gains is not None else (self._zero, self._zero)
+        kp, kd = self.matrix_gains
         v_new = self.dynamics.implicit_euler_velocity(q, v, tau, h, kp, kd, w)
         self._record(q, v, tau, w)
         return v_new
 
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains; counts one Jacobian."""
+        """(M, K̃, D̃) (nv, nv) at (q, v), including the controller's PD gains (the closed loop's
+        linearisation, a hold or not); counts one Jacobian."""
         self.n_jac += 1
         M, K, D = self.dynamics.stiffness(q, v)
-        if self._gains is not None:
-            self.dynamics.add_joint_gains(K, D, *self._gains)
+        if self._own_gains is not None:
+            self.dynamics.add_joint_gains(K, D, *self._own_gains)
         return M, K, D
 
     def _object_power(self, wrench: np.ndarray) -> float:

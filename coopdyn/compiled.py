@@ -116,7 +116,7 @@ def plan(
         steps = sorted({min(dt, t_final - k * dt) for k in last})
         discretisations = [(h, *method.discretisation(system, h, ws)) for h in steps]  # type: ignore[attr-defined]
         spec = dataclasses.replace(spec, discretisations=discretisations, n_factor=system.n_factor)
-    kp, kd = system.gains
+    kp, kd = system.matrix_gains  # (none under a control_dt hold)
     config = {
         **spec.fields(),  # the method family's name and settings, read by its header in src/native/methods/
         "controller": controller,
@@ -135,6 +135,7 @@ def plan(
         "rtol": float(getattr(method, "rtol", 0.0)),
         "atol": float(getattr(method, "atol", 0.0)),
         "h_min": float(getattr(method, "h_min", 0.0)),
+        "control_dt": 0.0 if system.control_dt is None else float(system.control_dt),
     }
     return Plan(config, "")
 

@@ -19,7 +19,9 @@ class EnergyMonitor:
 
     The net power ``τ·q̇ − dissipation`` is taken at every step's start (reused from the
     integrator's own evaluation there) and integrated by the third-order rule
-    ``h/12 (5 P₊ + 8 P − P₋)`` on equal steps (trapezoidal otherwise); the energy is evaluated
+    ``h/12 (5 P₊ + 8 P − P₋)`` on equal steps (trapezoidal otherwise; under a ``control_dt``
+    hold, each hold's integral ends on the power before the next sample's jump and the rule
+    does not reach across it); the energy is evaluated
     every ``every`` steps. The tolerance is ``rtol`` times the energy in play (the largest
     kinetic + elastic energy seen, plus ∫|P| dt), plus the quadrature's own error estimate,
     plus round-off.
@@ -50,7 +52,9 @@ class EnergyMonitor:
 
     def after_step(self, t0: float, q0: np.ndarray, v0: np.ndarray, h: float, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """Call right after a step from (t0, q0, v0) of length h [s] to (t, q, v)."""
-        self._close_interval(self.system.power_at(t0, q0, v0), h)
+        p = self.system.power_at(t0, q0, v0)
+        jump = self.system.power_jump(t0, v0)  # a new control sample at t0: the last hold ends before it
+        self._close_interval(p - jump, h, p, fresh=jump != 0.0)
         self._steps += 1
         if self._steps % self.every == 0:
             self._check(t0, q0, v0)
@@ -61,8 +65,10 @@ class EnergyMonitor:
         self._close_interval(self.system.power_at(t, q, v), None)
         self._check(t, q, v)
 
-    def _close_interval(self, p_end: float, h_next: float | None) -> None:
-        """Add the work of the pending interval, which ends where the power is ``p_end``."""
+    def _close_interval(self, p_end: float, h_next: float | None, p_next: float | None = None, fresh: bool = False) -> None:
+        """Add the work of the pending interval, which ends where the power is ``p_end``; the
+        next interval starts at ``p_next`` (default ``p_end``), afresh after a jump of the held
+        torques (``fresh``: no three-point rule across it)."""
         if self._pending is not None:
             h, p = self._pending
             if self._before is not None and abs(self._before[0] - h) <= 1e-12 * h:
@@ -74,7 +80,9 @@ class EnergyMonitor:
             self.work += dw
             self.abs_work += abs(dw)
             self._before = self._pending
-        self._pending = None if h_next is None else (h_next, p_end)
+        if fresh:
+            self._before = None
+        self._pending = None if h_next is None else (h_next, p_end if p_next is None else p_next)
 
     def _check(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """Compare the energy at (t, q, v) — where the work integral ends — with the work."""

@@ -61,6 +61,7 @@ def simulate(
     max_memory: float | None = 4e9,
     stream_to: str | os.PathLike[str] | None = None,
     accuracy_check: str = "auto",
+    control_dt: float | None = None,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -89,10 +90,10 @@ def simulate(
             — and in Python otherwise. A built-in controller (``GravityCompensationPD``,
             ``ComputedTorque`` holding q0, ``ObjectImpedance`` holding or with
             ``GripLiftOscillate``, ``drives_controller``) runs compiled too; any other callable is
-            called from the compiled loop at each evaluation (Python code, with the GIL taken
-            for the call). ``"compiled"`` requires the compiled loop (SimulationError saying
-            which piece keeps it in Python); ``"python"`` forces the Python loop. Both give the
-            same result to round-off; ``Result.loop`` says which ran.
+            called from the compiled loop at each evaluation, or once per sample with
+            ``control_dt`` (Python code, with the GIL taken for the call). ``"compiled"``
+            requires the compiled loop (SimulationError saying which piece keeps it in Python);
+            ``"python"`` forces the Python loop. Both give the same result to round-off; ``Result.loop`` says which ran.
         max_steps: refuse a run whose ``t_final / dt`` exceeds this many steps, before it starts
             (the message estimates its CPU time); for adaptive methods, also the most steps
             (accepted and rejected) they may take (:class:`StepBudgetError` past it). ``None``:
@@ -113,6 +114,13 @@ def simulate(
             decides.
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
+        control_dt: the controller's sample period [s], or ``None`` (default) to call it at every
+            evaluation (a continuous-time controller: every stage of every step). With a period
+            the controller runs as a digital one does: it is called at t = 0, k·control_dt, …
+            and its output is held in between (zero-order hold) — one call per sample instead
+            of one per stage, whatever the method. Fixed-step methods need ``control_dt`` a
+            whole multiple of ``dt``; adaptive ones land a step on every sample instant. A
+            hold is part of the physics: the accuracy check's reference run holds too.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -152,6 +160,7 @@ def simulate(
     progress = _validate.flag(progress, "progress", SimulationError)
     method = get_integrator(integrator)
     check_integrator(scene, method)
+    control_dt = _control_period(control_dt, dt, method)
     if object_wrench is not None and has_constraints(scene):
         raise SimulationError(
             "object_wrench cannot be combined with rigid grasps yet: their constraint wrenches are read out after the run "
@@ -160,7 +169,7 @@ def simulate(
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
     budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
 
-    system = System(Dynamics(scene, backend), controller, object_wrench)
+    system = System(Dynamics(scene, backend), controller, object_wrench, control_dt)
     system.max_speed = max_speed
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
@@ -229,7 +238,9 @@ def simulate(
             bar.close()
     if not judged:
         return result
-    rerun = dict(controller=controller, q0=q, v0=v, object_wrench=object_wrench, backend=backend, progress=progress)
+    rerun = dict(
+        controller=controller, q0=q, v0=v, object_wrench=object_wrench, backend=backend, progress=progress, control_dt=control_dt
+    )
     return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
 
 
@@ -292,6 +303,27 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
     if message is not None:
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
+
+
+def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | None:
+    """``control_dt`` checked [s]: None, or a period > 0 that a fixed-step method's steps land on."""
+    if control_dt is None:
+        return None
+    period = _validate.number(control_dt, "control_dt", "s", SimulationError)
+    if not period >= MIN_DT:
+        raise SimulationError(
+            f"control_dt must be None (a controller called at every evaluation) or >= {MIN_DT:g} [s], got {period}"
+        )
+    if not method.adaptive:
+        ratio = period / dt
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+            finer = period / math.ceil(ratio * (1.0 - 1e-9) + 1e-9) if ratio >= 1.0 else period
+            raise SimulationError(
+                f"control_dt = {period:g} s must be a whole multiple of dt = {dt:g} s: {method.name} takes fixed steps and "
+                f"each sample instant k·control_dt must be the start of a step (the held torque changes there). "
+                f"Use dt = {finer:.6g} s (or another divisor of control_dt), or an adaptive method (dopri5, ros2_adaptive)"
+            )
+    return period
 
 
 STREAM_BATCH = 1024  #: samples kept in memory between writes to ``stream_to``
@@ -480,7 +512,7 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
         if k == n_steps:
             break
         h = min(dt, run.t_final - k * dt)
-        system.begin_step()
+        system.begin_step(t, q, v)
         try:
             q_new, v_new = method.step(system, t, q, v, h, run.ws)
         except StepMatrixError as exc:
@@ -588,10 +620,11 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
         if t_out <= t:
             continue
         while t < t_out:
-            h_try = min(h, t_out - t)
-            if t + h_try * (1.0 + 1e-9) >= t_out:  # land exactly on the output time
-                h_try = t_out - t
-            system.begin_step()
+            system.begin_step(t, q, v)  # (a controller's sample is due: taken here)
+            t_land = min(t_out, system.next_sample_time())
+            h_try = min(h, t_land - t)
+            if t + h_try * (1.0 + 1e-9) >= t_land:  # land exactly on the output time (or sample instant)
+                h_try = t_land - t
             try:
                 out = method.attempt(system, t, q, v, h_try, run.ws)
             except StepMatrixError as exc:
@@ -614,7 +647,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                         f"the step fell below h_min = {method.h_min:g} s"
                     )
                 continue
-            t_new = t_out if h_try == t_out - t else t + h_try
+            t_new = t_land if h_try == t_land - t else t + h_try
             run.check(t_new, out.q, out.v, h_try)
             run.after_step(t_new)
             if monitor is not None:

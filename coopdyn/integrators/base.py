@@ -39,6 +39,9 @@ class Problem(Protocol):
     n_rhs: int
     n_jac: int
     n_factor: int
+    #: the current step's start took a new controller sample (``control_dt``): the closed loop
+    #: changed there, and a derivative carried from the last step's end no longer holds
+    new_sample: bool
 
     @property
     def q0(self) -> np.ndarray:

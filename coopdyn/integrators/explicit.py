@@ -151,7 +151,8 @@ class RK4(ExplicitRungeKutta):
 
 class _FirstSameAsLast:
     """Dormand–Prince's workspace: the last stage's acceleration, reused as the next step's first
-    when that step starts from the same state array ``q``."""
+    when that step starts from the same state array ``q`` with the same controller output (no
+    new ``control_dt`` sample)."""
 
     def __init__(self) -> None:
         self.q: np.ndarray | None = None
@@ -194,7 +195,7 @@ class DormandPrince(AdaptiveIntegrator):
 
     def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
         tab = self.tableau
-        a0 = ws.a if ws is not None and ws.q is q else None
+        a0 = ws.a if ws is not None and ws.q is q and not system.new_sample else None  # a new held torque: afresh
         kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the 5th-order solution
         diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
         err = self.error_norm(system, h * _combine(diff, kd), h * _combine(diff, ka), q, v, v_new)

@@ -54,7 +54,7 @@ CONTROLLERS: dict[str, Any] = {
 TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
 TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output", "sweep")
 DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe a scene without a builder
-SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int}
+SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int, "control_dt": float}
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
 
 
@@ -71,6 +71,7 @@ class Run:
     dt: float
     save_every: int
     output: dict[str, Any] = field(default_factory=dict)
+    control_dt: float | None = None  #: the controller's sample period [s] (None: every evaluation)
 
 
 class _File:
@@ -250,6 +251,11 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     save_every = _check_type(f, "simulation", "save_every", sim.get("save_every", max(1, round(0.01 / dt))), int)
     if duration < 0 or save_every < 1:
         raise f.error("need duration >= 0 [s], dt > 0 [s], save_every >= 1", "simulation")
+    control_dt = None
+    if "control_dt" in sim:
+        control_dt = _check_type(f, "simulation", "control_dt", sim["control_dt"], float)
+        if not control_dt >= 1e-12:
+            raise f.error(f"the controller's sample period must be >= 1e-12 [s], got {control_dt:g}", "simulation", "control_dt")
 
     task = _task(f, doc.get("task"), scene)
     controller = _controller(f, doc.get("controller", {"type": "none"}), scene, task, builder_name, kwargs)
@@ -265,7 +271,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     except SceneFileError as exc:
         raise f.error(str(exc), "output", "folder") from None
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
-    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output)
+    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt)
 
 
 def _scene(f: _File, doc: dict[str, Any]) -> tuple[Scene, str | None, dict[str, Any]]:
@@ -413,6 +419,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
             integrator=loaded.integrator,
             dt=loaded.dt,
             save_every=loaded.save_every,
+            control_dt=loaded.control_dt,
             progress=progress,
             max_steps=max_steps,
         )

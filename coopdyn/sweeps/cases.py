@@ -67,6 +67,8 @@ class Case:
             ``reference`` when it has one.
         duration: simulated time [s]; integrator, dt [s], save_every: as for
             :func:`coopdyn.simulate`. ``None`` takes the sweep's setting.
+        control_dt: the controller's sample period [s] (:func:`coopdyn.simulate`'s
+            ``control_dt``); ``None``: called at every evaluation.
     """
 
     scene: Scene
@@ -76,6 +78,7 @@ class Case:
     integrator: str | None = None
     dt: float | None = None
     save_every: int | None = None
+    control_dt: float | None = None  #: the controller's sample period [s] (None: every evaluation)
 
 
 @dataclass(frozen=True)
@@ -341,6 +344,8 @@ def run_item(job: Job, item: Item, trajectories: str | None) -> dict[str, Any]:
             integrator = case.integrator or s.integrator
             name = integrator if isinstance(integrator, str) else repr(integrator)  # the table stores text
             row.update(integrator=name, dt_s=float(dt), duration_s=float(duration), save_every=int(save_every))
+            if case.control_dt is not None:
+                row.update(control_dt_s=float(case.control_dt))
             try:
                 result = simulate(
                     case.scene,
@@ -349,6 +354,7 @@ def run_item(job: Job, item: Item, trajectories: str | None) -> dict[str, Any]:
                     integrator=integrator,
                     dt=dt,
                     save_every=save_every,
+                    control_dt=case.control_dt,
                     max_steps=s.max_steps,
                     energy_check=s.energy_check,
                     accuracy_check=s.accuracy_check,

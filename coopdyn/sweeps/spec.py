@@ -100,7 +100,7 @@ class SpecJob:
         for name, value in item.params.items():
             put(doc, name, value)
         run = scenefile.from_document(doc, f)
-        return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every)
+        return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every, run.control_dt)
 
 
 def _draw(rng: np.random.Generator, name: str, dist: Any) -> Any:

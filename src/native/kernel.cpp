@@ -66,6 +66,7 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict values) {
     cfg.get<long>("save_every"), cfg.get<double>("max_speed"), cfg.get<int>("energy_mode"), cfg.get<long>("energy_every"),
     cfg.get<double>("energy_rtol"), cfg.get<double>("rtol"), cfg.get<double>("atol"), cfg.get<double>("h_min"));
   loop->set_first_step(cfg.get<double>("dt"));
+  loop->set_control_period(cfg.get<double>("control_dt"));
   if (cfg.has("n_factor")) loop->set_factorisations(cfg.get<long>("n_factor"));
   cfg.check_all_read();
   return loop;

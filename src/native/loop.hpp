@@ -43,7 +43,9 @@ struct Monitor {
   double pending_h = 0, pending_p = 0, before_h = 0, before_p = 0;
   long steps = 0;
 
-  void close_interval(double p_end, double h_next, bool has_next) {
+  // (p_next: the next interval's start power; fresh: after a jump of the held torques, no
+  // three-point rule across it)
+  void close_interval(double p_end, double h_next, bool has_next, double p_next, bool fresh) {
     if (has_pending) {
       const double h = pending_h, p = pending_p;
       double dw;
@@ -60,9 +62,10 @@ struct Monitor {
       before_h = pending_h;
       before_p = pending_p;
     }
+    if (fresh) has_before = false;
     has_pending = has_next;
     pending_h = h_next;
-    pending_p = p_end;
+    pending_p = p_next;
   }
 };
 
@@ -188,7 +191,12 @@ public:
 
   // ---------------------------------------------------------------- services for the methods
   // τ at (t, q, v) into tau(); `kinematics_done`: the kernel's kinematics are at (q, v) already.
+  // Under a control_dt hold: the last sample's τ (System.torque).
   void torque(double t, const VectorXd & q, const VectorXd & v, bool kinematics_done = false) {
+    if (holding_) {
+      tau_ = tau_hold_;
+      return;
+    }
     if (!kinematics_done && ctrl_->reads_kernel()) k_.kinematics(q, v, false);
     ctrl_->torque(t, q, v, tau_);
     const double sq = tau_.dot(tau_);
@@ -311,7 +319,31 @@ private:
     last_p_ = p;
     last_tau_ = tau_;
   }
-  void begin_step() { have_first_ = false; }
+  // A step from (t, q, v) begins: the controller's sample is taken when one is due (System.begin_step).
+  void begin_step(double t, const VectorXd & q, const VectorXd & v) {
+    have_first_ = false;
+    if (sample(t, q, v)) method_->restart();
+  }
+  // With a control_dt: τ at (t, q, v), held, when t is on or past the next sample instant (to
+  // 1e-9 of the period; System.sample); whether a sample was taken.
+  bool sample(double t, const VectorXd & q, const VectorXd & v) {
+    if (control_dt_ <= 0.0 || t < (double(next_sample_) - 1e-9) * control_dt_) return false;
+    const bool held = holding_;
+    holding_ = false;
+    torque(t, q, v);
+    if (held)
+      jump_ = tau_ - tau_hold_;
+    else
+      jump_ = tau_;
+    tau_hold_ = tau_;
+    holding_ = true;
+    sampled_at_ = t;
+    next_sample_ = static_cast<long>(std::floor(t / control_dt_ + 1e-9)) + 1;
+    return true;
+  }
+  double next_sample_time() const {
+    return control_dt_ > 0.0 ? double(next_sample_) * control_dt_ : std::numeric_limits<double>::infinity();
+  }
   // One step (fixed) or attempt (adaptive) from (t, q_, v_) into q_new_, v_new_; the error norm.
   double step(double t, double h) { return method_->step(*this, t, q_, v_, h, q_new_, v_new_); }
 
@@ -388,14 +420,19 @@ private:
     }
   }
   void monitor_after_step(double t0, const VectorXd & q0, const VectorXd & v0, double h, bool reused_start) {
-    monitor_.close_interval(start_power(reused_start), h, true);
+    const double p = start_power(reused_start);
+    double jump = 0.0;  // a new control sample at t0: the last hold ends on the power before it
+    if (t0 == sampled_at_)
+      for (Eigen::Index i = 0; i < na_; ++i) jump += jump_[i] * v0[act_[i]];
+    monitor_.close_interval(p - jump, h, true, p, jump != 0.0);
     ++monitor_.steps;
     if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
   }
   void monitor_finish(double t, const VectorXd & q, const VectorXd & v) {
     kinematics_and_torque(t, q, v, false);
     k_.accel(q, v, tau_);
-    monitor_.close_interval(net_power(v), 0.0, false);
+    const double p = net_power(v);
+    monitor_.close_interval(p, 0.0, false, p, false);
     monitor_check(t, q, v);
   }
 
@@ -451,7 +488,7 @@ private:
         return;
       }
       const double h = std::min(dt_, t_final_ - double(k) * dt_);
-      begin_step();
+      begin_step(t_, q_, v_);
       fail_t_ = t_;  // where a failing step started (a StepMatrixError reports it)
       fail_h_ = h;
       step(t_, h);
@@ -469,10 +506,10 @@ private:
         finish();
         return;
       }
-      const double t_out = outputs_[j_out_];
-      double h_try = std::min(h_, t_out - t_);
-      if (t_ + h_try * (1.0 + 1e-9) >= t_out) h_try = t_out - t_;
-      begin_step();
+      begin_step(t_, q_, v_);  // (a controller's sample is due: taken here)
+      const double t_out = outputs_[j_out_], t_land = std::min(t_out, next_sample_time());
+      double h_try = std::min(h_, t_land - t_);
+      if (t_ + h_try * (1.0 + 1e-9) >= t_land) h_try = t_land - t_;  // land on the output time (or sample instant)
       fail_t_ = t_;
       fail_h_ = h_try;
       const bool reused = method_->reuses_start();
@@ -496,7 +533,7 @@ private:
         continue;
       }
       method_->accepted();
-      const double t_new = (h_try == t_out - t_) ? t_out : t_ + h_try;
+      const double t_new = (h_try == t_land - t_) ? t_land : t_ + h_try;
       if (!accept(t_, t_new, h_try, reused)) return;
       if (t_ >= t_out) {
         save(t_, q_, v_, t_ < t_final_);
@@ -547,8 +584,16 @@ private:
   double fail_t_ = 0.0, fail_h_ = 0.0;
   VectorXd q_fail_, v_fail_;
 
+  // the controller's sample period (0: called at every evaluation), the next sample's index, the held τ
+  double control_dt_ = 0.0;
+  long next_sample_ = 0;
+  bool holding_ = false;
+  double sampled_at_ = std::numeric_limits<double>::quiet_NaN();  // the last sample's time
+  VectorXd tau_hold_, jump_;  // the held τ, and how the last sample changed it
+
 public:
   void set_first_step(double h) { h_ = h; }
+  void set_control_period(double control_dt) { control_dt_ = control_dt; }
   void set_factorisations(long n) { n_factor_ = n; }
 };
 

@@ -28,6 +28,9 @@ public:
   virtual bool reuses_start() const { return false; }
   virtual void accepted() {}
   virtual void rejected() {}
+  // The closed loop changed at this step's start (a new controller sample under a control_dt
+  // hold): a derivative carried from the last step's end no longer holds.
+  virtual void restart() {}
 };
 
 // A family's constructor from the run's settings (its compiled_spec() merged into the loop's).

@@ -43,6 +43,7 @@ public:
   bool reuses_start() const override { return fsal_valid_; }
   void accepted() override { fsal_valid_ = true; }
   void rejected() override { fsal_valid_ = false; }
+  void restart() override { fsal_valid_ = false; }
 
   // The tableau of `settings` (A, b, c, and b_hat when adaptive), checked explicit and consistent.
   static std::unique_ptr<Method> make(Settings & settings, const Model & model, Eigen::Index) {
