@@ -1,5 +1,5 @@
 """Type stub of the compiled kernel (src/native/kernel.cpp): the dynamics (coopdyn.dynamics.native)
-and the step loop (coopdyn.compiled)."""
+and the step loop (coopdyn.compiled), and the MuJoCo callbacks (coopdyn.mujoco)."""
 
 from typing import Any
 
@@ -66,3 +66,27 @@ def evaluate_element(
     kind: str, parameters: dict[str, Any], T_M_G: np.ndarray, xi: np.ndarray, jacobians: bool
 ) -> tuple[float, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, float]: ...
 def make_loop(kernel: Kernel, config: dict[str, Any]) -> Loop: ...
+
+class MujocoBridge:
+    """coopdyn's law as MuJoCo callbacks (src/native/mujoco_bridge.hpp); see coopdyn.mujoco."""
+
+    @property
+    def evaluations(self) -> int: ...
+    def take_error(self) -> str: ...
+
+def make_mujoco_bridge(
+    kernel: Kernel,
+    controller: dict[str, Any] | None,
+    layout: tuple[int, int, int, int, int],
+    q_pin: np.ndarray,
+    q_mj: np.ndarray,
+    v_pin: np.ndarray,
+    v_mj: np.ndarray,
+    free: np.ndarray,
+    motor_ctrl: np.ndarray,
+    motor_tau: np.ndarray,
+) -> MujocoBridge: ...
+def install_mujoco_bridge(bridge: MujocoBridge) -> None: ...
+def uninstall_mujoco_bridge() -> None: ...
+def mujoco_passive_address() -> int: ...
+def mujoco_control_address() -> int: ...

@@ -46,9 +46,11 @@ def test_bench_peer_rows_and_summary() -> None:
     assert bench.peer_rows(bench.panda_case(1e4), quick=True, progress=False) == []
 
 
-def test_mujoco_panda_scene_is_coopdyns_scene() -> None:
+@pytest.mark.parametrize("compiled", [True, False], ids=["C callbacks", "Python callbacks"])
+def test_mujoco_panda_scene_is_coopdyns_scene(compiled: bool) -> None:
     """The Panda scene rebuilt in MuJoCo from coopdyn's model, with coopdyn's law as passive
-    forces and its controller: the same accelerations at random states (round-off), and RK4 in
+    forces and its controller (as C callbacks of coopdyn's kernel, or from Python): the same
+    accelerations at random states (round-off), and RK4 in
     both simulators converges to the same trajectory (the difference falls at order 4)."""
     import pinocchio as pin
 
@@ -57,12 +59,12 @@ def test_mujoco_panda_scene_is_coopdyns_scene() -> None:
 
     scene = scenes.facing_arms("panda", stiffness=1e4, damping=0.002, joint_damping=0.5)
     ctrl = GravityCompensationPD(scene, 50.0, 5.0)
-    assert MujocoScene(scene, ctrl, "RK4", 1e-3).check(n=5) < 1e-12
+    assert MujocoScene(scene, ctrl, "RK4", 1e-3, compiled=compiled).check(n=5) < 1e-12
     v0 = np.random.default_rng(4).normal(size=scene.nv) * 0.3
     ref = __import__("coopdyn").simulate(scene, 0.05, controller=ctrl, integrator="rk4", dt=1e-5, v0=v0, save_every=1000)
     errors = []
     for dt in (2e-3, 1e-3, 5e-4):
-        _, Q, _, _, _ = MujocoScene(scene, ctrl, "RK4", dt).run(scene.q0, v0, 0.05, round(0.01 / dt))
+        _, Q, _, _, _ = MujocoScene(scene, ctrl, "RK4", dt, compiled=compiled).run(scene.q0, v0, 0.05, round(0.01 / dt))
         errors.append(max(np.max(np.abs(pin.difference(scene.model, Q[i], ref.q[i]))) for i in range(len(Q))))
     order = np.polyfit(np.log([2e-3, 1e-3, 5e-4]), np.log(errors), 1)[0]
     assert abs(order - 4.0) < 0.3, (errors, order)

@@ -32,7 +32,7 @@ from .. import _validate
 from .._optional import require
 from ..errors import CoopdynError, SimulationError
 from ..model.scene import Scene
-from .mujoco_scene import _rotation
+from ..mujoco import _rotation
 
 _AXES = {"RX": (1.0, 0.0, 0.0), "RY": (0.0, 1.0, 0.0), "RZ": (0.0, 0.0, 1.0)}
 _AXES.update({"P" + k[1]: a for k, a in list(_AXES.items())})

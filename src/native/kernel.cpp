@@ -18,6 +18,7 @@
 
 #include "kernel.hpp"
 #include "loop.hpp"
+#include "mujoco_bridge.hpp"
 #include "registered.hpp"  // every header of controllers/, elements/ and methods/ (CMakeLists.txt)
 
 namespace {
@@ -71,6 +72,35 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict values) {
   cfg.check_all_read();
   return loop;
 }
+
+// coopdyn's law (and a compiled controller, or None) as MuJoCo callbacks (mujoco_bridge.hpp;
+// coopdyn/mujoco.py finds the layout and the index maps).
+std::shared_ptr<cn::MujocoBridge> make_mujoco_bridge(Kernel & kernel, bp::object controller, bp::tuple layout,
+                                                     const Eigen::VectorXi & q_pin, const Eigen::VectorXi & q_mj,
+                                                     const Eigen::VectorXi & v_pin, const Eigen::VectorXi & v_mj,
+                                                     const Eigen::VectorXi & free, const Eigen::VectorXi & motor_ctrl,
+                                                     const Eigen::VectorXi & motor_tau) {
+  if (bp::len(layout) != 5 || free.size() != 4 || q_pin.size() != q_mj.size() || v_pin.size() != v_mj.size() ||
+      motor_ctrl.size() != motor_tau.size())
+    throw std::invalid_argument("make_mujoco_bridge: inconsistent layout or index maps");
+  const cn::MjDataLayout offsets{bp::extract<long>(layout[0]), bp::extract<long>(layout[1]), bp::extract<long>(layout[2]),
+                                 bp::extract<long>(layout[3]), bp::extract<long>(layout[4])};
+  std::unique_ptr<cn::Controller> ctrl;
+  if (!controller.is_none()) ctrl = make_controller(kernel, bp::extract<bp::dict>(controller));
+  return std::make_shared<cn::MujocoBridge>(kernel, std::move(ctrl), offsets, q_pin, q_mj, v_pin, v_mj,
+                                            Eigen::Vector4i(free), motor_ctrl, motor_tau);
+}
+void install_mujoco_bridge(std::shared_ptr<cn::MujocoBridge> bridge) {
+  const std::lock_guard<std::mutex> lock(cn::bridge_mutex());
+  cn::installed_bridge() = std::move(bridge);
+}
+void uninstall_mujoco_bridge() {
+  const std::lock_guard<std::mutex> lock(cn::bridge_mutex());
+  cn::installed_bridge().reset();
+}
+// The callbacks' addresses, for ctypes (MuJoCo's mjfGeneric).
+std::uintptr_t mujoco_passive_address() { return reinterpret_cast<std::uintptr_t>(&coopdyn_mjcb_passive); }
+std::uintptr_t mujoco_control_address() { return reinterpret_cast<std::uintptr_t>(&coopdyn_mjcb_control); }
 
 // One element built from its parameters as the kernel builds it, evaluated at the relative pose
 // T_M_G (4x4) and twist xi: (energy, deformation, G_f_G, power, S_K, S_D, theta), as
@@ -141,6 +171,16 @@ BOOST_PYTHON_MODULE(_native) {
     .def("counters", &Loop::counters, bp::args("self"))
     .def("failure", &Loop::failure, bp::args("self"))
     .add_property("t", &Loop::time);
+  bp::class_<cn::MujocoBridge, std::shared_ptr<cn::MujocoBridge>, boost::noncopyable>(
+    "MujocoBridge", "coopdyn's law as MuJoCo callbacks (see coopdyn.mujoco).", bp::no_init)
+    .add_property("evaluations", &cn::MujocoBridge::evaluations)
+    .def("take_error", &cn::MujocoBridge::take_error, bp::args("self"));
+  bp::def("make_mujoco_bridge", &make_mujoco_bridge, bp::with_custodian_and_ward_postcall<0, 1>(),
+          bp::args("kernel", "controller", "layout", "q_pin", "q_mj", "v_pin", "v_mj", "free", "motor_ctrl", "motor_tau"));
+  bp::def("install_mujoco_bridge", &install_mujoco_bridge, bp::args("bridge"));
+  bp::def("uninstall_mujoco_bridge", &uninstall_mujoco_bridge);
+  bp::def("mujoco_passive_address", &mujoco_passive_address);
+  bp::def("mujoco_control_address", &mujoco_control_address);
   bp::def("evaluate_element", &evaluate_element, bp::args("kind", "parameters", "T_M_G", "xi", "jacobians"));
   bp::def("make_loop", &make_loop, bp::with_custodian_and_ward_postcall<0, 1>(), bp::args("kernel", "config"));
 }

@@ -328,6 +328,19 @@ public:
   double rotation_alarm_angle() const { return rotation_alarm_angle_; }
   void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
 
+  // Q = Σ Jrᵀ G_f_G at (q, v) after kinematics(q, v, false), without the Jacobians: the elements'
+  // wrenches on the joints (as forward_dynamics applies them), summed over each joint's subtree
+  // and projected on its motion subspace (one pass from the leaves). What a peer simulator adds
+  // as passive force (coopdyn.mujoco); equal to spring_force to round-off (tests/test_mujoco.py).
+  const VectorXd & passive_force() {
+    if (kinematics_ != VELOCITIES) throw std::logic_error("passive_force needs kinematics(q, v, false) first");
+    kinematics_ = NONE;
+    link_wrenches();
+    for (pinocchio::JointIndex j = model_.njoints - 1; j > 0; --j)
+      ProjectForce::run(model_.joints[j], data_.joints[j], ProjectForce::ArgsType(model_, data_, fext_, Q_));
+    return Q_;
+  }
+
 private:
   static Vector6 object_wrench(bp::object wrench) {
     if (wrench.is_none()) return Vector6::Zero();
@@ -357,6 +370,33 @@ private:
     if (kinematics_ != VELOCITIES) throw std::logic_error("accel needs kinematics(q, v, false) first");
     kinematics_ = NONE;
     check_size(tau, actuated_.size(), "tau");
+    const double p_diss = link_wrenches();
+    if (wrench) {
+      const pinocchio::Frame & object = model_.frames[object_frame_];
+      fext_[object.parentJoint] += object.placement.act(pinocchio::Force(local_wrench(*wrench)));
+    }
+    tau_full_.setZero();
+    joint_torques(v, tau, p_diss);
+    return aba_.accelerations(model_, data_, tau_full_, fext_);
+  }
+
+private:
+  // f into Q through joint i's motion subspace, then onto its parent (leaves first).
+  struct ProjectForce : pinocchio::fusion::JointUnaryVisitorBase<ProjectForce> {
+    typedef boost::fusion::vector<const Model &, Data &, ForceList &, VectorXd &> ArgsType;
+    template <typename JointModel>
+    static void algo(const pinocchio::JointModelBase<JointModel> & jmodel,
+                     pinocchio::JointDataBase<typename JointModel::JointDataDerived> & jdata, const Model & model,
+                     Data & data, ForceList & f, VectorXd & Q) {
+      const auto i = jmodel.id();
+      jmodel.jointVelocitySelector(Q).noalias() = jdata.S().transpose() * f[i];
+      if (model.parents[i] > 0) f[model.parents[i]] += data.liMi[i].act(f[i]);
+    }
+  };
+
+  // Each element's wrench from the frames' placements and velocities (after kinematics(q, v,
+  // false)) into fext_, on the joints carrying G and T; the elements' dissipated power [W].
+  double link_wrenches() {
     for (pinocchio::Force & f : fext_) f.setZero();
     double p_diss = 0.0;
     for (std::size_t i = 0; i < links_.size(); ++i) {
@@ -370,13 +410,7 @@ private:
       p_diss += ev_.power;
       watch_rotation(i);
     }
-    if (wrench) {
-      const pinocchio::Frame & object = model_.frames[object_frame_];
-      fext_[object.parentJoint] += object.placement.act(pinocchio::Force(local_wrench(*wrench)));
-    }
-    tau_full_.setZero();
-    joint_torques(v, tau, p_diss);
-    return aba_.accelerations(model_, data_, tau_full_, fext_);
+    return p_diss;
   }
 
   // What the implicit methods need at (q, v), after kinematics(q, v, true): tau_full_ = f =
