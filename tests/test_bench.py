@@ -54,13 +54,17 @@ def test_peer_comparison_on_the_panda_scene() -> None:
     mine, theirs = rows["rk4", "dt=0.000625"], rows["mujoco RK4", "dt=0.000625"]
     assert mine.stable and theirs.stable
     assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05)  # the same method on the same system
+    python = rows["mujoco RK4 (Python callbacks)", "dt=0.000625"]  # the labelled second row: the same run
+    assert python.wrench_error == pytest.approx(theirs.wrench_error, rel=1e-6)
+    assert result["checks"]["pandas k=1e+04 (MuJoCo, Python callbacks)"] < 1e-12
     table = format_comparison(result)
-    assert "pandas k=1e+04" in table and "1 panda k=1e+04" in table and "coopdyn / best peer" in table
+    assert "pandas k=1e+04" in table and "1 panda k=1e+04" in table and "MuJoCo, compiled callbacks" in table
+    assert "best peer with Python callbacks" in table
     assert result["checks"]["1 panda k=1e+04 (MuJoCo)"] < 1e-12  # the chain holding the box, too
     if "pandas k=1e+04 (Drake)" in result["checks"]:  # Drake installed: checked, timed and tabled
         assert max(v for k, v in result["checks"].items() if k.endswith("(Drake)")) < 1e-12
         assert {"drake discrete", "drake runge_kutta3"} <= {r.method for r in result["rows"]}
-        assert "MuJoCo, Drake and Exudyn" in table or "MuJoCo and Drake" in table
+        assert "MuJoCo, Drake, Exudyn" in table or "MuJoCo, Drake" in table
 
 
 def test_single_threaded_blas_limits_then_restores() -> None:

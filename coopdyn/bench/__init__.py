@@ -32,9 +32,11 @@ from .stability import is_stable_at, measure_stable_dt
 def run_peer_comparison(
     out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True
 ) -> dict[str, Any]:
-    """coopdyn against MuJoCo, and Drake and Exudyn when installed, on two Pandas, k = 1e4 and 1e6 N/m, and one Panda (a
-    7-link chain holding the box), k = 1e4 (:mod:`.panda_peers`);
-    writes ``peers.csv`` and ``peers.png`` (work–precision, every simulator on the same axes) and
+    """coopdyn against MuJoCo (with coopdyn's law compiled, and with it in Python), and Drake and
+    Exudyn when installed (:mod:`.panda_peers`): the perturbed benchmark on two Pandas, k = 1e4
+    and 1e6 N/m, and one Panda (a 7-link chain holding the box), k = 1e4; and the demo's task,
+    damped, at k = 1e4 … 1e7 N/m (``"task"``). Writes ``peers.csv``/``peers.png`` and
+    ``task_peers.csv``/``task_peers.png`` (work–precision, every simulator on the same axes) and
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
 
     Raises:
@@ -46,20 +48,33 @@ def run_peer_comparison(
     require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
+    rounds = 1 if quick else 5
     with single_threaded_blas():
-        result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=1 if quick else 5, progress=progress)
+        result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=rounds, progress=progress)
+        task = compare(
+            (1e4, 1e6) if quick else (1e4, 1e5, 1e6, 1e7),
+            t_final=0.4 if quick else 1.25,
+            quick=quick,
+            rounds=rounds,
+            progress=progress,
+            task=True,
+        )
     files = {
         "rows": write_csv(result["rows"], out_dir / "peers.csv"),
         "chart": plot_work_precision(result["rows"], out_dir / "peers.png"),
+        "task_rows": write_csv(task["rows"], out_dir / "task_peers.csv"),
+        "task_chart": plot_work_precision(task["rows"], out_dir / "task_peers.png"),
     }
     report = "\n\n".join(
         [
             format_rows(result["rows"]),
             format_comparison(result),
+            format_rows(task["rows"]),
+            format_comparison(task),
             "\n".join(f"wrote {path}  ({name})" for name, path in files.items()),
         ]
     )
-    return {**result, "files": files, "report": report}
+    return {**result, "task": task, "files": files, "report": report}
 
 
 def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:

@@ -8,11 +8,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..control import GravityCompensationPD
+from ..control import GravityCompensationPD, GripLiftOscillate, ObjectImpedance
 from ..errors import SimulationError
 from ..integrators import INTEGRATORS
 from ..model.scene import Scene
-from ..problems.facing_arms import facing_arms
+from ..problems.facing_arms import facing_arms, object_start
 from ..problems.linear_book import BookParameters, Drive, book_task, drives_controller, linear_book, linear_book_exact
 from ..result import Result
 from ..simulate import simulate
@@ -97,3 +97,38 @@ def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1
     note = f"dopri5 rtol={reference_rtol:g}"
     name = f"pandas k={stiffness:.0e}" if n_arms == 2 else f"{n_arms} panda{'s' * (n_arms > 1)} k={stiffness:.0e}"
     return Case(name, scene, ctrl, t_final, v0, reference, note)
+
+
+#: the task benchmark's pace: the demo's grip, lift and oscillation compressed into 1.2 s
+TASK_PACE = dict(squeeze=20.0, t_grip=0.2, t_lift=0.3, lift_duration=0.4, t_osc=0.7, frequency=2.0, cycles=1.0)
+#: the task benchmark's interconnection damping, as the demo's: D = 0.002 s · K
+TASK_DAMPING = 0.002
+
+
+def task_case(stiffness: float, t_final: float = 1.25, reference_rtol: float = 1e-11) -> Case:
+    """The demo's task as a benchmark: two Pandas grip a 2 kg box (20 N squeeze), lift it 0.1 m
+    and oscillate it one cycle at 2 Hz (:data:`TASK_PACE`, 1.2 s), damped interconnections
+    (D = 0.002 s · K) at ``stiffness`` [N/m], ObjectImpedance, from rest at the scene's start:
+    the realistic regime, where the spring modes are excited only weakly; reference:
+    Dormand–Prince at a tight tolerance."""
+    scene = facing_arms("panda", stiffness=stiffness, damping=TASK_DAMPING)
+    ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), **TASK_PACE))
+    v0 = np.zeros(scene.nv)
+    ref = simulate(
+        scene,
+        t_final,
+        controller=ctrl,
+        integrator=INTEGRATORS["dopri5"](rtol=reference_rtol, atol=reference_rtol * 1e-2),  # type: ignore[call-arg]
+        dt=OUTPUT_INTERVAL,
+        v0=v0,
+        energy_check="off",
+        max_steps=None,
+    )
+    ref_pos, ref_forces = ref.object_position(), _forces(ref)
+
+    def reference(res: Result) -> tuple[np.ndarray, np.ndarray]:
+        if res.t.size != ref.t.size or np.max(np.abs(res.t - ref.t)) > 1e-9:
+            raise SimulationError("benchmark runs must save on the reference's output grid")
+        return ref_pos, ref_forces
+
+    return Case(f"task k={stiffness:.0e}", scene, ctrl, t_final, v0, reference, f"dopri5 rtol={reference_rtol:g}")

@@ -50,6 +50,9 @@ METHODS = ("implicit_euler", "trapezoid", "trapezoid rho_inf=0.7", "generalized_
 #: k = 1e4 and 5 ms, from 1, 0.9, 0.7, 0.5, 0 — a user's choice, shown beside the default)
 VARIANTS: dict[str, Callable[[], Integrator]] = {"trapezoid rho_inf=0.7": lambda: Trapezoid(rho_inf=0.7)}
 MUJOCO = ("implicitfast", "RK4")
+#: the label suffix of the MuJoCo rows whose law and controller are Python callbacks (the
+#: unlabelled MuJoCo rows run them as compiled C callbacks: the fair peer)
+PYTHON_CALLBACKS = " (Python callbacks)"
 #: Exudyn's solvers in the comparison (when ``import exudyn`` works)
 EXUDYN = ("RK44", "GeneralizedAlpha")
 #: Drake's ways of running the scene (when ``import pydrake`` works): its discrete plant over
@@ -94,17 +97,18 @@ def _peer_result(
     return cpu, Result(case.scene, t, Q, V, tau, method, dt, n_steps, cpu)
 
 
-def _mujoco_point(case: Case, integrator: str, dt: float) -> Callable[[], tuple[float, Result | None]]:
+def _mujoco_point(case: Case, integrator: str, dt: float, compiled: bool = True) -> Callable[[], tuple[float, Result | None]]:
     from .mujoco_scene import MujocoScene
 
-    peer = MujocoScene(case.scene, case.controller, integrator, dt)
+    peer = MujocoScene(case.scene, case.controller, integrator, dt, compiled=compiled)
+    label = f"mujoco {integrator}" + ("" if compiled else PYTHON_CALLBACKS)
 
     def run() -> tuple[float, Result | None]:
         save_every = max(1, round(OUTPUT_INTERVAL / dt))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t, Q, V, cpu, n_steps = peer.run(case.scene.q0, case.v0, case.t_final, save_every)
-        return _peer_result(case, (t, Q, V, cpu), f"mujoco {integrator}", dt, n_steps * (4 if integrator == "RK4" else 1))
+        return _peer_result(case, (t, Q, V, cpu), label, dt, n_steps * (4 if integrator == "RK4" else 1))
 
     return run
 
@@ -152,6 +156,14 @@ def _exudyn_reference(case: Case, peer: Any) -> tuple[np.ndarray, np.ndarray]:
     return res.object_position(), _forces(res)
 
 
+def _exudyn_takes(case: Case) -> bool:
+    """Whether the Exudyn peer can run the case: it models the joint PD + gravity compensation
+    in Exudyn's own kinematic tree (its PD vector), not the object impedance of the task."""
+    from ..control import GravityCompensationPD
+
+    return case.controller is None or isinstance(case.controller, GravityCompensationPD)
+
+
 def _check(checks: dict[str, float], case: Case, peer: str, difference: float) -> None:
     """Record a peer's acceleration check; refuse to time a model that is not coopdyn's scene."""
     checks[f"{case.name} ({peer})"] = difference
@@ -170,22 +182,30 @@ def compare(
     rounds: int = 5,
     progress: bool = True,
     chain: bool = True,
+    task: bool = False,
 ) -> dict[str, Any]:
-    """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first;
-    returns ``rows`` (:class:`Row`, the peers' methods named ``"mujoco …"``, ``"drake …"``,
+    """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first
+    (the perturbed benchmark: undamped, kicked by a random start), or with ``task`` on the demo's
+    task at each stiffness (:func:`.cases.task_case`: damped, grip–lift–oscillate); returns
+    ``rows`` (:class:`Row`, the peers' methods named ``"mujoco …"``, ``"drake …"``,
     ``"exudyn …"``) and ``checks`` (``"scene (MuJoCo)"`` / ``"scene (Drake)"`` → largest
     relative difference between that peer's accelerations and coopdyn's)."""
+    from .cases import task_case
     from .mujoco_scene import MujocoScene
 
-    cases = [panda_case(k, t_final) for k in stiffnesses]
-    if chain:  # one Panda: a 7-link revolute chain holding the box by one spring
-        cases.append(panda_case(stiffnesses[0], t_final, n_arms=1))
+    if task:
+        cases = [task_case(k, t_final) for k in stiffnesses]
+    else:
+        cases = [panda_case(k, t_final) for k in stiffnesses]
+        if chain:  # one Panda: a 7-link revolute chain holding the box by one spring
+            cases.append(panda_case(stiffnesses[0], t_final, n_arms=1))
     checks: dict[str, float] = {}
     references: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # Exudyn's own, per scene
     plan: list[tuple[Case, str, str, float, float, Callable[[], tuple[float, Result | None]]]] = []
     flags: set[int] = set()
     for case in cases:
         _check(checks, case, "MuJoCo", MujocoScene(case.scene, case.controller, "RK4", 1e-3).check())
+        _check(checks, case, "MuJoCo, Python callbacks", MujocoScene(case.scene, case.controller, "RK4", 1e-3, False).check())
         h = OUTPUT_INTERVAL
         for m in METHODS:
             if m not in VARIANTS and INTEGRATORS[m].adaptive:
@@ -196,6 +216,10 @@ def compare(
                     plan.append((case, m, f"dt={dt:g}", dt, math.nan, _coopdyn_point(case, m, dt, math.nan, flags, len(plan))))
         for mj in MUJOCO:
             plan += [(case, f"mujoco {mj}", f"dt={dt:g}", dt, math.nan, _mujoco_point(case, mj, dt)) for dt in _steps(quick)]
+            plan += [
+                (case, f"mujoco {mj}{PYTHON_CALLBACKS}", f"dt={dt:g}", dt, math.nan, _mujoco_point(case, mj, dt, False))
+                for dt in _steps(quick)
+            ]
         if drake_available():
             from .drake_scene import DrakeScene
 
@@ -210,7 +234,7 @@ def compare(
                         (case, f"drake {dk}", f"accuracy={a:g}", OUTPUT_INTERVAL, a, _drake_point(case, dk, a))
                         for a in _drake_accuracies(quick)
                     ]
-        if exudyn_available():
+        if exudyn_available() and _exudyn_takes(case):
             from .exudyn_scene import ExudynScene
 
             peer = ExudynScene(case.scene, case.controller)
@@ -243,37 +267,58 @@ def compare(
         pos_err, force_err = errors_against(res, *reference)
         # an energy-flagged run is not counted as reaching a level (_best_to_reach)
         rows.append(measured_row(case, method, label, dt, rtol, res, pos_err, force_err, cpu[i], i in flags))
-    return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final}
+    return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final, "task": task}
+
+
+def _fair(method: str) -> bool:
+    """A MuJoCo row with the law and controller compiled (the fair peer)."""
+    return method.startswith("mujoco") and not method.endswith(PYTHON_CALLBACKS)
 
 
 def format_comparison(result: dict[str, Any]) -> str:
-    """For each scene and force-error level: the cheapest run of each simulator that reaches it
-    and the ratio coopdyn / best peer (< 1: coopdyn is cheaper)."""
+    """For each scene and force-error level: coopdyn's cheapest run that reaches it, MuJoCo's
+    with the law and controller compiled (the fair peer) and the ratio; then the best of the
+    peers that call the law from Python (MuJoCo's Python callbacks, Drake, Exudyn) and that ratio."""
     from .report import _best_to_reach
 
     rows: list[Row] = result["rows"]
-    present = ["MuJoCo"] + [name for name in ("Drake", "Exudyn") if any(r.method.startswith(name.lower()) for r in rows)]
-    missing = [name for name in ("Drake", "Exudyn") if name not in present]
-    peers = ", ".join(present[:-1]) + " and " + present[-1] if len(present) > 1 else present[0]
-    if missing:
-        peers += f" ({' and '.join(missing)} not installed)"
+    present = [name for name in ("Drake", "Exudyn") if any(r.method.startswith(name.lower()) for r in rows)]
+    installed = {"Drake": drake_available(), "Exudyn": exudyn_available()}
+    missing = [name for name, yes in installed.items() if not yes]
+    slow = ", ".join(["MuJoCo", *present]) + (f"; {' and '.join(missing)} not installed" if missing else "")
+    if installed["Exudyn"] and "Exudyn" not in present:
+        slow += "; Exudyn's peer takes only the joint PD, not the task's object impedance"
+    what = (
+        "the demo's task (grip, lift, oscillate; damped, D = 0.002 s·K; ObjectImpedance)"
+        if result.get("task")
+        else "the perturbed start (undamped, random initial velocities; joint PD + gravity compensation)"
+    )
     lines = [
-        f"coopdyn vs {peers} (same model and controller; MuJoCo and Drake with coopdyn's interconnection law), "
-        f"{result['t_final']:g} s, CPU median of {result['rounds']} interleaved rounds",
+        f"{what}: coopdyn vs MuJoCo with coopdyn's law and controller as compiled C callbacks (the fair peer), and vs "
+        f"peers calling them from Python ({slow}); {result['t_final']:g} s, CPU median of {result['rounds']} interleaved "
+        "rounds",
         "accelerations checked first, largest relative difference: "
         + ", ".join(f"{name}: {err:.1e}" for name, err in result["checks"].items()),
     ]
-    head = f"{'scene':<16} {'level [N]':>9}  {'coopdyn: cheapest run':<34} {'best peer: cheapest run':<44} {'ratio':>6}"
+    head = (
+        f"{'scene':<16} {'level [N]':>9}  {'coopdyn: cheapest run':<34} {'MuJoCo, compiled callbacks':<30} {'ratio':>6}  "
+        f"{'best peer with Python callbacks':<52} {'ratio':>6}"
+    )
     lines += [head, "-" * len(head)]
     for scene in dict.fromkeys(r.scene for r in rows):
         mine = [r for r in rows if r.scene == scene and not r.method.startswith(PEERS)]
-        peer = [r for r in rows if r.scene == scene and r.method.startswith(PEERS)]
+        fair = [r for r in rows if r.scene == scene and _fair(r.method)]
+        python = [r for r in rows if r.scene == scene and r.method.startswith(PEERS) and not _fair(r.method)]
         for level in LEVELS:
-            a, b = _best_to_reach(mine, level), _best_to_reach(peer, level)
-            cell_a = f"{a.method} {a.setting} {a.cpu_per_sim_s * 1e3:.1f} ms" if a else "not reached"
-            cell_b = f"{b.method} {b.setting} {b.cpu_per_sim_s * 1e3:.1f} ms" if b else "not reached"
-            ratio = f"{a.cpu_per_sim_s / b.cpu_per_sim_s:.2f}" if a and b else "—"
-            lines.append(f"{scene:<16} {level:>9g}  {cell_a:<34} {cell_b:<44} {ratio:>6}")
-    lines.append("(ms: CPU per simulated second; ratio: coopdyn / best peer, below 1 means coopdyn is cheaper;")
+            a, b, c = _best_to_reach(mine, level), _best_to_reach(fair, level), _best_to_reach(python, level)
+
+            def cell(r: Row | None) -> str:
+                return f"{r.method} {r.setting} {r.cpu_per_sim_s * 1e3:.1f} ms" if r else "not reached"
+
+            def ratio(x: Row | None, y: Row | None) -> str:
+                return f"{x.cpu_per_sim_s / y.cpu_per_sim_s:.2f}" if x and y else "—"
+
+            lines.append(f"{scene:<16} {level:>9g}  {cell(a):<34} {cell(b):<30} {ratio(a, b):>6}  {cell(c):<52} {ratio(a, c):>6}")
+    lines.append("(ms: CPU per simulated second; ratio: coopdyn / that peer, below 1 means coopdyn is cheaper;")
     lines.append(" Exudyn's errors are against its own reference: its spring law differs from coopdyn's at second order)")
     return "\n".join(lines)

@@ -60,6 +60,8 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
                 style = _PEER_STYLES.get(method.split()[0], "o-")  # coopdyn solid; each peer its own line and marker
+                if method.endswith("(Python callbacks)"):
+                    style = "+:"  # a peer paying Python per evaluation: thin, dotted
                 ax.loglog(
                     [r.cpu_per_sim_s for r in pts],
                     [max(r.wrench_error, 1e-16) for r in pts],
