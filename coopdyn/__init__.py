@@ -38,6 +38,7 @@ from .model import (
 )
 from .result import Result
 from .simulate import simulate
+from .simulator import Simulator
 from .stability import Advice, advise
 from .sweeps import Case, sweep
 
@@ -67,6 +68,7 @@ __all__ = [
     "Section",
     "SimulationError",
     "SimulationInterrupted",
+    "Simulator",
     "StepBudgetError",
     "SweepError",
     "SweepInterrupted",

@@ -101,6 +101,15 @@ class System:
                 raise ControllerError(f"the controller's gains() raised {type(exc).__name__}: {exc}") from exc
             self._own_gains = _checked_gains(raw, self.n_actuated)
 
+    def restart(self) -> None:
+        """Forget a run: the work counters, the evaluation records and the held sample (a new run
+        with the same dynamics and controller, as :class:`coopdyn.Simulator` makes)."""
+        self.n_rhs = self.n_jac = self.n_factor = 0
+        self._first = self._last = self._previous_last = None
+        self._held, self._next_sample, self._jump, self._sampled_at = None, 0, self._zero, math.nan
+        self.new_sample = False
+        self.dynamics.clear_rotation_alarm()
+
     @property
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """The controller's joint (Kp, Kd) (n_actuated,) (zero without ``gains()``): the closed

@@ -1,0 +1,140 @@
+"""``coopdyn.Simulator``: many runs of one scene, controller and method, each at a fraction of
+:func:`coopdyn.simulate`'s fixed cost — for model-predictive control, identification and
+sweeps over initial states, where a run is short and there are thousands of them."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from . import _validate, compiled
+from .budget import check_budget
+from .closed_loop import Controller, System
+from .dynamics import Dynamics
+from .dynamics.constrained import check_integrator
+from .errors import SimulationError
+from .integrators import get_integrator
+from .model.scene import Scene
+from .result import Result
+from .simulate import ENERGY_CHECKS, _compiled_loop, _control_period, _Run, simulate
+
+__all__ = ["Simulator"]
+
+
+class Simulator:
+    """Repeated runs of ``scene`` under ``controller`` with one method and step, set up once.
+
+    ``Simulator(scene, controller, integrator, dt).run(t_final, q0, v0)`` gives the same
+    :class:`Result`, to the last bit, as ``coopdyn.simulate(scene, t_final, controller,
+    integrator, dt, q0=q0, v0=v0, accuracy_check="off", energy_check=…)`` with the same settings
+    (tests/test_simulator.py). What ``simulate`` does before and after every run — checking the
+    arguments, building the dynamics and the closed loop, reading the controller's compiled
+    twin and gains — is done here once; a run only checks its state, builds the compiled loop
+    and collects its samples. ``benchmarks/fixed_cost.py`` measures both.
+
+    What it leaves out, as the price of that: the accuracy judgement (``accuracy_check``: judge
+    one representative run with :func:`coopdyn.simulate` first), progress bars and
+    ``stream_to``. A run that cannot go to the compiled loop (the Python backend, a Python
+    integrator, an ``object_wrench``) is an ordinary ``simulate`` call.
+
+    Args:
+        scene, controller, integrator, dt, save_every, max_speed, control_dt, backend,
+        max_steps, max_memory: as for :func:`coopdyn.simulate`.
+        energy_check: as for ``simulate``, but ``"off"`` by default (a controller design loop
+            runs the same scene many times; check it once with ``"warn"``).
+
+    Raises:
+        SimulationError, ControllerError: the arguments, as ``simulate`` refuses them.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        controller: Controller | None = None,
+        integrator: Any = "rk4",
+        dt: float = 1e-3,
+        *,
+        save_every: int = 1,
+        max_speed: float = 1e4,
+        energy_check: str = "off",
+        control_dt: float | None = None,
+        backend: str | None = None,
+        max_steps: int | None = 2 * 10**6,
+        max_memory: float | None = 4e9,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
+        self.scene, self.controller = scene, controller
+        self.dt = _validate.number(dt, "dt", "s", SimulationError)
+        if not self.dt >= 1e-12:
+            raise SimulationError(f"dt must be >= 1e-12 [s], got {self.dt}")
+        self.save_every = _validate.count(save_every, "save_every", SimulationError)
+        self.max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
+        if self.max_speed <= 0.0:
+            raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {self.max_speed}")
+        if not isinstance(energy_check, str) or energy_check not in ENERGY_CHECKS:
+            raise SimulationError(f"energy_check must be one of {list(ENERGY_CHECKS)}, got {_validate._short(energy_check)}")
+        self.energy_check = energy_check
+        self.method = get_integrator(integrator)
+        check_integrator(scene, self.method)
+        self.control_dt = _control_period(control_dt, self.dt, self.method)
+        self.backend, self.max_steps, self.max_memory = backend, max_steps, max_memory
+        self.system = System(Dynamics(scene, backend), controller, None, self.control_dt)
+        self.system.max_speed = self.max_speed
+        self._energy = "off" if self.method.exact_discretisation else energy_check
+
+    def run(self, t_final: float, q0: Any = None, v0: Any = None) -> Result:
+        """Simulate from (q0, v0) (default: the scene's) over ``t_final`` [s]; the result as
+        :func:`coopdyn.simulate` returns it (its errors too: a DivergenceError with the partial
+        run, a ControllerError …)."""
+        t_final = _validate.number(t_final, "t_final", "s", SimulationError)
+        if t_final < 0.0:
+            raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
+        scene, method, system = self.scene, self.method, self.system
+        q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
+        budget = check_budget(scene, t_final, self.dt, self.save_every, self.max_steps, self.max_memory)
+        system.restart()
+        run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed)
+        run.budget = budget
+        config, _ = compiled.plan(
+            scene,
+            system,
+            method,
+            q0=q,
+            v0=v,
+            dt=self.dt,
+            t_final=t_final,
+            n_steps=run.n_steps,
+            save_every=self.save_every,
+            max_speed=self.max_speed,
+            energy_check=self._energy,
+        )
+        if config is None:  # the Python loop: an ordinary simulate call
+            return simulate(
+                scene,
+                t_final,
+                controller=self.controller,
+                integrator=method,
+                dt=self.dt,
+                save_every=self.save_every,
+                q0=q,
+                v0=v,
+                max_speed=self.max_speed,
+                energy_check=self.energy_check,
+                backend=self.backend,
+                max_steps=self.max_steps,
+                max_memory=self.max_memory,
+                accuracy_check="off",
+                control_dt=self.control_dt,
+            )
+        run.loop = "compiled"
+        cpu0 = time.process_time()
+        with np.errstate(over="ignore", invalid="ignore"):
+            _compiled_loop(run, config, None)
+        run.cpu_time = time.process_time() - cpu0
+        return run.result()
+
+    def __repr__(self) -> str:
+        return f"Simulator({self.scene!r}, {type(self.controller).__name__}, {self.method!r}, dt={self.dt:g})"
