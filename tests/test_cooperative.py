@@ -168,3 +168,27 @@ def test_object_impedance_closed_form_equals_the_pseudo_inverse_law(robot: str, 
         tau = ctrl(t, q, v)
         expected = _pinv_torques(ObjectImpedance(scene, ctrl.reference), t, q, v)
         assert np.max(np.abs(tau - expected)) <= 1e-9 * np.max(np.abs(expected))
+
+
+def test_grip_lift_oscillate_holds_the_objects_starting_orientation() -> None:
+    """The held strip starts turned 90° about z: with the task's default rotation the controller
+    holds that orientation (no twist commanded at rest, in Python and in its compiled spec), as
+    the docstring says, instead of the world axes (which commanded −15.7 N·m)."""
+    import pinocchio as pin
+
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+    from coopdyn.scenes import object_start
+
+    scene = cd.scenes.held_beam()
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    R0 = data.oMf[scene.object_frame].rotation
+    assert pin.log3(R0)[2] == pytest.approx(np.pi / 2, abs=1e-6)  # (the premise: turned 90°)
+    ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), squeeze=0.0))
+    assert np.allclose(ctrl.reference(0.0).rotation, R0, atol=1e-12)
+    spec = ctrl.compiled_spec(scene)
+    assert spec is not None and np.allclose(spec.task.rotation, R0, atol=1e-12)
+    explicit = np.eye(3)
+    assert np.array_equal(
+        ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), rotation=explicit)).reference(1.0).rotation, explicit
+    )

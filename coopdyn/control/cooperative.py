@@ -18,6 +18,7 @@ mass of the object plus the arms' reflected inertia at the grasps
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -106,7 +107,10 @@ class GripLiftOscillate:
     """The book's task: grip, lift, oscillate, hold — a desired object motion and squeeze.
 
     Attributes (times [s], lengths [m], forces [N], frequency [Hz]):
-        start: the object's initial position (3,); its orientation is held.
+        start: the object's initial position (3,).
+        rotation: the object orientation to hold (3, 3); ``None`` (default): the object's
+            orientation at the scene's start, which :class:`ObjectImpedance` fills in (a task
+            called on its own, without a scene, then reports the world axes).
         squeeze: internal force to grip with; ramped up over ``t_grip``.
         lift: rise along world z, a smooth (minimum-jerk) motion over ``[t_lift, t_lift + lift_duration]``.
         amplitude, frequency, axis: the oscillation ``amplitude·sin(2π f (t − t_osc))`` along
@@ -281,6 +285,8 @@ class ObjectImpedance:
         oMo = data.oMf[scene.object_frame]
         hold = ObjectReference(oMo.translation.copy(), oMo.rotation.copy(), np.zeros(3), np.zeros(3), np.zeros(3), 0.0)
         self._hold = hold if reference is None else None
+        if type(reference) is GripLiftOscillate and reference.rotation is None:  # hold the starting orientation
+            reference = dataclasses.replace(reference, rotation=oMo.rotation.copy())
 
         def hold_reference(t: float) -> ObjectReference:
             return hold
