@@ -90,20 +90,26 @@ class System:
         #: whether the current step's start took a new sample (a method carrying the last step's
         #: derivative, first-same-as-last, must evaluate afresh)
         self.new_sample = False
-        gains = getattr(controller, "gains", None)
-        self._own_gains: tuple[np.ndarray, np.ndarray] | None = None
-        if callable(gains):
-            try:
-                raw = gains()
-            except (CoopdynError, KeyboardInterrupt):
-                raise
-            except Exception as exc:
-                raise ControllerError(f"the controller's gains() raised {type(exc).__name__}: {exc}") from exc
-            self._own_gains = _checked_gains(raw, self.n_actuated)
+        self._own_gains = self._read_gains()
+
+    def _read_gains(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The controller's ``gains()``, checked (None without it)."""
+        gains = getattr(self.controller, "gains", None)
+        if not callable(gains):
+            return None
+        try:
+            raw = gains()
+        except (CoopdynError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            raise ControllerError(f"the controller's gains() raised {type(exc).__name__}: {exc}") from exc
+        return _checked_gains(raw, self.n_actuated)
 
     def restart(self) -> None:
-        """Forget a run: the work counters, the evaluation records and the held sample (a new run
-        with the same dynamics and controller, as :class:`coopdyn.Simulator` makes)."""
+        """Forget a run: the work counters, the evaluation records and the held sample, and read
+        the controller's gains again (a new run with the same dynamics and controller, as
+        :class:`coopdyn.Simulator` makes; the controller may have been retuned between runs)."""
+        self._own_gains = self._read_gains()
         self.n_rhs = self.n_jac = self.n_factor = 0
         self._first = self._last = self._previous_last = None
         self._held, self._next_sample, self._jump, self._sampled_at = None, 0, self._zero, math.nan
@@ -159,11 +165,11 @@ class System:
         self._next_sample = math.floor(t / period + 1e-9) + 1
         self.new_sample = True
 
-    def power_jump(self, t: float, v: np.ndarray) -> float:
+    def power_jump(self, t: float, v: np.ndarray) -> float | None:
         """[W] how much a sample taken at t changed the torques' power at the velocity v
-        (``Δτ·q̇``; 0 when no sample was taken at t): the energy monitor ends the last hold's
+        (``Δτ·q̇``), None when no sample was taken at t: the energy monitor ends the last hold's
         work integral on the power before the jump."""
-        return float(self._jump @ v[self._act]) if t == self._sampled_at else 0.0
+        return float(self._jump @ v[self._act]) if t == self._sampled_at else None
 
     def next_sample_time(self) -> float:
         """[s] the next sample instant a step must land on (inf without ``control_dt``)."""

@@ -54,7 +54,10 @@ class EnergyMonitor:
         """Call right after a step from (t0, q0, v0) of length h [s] to (t, q, v)."""
         p = self.system.power_at(t0, q0, v0)
         jump = self.system.power_jump(t0, v0)  # a new control sample at t0: the last hold ends before it
-        self._close_interval(p - jump, h, p, fresh=jump != 0.0)
+        if jump is None:
+            self._close_interval(p, h)
+        else:
+            self._close_interval(p - jump, h, p, fresh=True)
         self._steps += 1
         if self._steps % self.every == 0:
             self._check(t0, q0, v0)

@@ -44,8 +44,10 @@ force in MuJoCo does.
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import ctypes
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -127,48 +129,61 @@ def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> st
     )
 
 
-_LAYOUT: tuple[int, int, int, int, int] | None = None
+class MjDataLayout(NamedTuple):
+    """Byte offsets in mjData of ``time`` (a double) and of the pointer fields ``qpos, qvel,
+    ctrl, qfrc_passive`` (double*), for the installed MuJoCo."""
+
+    time: int
+    qpos: int
+    qvel: int
+    ctrl: int
+    qfrc_passive: int
 
 
-def _layout(mujoco: Any, data: Any) -> tuple[int, int, int, int, int]:
-    """Byte offsets in mjData of ``time`` and of the pointers ``qpos, qvel, ctrl, qfrc_passive``
-    for the installed MuJoCo, found and verified on ``data``: ``time`` is the double just before
-    ``energy`` (whose numpy view points into the struct); each pointer field is the word that
-    holds its array's address. Cached for the process."""
+_LAYOUT: MjDataLayout | None = None
+#: a model with every field the layout needs non-empty (a hinge, a motor): the probe
+_PROBE = (
+    '<mujoco><worldbody><body><joint name="j" type="hinge"/><geom size="0.1"/></body></worldbody>'
+    '<actuator><motor joint="j"/></actuator></mujoco>'
+)
+
+
+def _layout(mujoco: Any) -> MjDataLayout:
+    """Where the installed MuJoCo's mjData keeps what the callbacks read and write, found on a
+    probe model and checked: ``time`` is the double just before ``energy`` (whose numpy view
+    points into the struct; checked by writing two values through the binding and reading them
+    back at the offset); each pointer field is the word holding its array's address, searched
+    word by word after ``energy`` in the header's order (mjdata.h: buffer, arena, qpos, qvel, …,
+    ctrl, …, qfrc_passive), where an empty array shares the next one's address (the field is the
+    last of such a run). Cached for the process. Raises KernelError when the layout is not
+    the one known (written against MuJoCo 4.0.0)."""
     global _LAYOUT
     if _LAYOUT is not None:
         return _LAYOUT
-    base = int(data._address)
-    energy = int(data.energy.ctypes.data)
+    model = mujoco.MjModel.from_xml_string(_PROBE)
+    data = mujoco.MjData(model)
+    advice = f"coopdyn.mujoco was written against MuJoCo 4.0.0 (pip install 'mujoco==4.0.0'); this is {mujoco.__version__}"
+    base, energy = int(data._address), int(data.energy.ctypes.data)
     time_offset = energy - 8 - base
     if not 0 < time_offset < 1 << 24:
-        raise KernelError(f"coopdyn.mujoco: MuJoCo {mujoco.__version__}'s mjData layout is not the one it knows (energy)")
-    saved = float(data.time)
-    try:
-        for probe in (0.3141592653589793, -2.718281828459045):
-            data.time = probe
-            if ctypes.c_double.from_address(base + time_offset).value != probe:
-                raise KernelError(f"coopdyn.mujoco: MuJoCo {mujoco.__version__}'s mjData keeps `time` elsewhere")
-    finally:
-        data.time = saved
-    # the pointer fields follow in the header's order (mjdata.h: buffer, arena, qpos, qvel, …,
-    # ctrl, …, qfrc_passive); an empty array has the address of the next one, so a field is the
-    # last of the run of words holding its array's address, after the field before it
-    words = list((ctypes.c_uint64 * 1024).from_address(energy + 16))
-    found, previous = {}, 1  # (words 0 and 1: buffer and arena)
+        raise KernelError(f"coopdyn.mujoco: mjData's layout is not the one it knows (energy): {advice}")
+    for probe in (0.3141592653589793, -2.718281828459045):
+        data.time = probe
+        if ctypes.c_double.from_address(base + time_offset).value != probe:
+            raise KernelError(f"coopdyn.mujoco: mjData keeps `time` elsewhere: {advice}")
+    found, word = {}, 1  # (words 0 and 1 after energy: buffer and arena)
     for name in ("qpos", "qvel", "ctrl", "qfrc_passive"):
-        array = getattr(data, name)
-        if array.size == 0:
-            found[name] = -1  # (no actuators: never written)
-            continue
-        address = array.ctypes.data
-        i = next((i for i in range(previous + 1, len(words)) if words[i] == address), None)
-        if i is None:
-            raise KernelError(f"coopdyn.mujoco: cannot find mjData.{name} in MuJoCo {mujoco.__version__}'s layout")
-        while i + 1 < len(words) and words[i + 1] == address:
-            i += 1
-        found[name], previous = energy + 16 + 8 * i - base, i
-    _LAYOUT = (time_offset, found["qpos"], found["qvel"], found["ctrl"], found["qfrc_passive"])
+        address = getattr(data, name).ctypes.data
+        for _ in range(400):  # (mjData has about 180 fields after energy: qfrc_passive is well inside)
+            word += 1
+            if ctypes.c_uint64.from_address(energy + 16 + 8 * word).value == address:
+                break
+        else:
+            raise KernelError(f"coopdyn.mujoco: cannot find mjData.{name}: {advice}")
+        while ctypes.c_uint64.from_address(energy + 16 + 8 * (word + 1)).value == address:
+            word += 1
+        found[name] = energy + 16 + 8 * word - base
+    _LAYOUT = MjDataLayout(time_offset, found["qpos"], found["qvel"], found["ctrl"], found["qfrc_passive"])
     return _LAYOUT
 
 
@@ -205,10 +220,16 @@ class Callbacks:
             if jid < 0:
                 raise SimulationError(f"the MuJoCo model has no joint named {name!r} (coopdyn.mujoco maps joints by name)")
             kind = jm.shortname().replace("JointModel", "")
-            want = {"FreeFlyer": mj.mjtJoint.mjJNT_FREE}.get(kind, mj.mjtJoint.mjJNT_HINGE if kind.startswith("R") else None)
-            if kind.startswith("P"):
-                want = mj.mjtJoint.mjJNT_SLIDE
-            if want is None or int(model.jnt_type[jid]) != int(want):
+            if kind != "FreeFlyer" and kind not in _AXES:
+                raise SimulationError(f"coopdyn.mujoco takes revolute, prismatic and free-flyer joints; {name!r} is {kind}")
+            want = (
+                mj.mjtJoint.mjJNT_FREE
+                if kind == "FreeFlyer"
+                else mj.mjtJoint.mjJNT_HINGE
+                if kind[0] == "R"
+                else mj.mjtJoint.mjJNT_SLIDE
+            )
+            if int(model.jnt_type[jid]) != int(want):
                 raise SimulationError(f"joint {name!r} is {kind} in coopdyn but of MuJoCo type {int(model.jnt_type[jid])}")
             qa, da = int(model.jnt_qposadr[jid]), int(model.jnt_dofadr[jid])
             if jm.nv == 6:
@@ -240,7 +261,7 @@ class Callbacks:
         self._bridge: Any = None  # made when entering, with the layout of a real mjData
         self._spec = spec
         self._motor_ctrl, self._motor_tau = motor_ctrl, motor_tau
-        self._previous: tuple[Any, Any] | None = None
+        self._previous: tuple[Any, Any, Any] | None = None  # while installed: what was before
         self._pointers = (
             _CALLBACK(_backend.kernel_module().mujoco_passive_address()),
             _CALLBACK(_backend.kernel_module().mujoco_control_address()),
@@ -250,31 +271,37 @@ class Callbacks:
         """(actuator index, τ index) of the motor on each actuated joint."""
         mj, model, pm = self.mj, self.model, self.scene.model
         order = {v: i for i, v in enumerate(self.scene.actuated.tolist())}
-        by_joint = {}
+        by_joint: dict[int, list[int]] = {}
         for k in range(model.nu):
             if int(model.actuator_trntype[k]) == int(mj.mjtTrn.mjTRN_JOINT):
-                by_joint[int(model.actuator_trnid[k, 0])] = k
+                by_joint.setdefault(int(model.actuator_trnid[k, 0]), []).append(k)
         ctrl, tau = [], []
         for j in range(1, pm.njoints):
             idx_v = pm.joints[j].idx_v
             if idx_v not in order:
                 continue
             jid = mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, pm.names[j])
-            if jid not in by_joint:
-                raise SimulationError(f"the MuJoCo model has no motor on the actuated joint {pm.names[j]!r}")
-            k = by_joint[jid]
+            if len(by_joint.get(jid, [])) != 1:
+                raise SimulationError(
+                    f"the actuated joint {pm.names[j]!r} needs exactly one actuator in the MuJoCo model (the controller's "
+                    f"motor), it has {len(by_joint.get(jid, []))}"
+                )
+            k = by_joint[jid][0]
             plain = (
                 model.actuator_gear[k, 0] == 1.0
                 and not np.any(model.actuator_gear[k, 1:])
+                and int(model.actuator_gaintype[k]) == int(mj.mjtGain.mjGAIN_FIXED)
                 and model.actuator_gainprm[k, 0] == 1.0
-                and not np.any(model.actuator_biasprm[k])
+                and int(model.actuator_biastype[k]) == int(mj.mjtBias.mjBIAS_NONE)
                 and int(model.actuator_dyntype[k]) == int(mj.mjtDyn.mjDYN_NONE)
                 and not model.actuator_ctrllimited[k]
+                and not model.actuator_forcelimited[k]
+                and not model.jnt_actfrclimited[jid]
             )
             if not plain:
                 raise SimulationError(
-                    f"actuator {k} on joint {pm.names[j]!r} must be a plain motor (gear 1, gain 1, no bias, no dynamics, "
-                    "ctrllimited false): the controller's torque goes to ctrl as is"
+                    f"actuator {k} on joint {pm.names[j]!r} must be a plain motor (gear 1, fixed gain 1, no bias, no "
+                    "dynamics, no control or force limits): the controller's torque goes to ctrl as is"
                 )
             ctrl.append(k)
             tau.append(order[idx_v])
@@ -323,16 +350,15 @@ class Callbacks:
 
     # --- installing ------------------------------------------------------------------------------
     def __enter__(self) -> Callbacks:
+        if self._previous is not None:
+            raise SimulationError("these Callbacks are already installed (a `with` block of them is running)")
         mj = self.mj
-        probe = mj.MjData(self.model)
-        layout = _layout(mj, probe)
-        if self._spec is not None and layout[3] < 0:
-            raise SimulationError("the MuJoCo model has no actuators for the controller")
+        layout = _layout(mj)
         kernel = _backend.kernel_module()
         self._bridge = kernel.make_mujoco_bridge(
-            self._dynamics._kernel,  # type: ignore[attr-defined]
+            self._dynamics._kernel,  # type: ignore[attr-defined]  # (the bridge keeps it alive)
             None if self._spec is None else self._spec.fields(),
-            layout,
+            tuple(layout),
             self._q_pin,
             self._q_mj,
             self._v_pin,
@@ -341,19 +367,20 @@ class Callbacks:
             np.array(self._motor_ctrl, dtype=np.int32),
             np.array(self._motor_tau, dtype=np.int32),
         )
-        self._previous = (mj.get_mjcb_passive(), mj.get_mjcb_control())
-        kernel.install_mujoco_bridge(self._bridge)
+        previous_bridge = kernel.install_mujoco_bridge(self._bridge)
+        self._previous = (mj.get_mjcb_passive(), mj.get_mjcb_control(), previous_bridge)
         mj.set_mjcb_passive(self._pointers[0])
         mj.set_mjcb_control(self._pointers[1] if self._spec is not None else None)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        mj = self.mj
-        assert self._previous is not None
-        passive, control = self._previous
-        mj.set_mjcb_passive(passive)
-        mj.set_mjcb_control(control)
-        _backend.kernel_module().uninstall_mujoco_bridge()
+        """Put back the callbacks (and the coopdyn law, for nested blocks) installed before."""
+        if self._previous is None:
+            return
+        passive, control, previous_bridge = self._previous
+        self.mj.set_mjcb_passive(passive)
+        self.mj.set_mjcb_control(control)
+        _backend.kernel_module().install_mujoco_bridge(previous_bridge)
         self._previous = None
 
     @property
@@ -379,7 +406,7 @@ class Callbacks:
         data = self.mj.MjData(self.model)
         rng = np.random.default_rng(seed)
         worst = 0.0
-        with self:
+        with self if self._previous is None else contextlib.nullcontext():
             for _ in range(n):
                 q = pin.integrate(self.scene.model, self.scene.q0, rng.normal(size=self.scene.nv) * 0.05)
                 v = rng.normal(size=self.scene.nv) * 0.3
@@ -391,3 +418,14 @@ class Callbacks:
                 a_mj, a_cd = self.acceleration(data), system.acceleration(t, q, v)
                 worst = max(worst, float(np.max(np.abs(a_mj - a_cd)) / max(1.0, np.max(np.abs(a_cd)))))
         return worst
+
+
+def _uninstall_at_exit() -> None:
+    """Let go of an installed law before the interpreter ends (the bridge holds a Python kernel)."""
+    try:
+        _backend.kernel_module().install_mujoco_bridge(None)
+    except Exception:  # (no kernel: nothing was installed)
+        return
+
+
+atexit.register(_uninstall_at_exit)

@@ -621,7 +621,8 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             continue
         while t < t_out:
             system.begin_step(t, q, v)  # (a controller's sample is due: taken here)
-            t_land = min(t_out, system.next_sample_time())
+            t_sample = system.next_sample_time()  # (one within 1e-9 of the period before t_out is t_out: no ulp-long step)
+            t_land = t_sample if system.control_dt is not None and t_sample < t_out - 1e-9 * system.control_dt else t_out
             h_try = min(h, t_land - t)
             if t + h_try * (1.0 + 1e-9) >= t_land:  # land exactly on the output time (or sample instant)
                 h_try = t_land - t

@@ -18,7 +18,7 @@ from .errors import SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
 from .result import Result
-from .simulate import ENERGY_CHECKS, _compiled_loop, _control_period, _Run, simulate
+from .simulate import ENERGY_CHECKS, MIN_DT, _compiled_loop, _control_period, _Run, simulate
 
 __all__ = ["Simulator"]
 
@@ -29,19 +29,24 @@ class Simulator:
     ``Simulator(scene, controller, integrator, dt).run(t_final, q0, v0)`` gives the same
     :class:`Result`, to the last bit, as ``coopdyn.simulate(scene, t_final, controller,
     integrator, dt, q0=q0, v0=v0, accuracy_check="off", energy_check=…)`` with the same settings
-    (tests/test_simulator.py). What ``simulate`` does before and after every run — checking the
-    arguments, building the dynamics and the closed loop, reading the controller's compiled
-    twin and gains — is done here once; a run only checks its state, builds the compiled loop
-    and collects its samples. ``benchmarks/fixed_cost.py`` measures both.
+    (tests/test_simulator.py). What ``simulate`` does before every run — checking the
+    arguments, building the dynamics (the compiled kernel) and the closed loop — is done here
+    once; a run checks its state, reads the controller's gains and compiled twin (a controller
+    retuned between runs is run as it is now), builds the compiled loop and collects its
+    samples. ``benchmarks/fixed_cost.py`` measures both.
 
     What it leaves out, as the price of that: the accuracy judgement (``accuracy_check``: judge
     one representative run with :func:`coopdyn.simulate` first), progress bars and
-    ``stream_to``. A run that cannot go to the compiled loop (the Python backend, a Python
-    integrator, an ``object_wrench``) is an ordinary ``simulate`` call.
+    ``stream_to``, and an ``object_wrench`` (not taken). A run that cannot go to the compiled
+    loop (the Python backend, a Python integrator) is an ordinary ``simulate`` call.
 
     Args:
-        scene, controller, integrator, dt, save_every, max_speed, control_dt, backend,
-        max_steps, max_memory: as for :func:`coopdyn.simulate`.
+        scene: the scene.
+        controller: ``controller(t, q, v) -> τ`` (n_actuated,) [N·m or N], or None.
+        integrator: a name from ``coopdyn.integrators.INTEGRATORS`` or an instance.
+        dt: time step [s]; save_every: keep every k-th step.
+        max_speed: [rad/s or m/s]; control_dt: the controller's sample period [s] or None;
+            backend, max_steps, max_memory [bytes]: as for :func:`coopdyn.simulate`.
         energy_check: as for ``simulate``, but ``"off"`` by default (a controller design loop
             runs the same scene many times; check it once with ``"warn"``).
 
@@ -68,8 +73,8 @@ class Simulator:
             raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
         self.scene, self.controller = scene, controller
         self.dt = _validate.number(dt, "dt", "s", SimulationError)
-        if not self.dt >= 1e-12:
-            raise SimulationError(f"dt must be >= 1e-12 [s], got {self.dt}")
+        if not self.dt >= MIN_DT:
+            raise SimulationError(f"dt must be >= {MIN_DT:g} [s], got {self.dt}")
         self.save_every = _validate.count(save_every, "save_every", SimulationError)
         self.max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
         if self.max_speed <= 0.0:
@@ -86,7 +91,7 @@ class Simulator:
         self._energy = "off" if self.method.exact_discretisation else energy_check
 
     def run(self, t_final: float, q0: Any = None, v0: Any = None) -> Result:
-        """Simulate from (q0, v0) (default: the scene's) over ``t_final`` [s]; the result as
+        """Simulate from (q0 (nq,), v0 (nv,)) (default: the scene's) over ``t_final`` [s]; the result as
         :func:`coopdyn.simulate` returns it (its errors too: a DivergenceError with the partial
         run, a ControllerError …)."""
         t_final = _validate.number(t_final, "t_final", "s", SimulationError)

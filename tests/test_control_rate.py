@@ -76,12 +76,16 @@ def test_adaptive_methods_land_on_every_sample_instant(pandas: cd.Scene, start: 
     """dopri5 with an output grid coarser than the sample period still steps to every sample
     instant (a 0.7 ms period against 5 ms outputs), and its first-same-as-last stage is not
     reused across a sample: it converges to the same trajectory as rk4 at fine steps."""
-    controller = Counting(pandas)
-    res = cd.simulate(
-        pandas, 0.021, controller=controller, integrator=DormandPrince(rtol=1e-10, atol=1e-12), dt=5e-3, v0=start,
-        control_dt=7e-4, accuracy_check="off",
-    )  # fmt: skip
-    assert np.allclose(controller.times, np.arange(30) * 7e-4, rtol=0, atol=1e-12)
+    for loop in ("python", "compiled"):
+        controller = Counting(pandas)
+        res = cd.simulate(
+            pandas, 0.021, controller=controller, integrator=DormandPrince(rtol=1e-10, atol=1e-12), dt=5e-3, v0=start,
+            control_dt=7e-4, accuracy_check="off", loop=loop,
+        )  # fmt: skip
+        assert np.allclose(controller.times, np.arange(30) * 7e-4, rtol=0, atol=1e-12)
+        # a stage carried across a sample would be the old torque's: the step would be rejected
+        # and retried at every sample (30 rejections, not a handful)
+        assert res.n_rejected <= 3, (loop, res.n_rejected)
     fine = cd.simulate(
         pandas, 0.021, controller=GravityCompensationPD(pandas), integrator="rk4", dt=7e-5, v0=start, control_dt=7e-4,
         accuracy_check="off",
@@ -120,6 +124,37 @@ def test_a_sampled_linear_loop_is_its_zero_order_hold_discretisation(book: cd.Sc
         )  # fmt: skip
         got = np.hstack([res.q, res.v])
         assert np.max(np.abs(got - exact)) <= tol * max(1.0, np.max(np.abs(exact))), (method, dt)
+
+
+class HeldGainsPD:
+    """A stiff joint PD on the book system that declares its gains (``gains()``): under a hold the
+    implicit methods must leave them out of their matrix, or they lose their order."""
+
+    def __init__(self, scene: cd.Scene) -> None:
+        self.q0, self.act = scene.q0.copy(), scene.actuated
+        self.kp, self.kd = 4e4, 40.0
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return -self.kp * (q[self.act] - self.q0[self.act]) - self.kd * v[self.act]
+
+    def gains(self) -> tuple[float, float]:
+        return self.kp, self.kd
+
+
+@pytest.mark.parametrize(("method", "order"), [("trapezoid", 2), ("generalized_alpha", 2), ("implicit_euler", 1)])
+def test_the_implicit_methods_keep_their_order_under_a_hold(book: cd.Scene, method: str, order: int) -> None:
+    """The book system under a stiff PD held at 2 ms: the implicit methods converge to the exact
+    sampled-data solution at their orders (a matrix still carrying the held PD's gains would be
+    a wrong Jacobian for the held loop, and cost the second-order methods their order)."""
+    ctrl = HeldGainsPD(book)
+    kw = dict(controller=ctrl, v0=book.v0 + 0.1, control_dt=2e-3, accuracy_check="off", energy_check="off")
+    exact = cd.simulate(book, 0.1, integrator="exponential", dt=2e-3, **kw)  # type: ignore[arg-type]
+    errors = [
+        np.max(np.abs(cd.simulate(book, 0.1, integrator=method, dt=dt, save_every=round(2e-3 / dt), **kw).q - exact.q))  # type: ignore[arg-type]
+        for dt in (2.5e-4, 1.25e-4, 6.25e-5)
+    ]
+    rates = [np.log2(errors[i] / errors[i + 1]) for i in range(2)]
+    assert all(abs(r - order) < 0.25 for r in rates), (errors, rates)
 
 
 def test_the_hold_keeps_rk4_fourth_order(pandas: cd.Scene, start: np.ndarray) -> None:

@@ -97,19 +97,67 @@ def test_a_users_own_model_with_more_in_it_runs_coopdyns_law(damped: cd.Scene) -
     assert error_mj < 1e-8 and error_mj < 3.0 * error_cd  # both RK4 (MuJoCo's free joint in its own coordinates)
 
 
-def test_the_callbacks_are_put_back_on_exit(damped: cd.Scene) -> None:
+def test_the_callbacks_are_put_back_on_exit_and_nest(damped: cd.Scene) -> None:
+    """Leaving a block puts back the user's own callbacks; an inner block's law gives way to the
+    outer one's when it ends; a block of the same Callbacks cannot be entered twice."""
     model = mujoco.MjModel.from_xml_string(mjcf(damped))
+    data = mujoco.MjData(model)
 
     def mine(m: object, d: object) -> None:
         return None
 
     mujoco.set_mjcb_passive(mine)
+    mujoco.set_mjcb_control(mine)
     try:
-        with Callbacks(damped, model):
+        outer, inner = Callbacks(damped, model), Callbacks(damped, model, GravityCompensationPD(damped))
+        with outer:
             assert mujoco.get_mjcb_passive() is not mine
-        assert mujoco.get_mjcb_passive() is mine
+            with inner:
+                mujoco.mj_forward(model, data)
+            mujoco.mj_forward(model, data)
+            with pytest.raises(SimulationError, match="already installed"), outer:
+                pass
+            assert outer.check(n=1) < 1e-12  # (inside its own block too)
+        assert (inner.evaluations, outer.evaluations) == (1, 2)
+        assert mujoco.get_mjcb_passive() is mine and mujoco.get_mjcb_control() is mine
     finally:
         mujoco.set_mjcb_passive(None)
+        mujoco.set_mjcb_control(None)
+
+
+def test_the_law_outlives_a_forgotten_block(damped: cd.Scene) -> None:
+    """Callbacks entered and dropped without leaving: the installed law keeps its kernel alive (no
+    use after free), and the next block replaces it."""
+    import gc
+
+    model = mujoco.MjModel.from_xml_string(mjcf(damped))
+    data = mujoco.MjData(model)
+    Callbacks(damped, model).__enter__()
+    gc.collect()
+    mujoco.mj_forward(model, data)  # the dropped Callbacks' law, still alive
+    assert np.all(np.isfinite(data.qacc))
+    with Callbacks(damped, model) as cb:
+        mujoco.mj_forward(model, data)
+    assert cb.evaluations == 1
+    mujoco.set_mjcb_passive(None)
+
+
+def test_control_alone_computes_its_torque(damped: cd.Scene) -> None:
+    """mj_forwardSkip past the velocity stage runs the control callback without the passive one:
+    the torque is computed for the state MuJoCo has now, not reused from an earlier state."""
+    pd = GravityCompensationPD(damped)
+    model = mujoco.MjModel.from_xml_string(mjcf(damped))
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(5)
+    with Callbacks(damped, model, pd) as cb:
+        cb.set_state(data, damped.q0, damped.v0)
+        mujoco.mj_forward(model, data)
+        q = pin.integrate(damped.model, damped.q0, rng.normal(size=damped.nv) * 0.05)
+        v = rng.normal(size=damped.nv) * 0.3
+        cb.set_state(data, q, v)
+        mujoco.mj_forwardSkip(model, data, mujoco.mjtStage.mjSTAGE_VEL, 0)
+        expected = pd(0.0, q, v)
+        assert np.allclose(data.ctrl[cb._motor_ctrl], expected[cb._motor_tau], rtol=1e-12, atol=1e-9)
 
 
 def test_what_it_refuses(damped: cd.Scene) -> None:
@@ -124,6 +172,18 @@ def test_what_it_refuses(damped: cd.Scene) -> None:
     bare = mujoco.MjModel.from_xml_string(xml)
     with pytest.raises(SimulationError, match="no compiled twin"):
         Callbacks(damped, bare, lambda t, q, v: np.zeros(damped.n_actuated))
+    twice = mujoco.MjModel.from_xml_string(xml.replace("  </actuator>", f'    <motor joint="{first}"/>\n  </actuator>'))
+    with pytest.raises(SimulationError, match="exactly one actuator"):
+        Callbacks(damped, twice, GravityCompensationPD(damped))
+    limited = mujoco.MjModel.from_xml_string(
+        xml.replace('ctrllimited="false"/>', 'ctrllimited="false" forcelimited="true" forcerange="-1 1"/>', 1)
+    )
+    with pytest.raises(SimulationError, match="must be a plain motor"):
+        Callbacks(damped, limited, GravityCompensationPD(damped))
+    no_motors = mujoco.MjModel.from_xml_string(xml.split("  <actuator>")[0] + "</mujoco>\n")
+    Callbacks(damped, no_motors)  # (the law alone needs no motor)
+    with pytest.raises(SimulationError, match="exactly one actuator"):
+        Callbacks(damped, no_motors, GravityCompensationPD(damped))
 
 
 def test_the_documented_example_runs() -> None:

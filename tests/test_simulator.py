@@ -25,8 +25,8 @@ def _same(a: cd.Result, b: cd.Result) -> None:
     ids=str,
 )
 def test_every_run_is_simulates_run(pandas: cd.Scene, integrator: object, control_dt: float | None) -> None:
-    """Three runs from three states, interleaved with other runs of the same Simulator: each equals
-    simulate's with the same settings bit for bit (counters included: nothing carries over)."""
+    """Three runs of one Simulator from three states, one after the other: each equals simulate's
+    with the same settings bit for bit (counters included: nothing carries over)."""
     pd = GravityCompensationPD(pandas)
     sim = cd.Simulator(pandas, pd, integrator, 5e-4, save_every=2, control_dt=control_dt)
     rng = np.random.default_rng(7)
@@ -79,3 +79,20 @@ def test_simulates_errors(pandas: cd.Scene) -> None:
     with pytest.raises(SimulationError, match="energy_check"):
         cd.Simulator(pandas, pd, energy_check="loud")
     assert sim.run(0.01).status == "completed"  # (still usable after a refused run)
+
+
+def test_after_a_failed_run_and_a_retuning_the_next_run_is_still_simulates(pandas: cd.Scene) -> None:
+    """A run that diverges, then the controller retuned (its gains enter the implicit matrix):
+    the next run equals simulate's with the controller as it is now."""
+    pd = GravityCompensationPD(pandas)
+    sim = cd.Simulator(pandas, pd, "implicit_euler", 1e-3, max_speed=5.0)
+    with pytest.raises(DivergenceError):
+        sim.run(0.3, v0=np.full(pandas.nv, 4.9))
+    pd.kp, pd.kd = pd.kp * 3.0, pd.kd * 2.0
+    v0 = np.random.default_rng(3).normal(size=pandas.nv) * 0.3
+    mine = sim.run(0.05, v0=v0)
+    theirs = cd.simulate(
+        pandas, 0.05, controller=pd, integrator="implicit_euler", dt=1e-3, v0=v0, max_speed=5.0, accuracy_check="off",
+        energy_check="off",
+    )  # fmt: skip
+    _same(mine, theirs)

@@ -40,7 +40,9 @@ class Problem(Protocol):
     n_jac: int
     n_factor: int
     #: the current step's start took a new controller sample (``control_dt``): the closed loop
-    #: changed there, and a derivative carried from the last step's end no longer holds
+    #: changed there, and a right-hand side evaluated at the last step's end (first same as
+    #: last) no longer holds, nor does generalized-α's algorithmic acceleration (carried on, it
+    #: costs the method its second order: both restart there as at t = 0)
     new_sample: bool
 
     @property

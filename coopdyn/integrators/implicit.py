@@ -335,7 +335,8 @@ class GeneralizedAlpha(Integrator):
         gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c  # γ', β'
         system.factor(M, K, D, gp, bp)  # first: a state that is not finite is a StepMatrixError
         # the loop hands back the arrays this step returned: same objects, same state (as FSAL)
-        carried = ws is not None and ws.a is not None and ws.q is q and ws.v is v
+        # (a new held torque at this step's start: a fresh start, the acceleration carried is the old load's)
+        carried = ws is not None and ws.a is not None and ws.q is q and ws.v is v and not system.new_sample
         a = ws.a if carried else cho_solve(cho_factor(M), f)  # a fresh start: a = q̈ (Cholesky, as the kernel)
         dv0 = dv_a * a
         dq0 = h * v + dq_a * a

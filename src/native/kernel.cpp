@@ -75,7 +75,7 @@ std::shared_ptr<Loop> make_loop(Kernel & kernel, bp::dict values) {
 
 // coopdyn's law (and a compiled controller, or None) as MuJoCo callbacks (mujoco_bridge.hpp;
 // coopdyn/mujoco.py finds the layout and the index maps).
-std::shared_ptr<cn::MujocoBridge> make_mujoco_bridge(Kernel & kernel, bp::object controller, bp::tuple layout,
+std::shared_ptr<cn::MujocoBridge> make_mujoco_bridge(bp::object kernel_object, bp::object controller, bp::tuple layout,
                                                      const Eigen::VectorXi & q_pin, const Eigen::VectorXi & q_mj,
                                                      const Eigen::VectorXi & v_pin, const Eigen::VectorXi & v_mj,
                                                      const Eigen::VectorXi & free, const Eigen::VectorXi & motor_ctrl,
@@ -85,18 +85,21 @@ std::shared_ptr<cn::MujocoBridge> make_mujoco_bridge(Kernel & kernel, bp::object
     throw std::invalid_argument("make_mujoco_bridge: inconsistent layout or index maps");
   const cn::MjDataLayout offsets{bp::extract<long>(layout[0]), bp::extract<long>(layout[1]), bp::extract<long>(layout[2]),
                                  bp::extract<long>(layout[3]), bp::extract<long>(layout[4])};
+  Kernel & kernel = bp::extract<Kernel &>(kernel_object);
   std::unique_ptr<cn::Controller> ctrl;
   if (!controller.is_none()) ctrl = make_controller(kernel, bp::extract<bp::dict>(controller));
-  return std::make_shared<cn::MujocoBridge>(kernel, std::move(ctrl), offsets, q_pin, q_mj, v_pin, v_mj,
+  return std::make_shared<cn::MujocoBridge>(kernel_object, kernel, std::move(ctrl), offsets, q_pin, q_mj, v_pin, v_mj,
                                             Eigen::Vector4i(free), motor_ctrl, motor_tau);
 }
-void install_mujoco_bridge(std::shared_ptr<cn::MujocoBridge> bridge) {
-  const std::lock_guard<std::mutex> lock(cn::bridge_mutex());
-  cn::installed_bridge() = std::move(bridge);
-}
-void uninstall_mujoco_bridge() {
-  const std::lock_guard<std::mutex> lock(cn::bridge_mutex());
-  cn::installed_bridge().reset();
+// Install `bridge` (None: none); the bridge installed before, for the caller to put back.
+std::shared_ptr<cn::MujocoBridge> install_mujoco_bridge(std::shared_ptr<cn::MujocoBridge> bridge) {
+  std::shared_ptr<cn::MujocoBridge> previous;
+  {
+    const std::lock_guard<std::mutex> lock(cn::bridge_mutex());
+    previous = std::move(cn::installed_bridge());
+    cn::installed_bridge() = std::move(bridge);
+  }
+  return previous;  // (released after the lock: its Python kernel is let go with the GIL held)
 }
 // The callbacks' addresses, for ctypes (MuJoCo's mjfGeneric).
 std::uintptr_t mujoco_passive_address() { return reinterpret_cast<std::uintptr_t>(&coopdyn_mjcb_passive); }
@@ -175,10 +178,9 @@ BOOST_PYTHON_MODULE(_native) {
     "MujocoBridge", "coopdyn's law as MuJoCo callbacks (see coopdyn.mujoco).", bp::no_init)
     .add_property("evaluations", &cn::MujocoBridge::evaluations)
     .def("take_error", &cn::MujocoBridge::take_error, bp::args("self"));
-  bp::def("make_mujoco_bridge", &make_mujoco_bridge, bp::with_custodian_and_ward_postcall<0, 1>(),
+  bp::def("make_mujoco_bridge", &make_mujoco_bridge,
           bp::args("kernel", "controller", "layout", "q_pin", "q_mj", "v_pin", "v_mj", "free", "motor_ctrl", "motor_tau"));
   bp::def("install_mujoco_bridge", &install_mujoco_bridge, bp::args("bridge"));
-  bp::def("uninstall_mujoco_bridge", &uninstall_mujoco_bridge);
   bp::def("mujoco_passive_address", &mujoco_passive_address);
   bp::def("mujoco_control_address", &mujoco_control_address);
   bp::def("evaluate_element", &evaluate_element, bp::args("kind", "parameters", "T_M_G", "xi", "jacobians"));

@@ -422,9 +422,10 @@ private:
   void monitor_after_step(double t0, const VectorXd & q0, const VectorXd & v0, double h, bool reused_start) {
     const double p = start_power(reused_start);
     double jump = 0.0;  // a new control sample at t0: the last hold ends on the power before it
-    if (t0 == sampled_at_)
+    const bool sampled = t0 == sampled_at_;
+    if (sampled)
       for (Eigen::Index i = 0; i < na_; ++i) jump += jump_[i] * v0[act_[i]];
-    monitor_.close_interval(p - jump, h, true, p, jump != 0.0);
+    monitor_.close_interval(p - jump, h, true, p, sampled);
     ++monitor_.steps;
     if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
   }
@@ -507,7 +508,9 @@ private:
         return;
       }
       begin_step(t_, q_, v_);  // (a controller's sample is due: taken here)
-      const double t_out = outputs_[j_out_], t_land = std::min(t_out, next_sample_time());
+      // (a sample instant within 1e-9 of the period before an output time is that time: no ulp-long step)
+      const double t_out = outputs_[j_out_], t_sample = next_sample_time();
+      const double t_land = t_sample < t_out - 1e-9 * control_dt_ ? t_sample : t_out;
       double h_try = std::min(h_, t_land - t_);
       if (t_ + h_try * (1.0 + 1e-9) >= t_land) h_try = t_land - t_;  // land on the output time (or sample instant)
       fail_t_ = t_;

@@ -59,6 +59,10 @@ public:
     return std::make_unique<GeneralizedAlpha>(alpha[0], alpha[1], alpha[2], alpha[3], model.nq);
   }
 
+  // A new held torque at this step's start (control_dt): start afresh from a = q̈ there, as at
+  // t = 0 — the carried acceleration is the old load's, and keeping it costs the method its order.
+  void restart() override { ready_ = false; }
+
 private:
   double am_, af_, g_, b_;
   bool ready_ = false;
