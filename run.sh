@@ -7,7 +7,10 @@ cd "$(dirname "$0")"
 VENV=${COOPDYN_VENV:-.venv}
 PY=${PYTHON:-python3}
 
+# setup LEVEL: "core" (what the demo needs: the package and its dependencies) or "dev" (also the
+# tools and peer simulators the tests use: ruff, mypy, pytest, MuJoCo, Drake, Exudyn, Dask).
 setup() {
+  level=$1
   if [ ! -x "$VENV/bin/python" ]; then
     echo "[run.sh] creating the virtual environment $VENV" >&2
     if ! "$PY" -m venv "$VENV" 2>/dev/null; then
@@ -20,24 +23,33 @@ setup() {
   # (Re)install when the project definition, the compiled kernel's sources or the list of the
   # package's modules changed since the last install (the editable install maps each module file;
   # the install compiles coopdyn._native: about 2 minutes).
+  # The stamp holds that digest and the level installed; "dev" includes "core".
   stamp="$VENV/.coopdyn-installed"
   want=$({ cat pyproject.toml CMakeLists.txt $(find src -type f | LC_ALL=C sort); find coopdyn -name '*.py' | LC_ALL=C sort; } | sha256sum | cut -d' ' -f1)
-  if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "[run.sh] installing coopdyn and its dependencies into $VENV (compiles the C++ kernel)" >&2
+  have=$(cat "$stamp" 2>/dev/null || true)
+  if [ "$have" != "$want dev" ] && [ "$have" != "$want $level" ]; then
+    if [ "$level" = dev ]; then
+      echo "[run.sh] installing coopdyn with the test tools and peer simulators into $VENV (compiles the C++ kernel)" >&2
+      spec=".[dev]"
+    else
+      echo "[run.sh] installing coopdyn and what the demo needs into $VENV (compiles the C++ kernel)" >&2
+      spec="."
+    fi
     "$VENV/bin/python" -m pip install --quiet --upgrade pip
-    "$VENV/bin/python" -m pip install --quiet -e ".[dev]"
-    echo "$want" > "$stamp"
+    "$VENV/bin/python" -m pip install --quiet -e "$spec"
+    echo "$want $level" > "$stamp"
   fi
 }
 
 job=${1:-demo}
 shift || true
-setup
 case "$job" in
   demo)
+    setup core
     exec "$VENV/bin/coopdyn" demo --out out/demo "$@"
     ;;
   test)
+    setup dev
     "$VENV/bin/ruff" check coopdyn tests examples benchmarks
     "$VENV/bin/ruff" format --check coopdyn tests examples benchmarks
     "$VENV/bin/mypy"

@@ -40,7 +40,7 @@ def run_peer_comparison(
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
 
     Raises:
-        MissingDependencyError: MuJoCo is not installed (``pip install coopdyn[peers]``).
+        MissingDependencyError: MuJoCo is not installed (``pip install -e ".[peers]"``).
     """
     from .._optional import require
     from .panda_peers import compare, format_comparison

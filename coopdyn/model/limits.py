@@ -23,9 +23,12 @@ from .scene import Scene
 
 
 def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> Scene:
-    """The same scene with every interconnection a rigid grasp.
+    """The same scene with every interconnection a rigid grasp (and the object rigid).
 
-    The arms, the object and the fixture frames T are kept; each grasp frame G is placed where
+    An elastic object (a :class:`~coopdyn.model.beam.Beam`) is first made one rigid body with
+    its mass and inertia (:func:`quasi_static`): the rigid model of the whole system (welding
+    the grasps of a beam whose own elements stay elastic would keep their kHz modes, which no
+    explicit step resolves). The arms, the object and the fixture frames T are kept; each grasp frame G is placed where
     its T is at ``scene.q0``, so every rigid grasp starts satisfied. A grasp the elastic scene
     preloads (T ≠ G at ``q0``: a grasp error) cannot be represented — a rigid model carries no
     preload; that is the force uncertainty — and is dropped with a warning giving its size.
@@ -46,6 +49,8 @@ def rigid_limit(scene: Scene, baumgarte: Any = (BAUMGARTE_KP, BAUMGARTE_KD)) -> 
     gains = _validate.finite_array(baumgarte, "baumgarte (Kp [1/s²], Kd [1/s])", (2,))
     if gains.min() < 0.0:
         raise SceneError(f"baumgarte gains must be >= 0, got Kp = {gains[0]:g} 1/s², Kd = {gains[1]:g} 1/s")
+    if scene.object.condensed(scene) is not None:  # an elastic object: rigid too
+        scene = quasi_static(scene)
     model = scene.model
     data = model.createData()
     pin.framesForwardKinematics(model, data, scene.q0)

@@ -4,7 +4,7 @@ and ``coopdyn sweep spec.toml``.
 Every run becomes one row of a tidy table (pandas, saved as Parquet): its parameters and seed,
 its status and diagnosis, its metrics, and what reproduces it (settings, versions). Runs go to
 local processes by default, or to any ``concurrent.futures.Executor`` — a Dask cluster through
-its ``Client`` (``pip install coopdyn[dask]``). ``coopdyn sweep --rerun TABLE RUN`` (or
+its ``Client`` (``pip install -e ".[dask]"``). ``coopdyn sweep --rerun TABLE RUN`` (or
 :func:`rerun`) runs a row again and compares it bit for bit. docs/sweeps.md walks through it.
 """
 

@@ -86,7 +86,7 @@ def sweep(
             row, beside the built-in ones (tracking error, internal and interconnection forces).
         executor: ``None`` or ``"processes"``: local processes (``workers`` of them, default
             every core); ``"serial"``: this process; any ``concurrent.futures.Executor``; or a
-            ``dask.distributed.Client`` (a cluster: ``pip install coopdyn[dask]``).
+            ``dask.distributed.Client`` (a cluster: ``pip install -e ".[dask]"``).
         workers: the number of local processes.
         chunk_size: runs per task (default: up to 64, at least 4 tasks per worker): short runs in
             chunks cost less scheduling; long ones in chunks of one balance best.
