@@ -71,11 +71,13 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
                     color=colour[method],
                 )
             bad = [r for r in rows if r.scene == name and r.method == method and not r.stable]
-            for r in bad:
+            if bad:  # one line per method: how many of its settings diverged, from which step up
                 n_bad += 1
+                steps = [r.dt for r in bad if r.setting.startswith("dt=")]
+                where = f" (dt ≥ {min(steps):.3g} s)" if len(steps) == len(bad) else ""
                 ax.annotate(
-                    f"× diverged: {method} {r.setting}",
-                    (0.02, 0.05 * n_bad - 0.03),
+                    f"× {method}: {len(bad)} of {len(bad) + len(pts)} settings diverged{where}",
+                    (0.02, 0.045 * n_bad - 0.025),
                     xycoords="axes fraction",
                     fontsize=6,
                     color="red",
