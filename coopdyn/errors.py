@@ -129,6 +129,11 @@ class AccuracyWarning(UserWarning):
     forces that mode carries are damped away or out of phase (see :func:`coopdyn.advise`)."""
 
 
+class SceneWarning(UserWarning):
+    """A scene or task that runs but looks wrong: a task that starts away from the object, a
+    grasp far from it. The message gives the figure and the fix."""
+
+
 class LogMapWarning(UserWarning):
     """A deformation's rotation neared π, where the SE(3) logarithm jumps."""
 

@@ -188,7 +188,28 @@ def test_grip_lift_oscillate_holds_the_objects_starting_orientation() -> None:
     assert np.allclose(ctrl.reference(0.0).rotation, R0, atol=1e-12)
     spec = ctrl.compiled_spec(scene)
     assert spec is not None and np.allclose(spec.task.rotation, R0, atol=1e-12)
-    explicit = np.eye(3)
-    assert np.array_equal(
-        ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), rotation=explicit)).reference(1.0).rotation, explicit
-    )
+    explicit = np.eye(3)  # (the world axes, asked for: honoured, with a warning that the strip starts turned)
+    with pytest.warns(cd.SceneWarning, match="rad away"):
+        ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), rotation=explicit))
+    assert np.array_equal(ctrl.reference(1.0).rotation, explicit)
+
+
+def test_a_task_that_starts_away_from_the_object_warns_with_the_distance(pandas: cd.Scene) -> None:
+    """The README's old quick start hard-coded start=[0, 0, 0.7]; a typo (1.7) gave −309 N of
+    tension, silently. A task starting away from the object's pose warns with the distance and
+    the fix; one starting on it does not."""
+    import warnings
+
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+    from coopdyn.scenes import object_start
+
+    here = object_start(pandas)
+    with pytest.warns(cd.SceneWarning, match=r"starts 1 m and 0 rad away.*object_start\(scene\)"):
+        ObjectImpedance(pandas, GripLiftOscillate(start=here + np.array([0.0, 0.0, 1.0])))
+    with pytest.warns(cd.SceneWarning, match=r"0\.3 rad away"):
+        R = pin.exp3(np.array([0.0, 0.0, 0.3]))
+        ObjectImpedance(pandas, GripLiftOscillate(start=here, rotation=R))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ObjectImpedance(pandas, GripLiftOscillate(start=here))
+        ObjectImpedance(pandas)  # (holding the start pose)

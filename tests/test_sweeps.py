@@ -411,7 +411,7 @@ def test_the_dask_options_name_the_install(
     spec.write_text(SPEC)
     monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed
     assert main(["sweep", str(spec), "--local-cluster", "2"]) == 2
-    assert "pip install coopdyn[dask]" in capsys.readouterr().err
+    assert 'pip install -e ".[dask]" in the coopdyn repository' in capsys.readouterr().err
     assert main(["sweep", str(spec), "--serial", "--local-cluster", "2"]) == 2
     capsys.readouterr()
     assert main(["sweep", str(spec), "--serial", "--workers", "2"]) == 2  # --workers sizes the local processes only

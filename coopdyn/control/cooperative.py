@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -30,7 +31,7 @@ from scipy.linalg import cho_solve
 
 from .. import _validate
 from .._spec import GripLiftOscillateTaskSpec, HoldTaskSpec, ObjectImpedanceSpec
-from ..errors import SceneError
+from ..errors import SceneError, SceneWarning
 from ..grasp import squeeze_directions
 from ..model.scene import Scene
 
@@ -221,6 +222,33 @@ class GripLiftOscillate:
         ]
 
 
+#: [m], [rad] how far a task may start from the object's pose at the scene's start, silently
+TASK_START_TOLERANCE = (0.005, 0.05)
+
+
+def _warn_if_away(reference: Callable[[float], ObjectReference], oMo: pin.SE3, Kp: np.ndarray) -> None:
+    """Warn (SceneWarning) when ``reference(0)`` is away from the object's pose ``oMo`` at the
+    scene's start: the impedance would drag the object there from the first instant."""
+    try:
+        start = reference(0.0)
+        offset = np.asarray(start.position, dtype=float) - oMo.translation
+        turn = float(np.linalg.norm(pin.log3(np.asarray(start.rotation, dtype=float) @ oMo.rotation.T)))
+    except Exception:  # (a reference that cannot be evaluated here fails in the run, with its own message)
+        return
+    distance = float(np.linalg.norm(offset))
+    if distance <= TASK_START_TOLERANCE[0] and turn <= TASK_START_TOLERANCE[1]:
+        return
+    pull = float(np.linalg.norm(Kp * offset))
+    warnings.warn(
+        f"ObjectImpedance: the task starts {distance:.3g} m and {turn:.3g} rad away from the object's pose at the scene's "
+        f"start (task at {np.round(start.position, 4).tolist()} m, object at {np.round(oMo.translation, 4).tolist()} m): "
+        f"the impedance drags the object there from t = 0, with ~{pull:.3g} N at first. Start the task at "
+        "coopdyn.scenes.object_start(scene) (GripLiftOscillate(start=object_start(scene)))",
+        SceneWarning,
+        stacklevel=3,
+    )
+
+
 def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
     """(linear, angular) object gains, each a non-negative scalar or 3-vector, as two (3,) arrays."""
     if (
@@ -287,6 +315,8 @@ class ObjectImpedance:
         self._hold = hold if reference is None else None
         if type(reference) is GripLiftOscillate and reference.rotation is None:  # hold the starting orientation
             reference = dataclasses.replace(reference, rotation=oMo.rotation.copy())
+        if reference is not None:
+            _warn_if_away(reference, oMo, self.Kp)
 
         def hold_reference(t: float) -> ObjectReference:
             return hold
