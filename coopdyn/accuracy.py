@@ -44,6 +44,9 @@ from .stability import state_matrix
 
 FORCE_ERROR_LIMIT = 0.1  #: a force error, relative to the peak force, above which a run is not trusted
 FORCE_FLOOR = 1e-9  #: [N] forces below this are round-off: a reference without force is not divided by
+#: a reference whose forces grow (last third of the compared span over its first, ×) to this many
+#: times the run's peak: the run's calm is its integrator's (an unstable closed loop, damped)
+UNSTABLE_RATIO, UNSTABLE_GROWTH = 5.0, 2.0
 SCREEN_LIMIT = 0.005  #: a mode's force-weighted error above which the forces are checked against a reference run
 CHECK_COST = 30  #: the check may take this many times the run's steps (or CHECK_FLOOR), else the screen decides
 CHECK_FLOOR = 20_000  #: steps the check may always take
@@ -252,16 +255,44 @@ def described(reference: AdaptiveIntegrator) -> str:
     return f"{reference.name} at rtol {reference.rtol:g}"
 
 
-def checked_message(s: Screen, error: float, peak: float, reference: AdaptiveIntegrator) -> str | None:
+def checked_message(
+    s: Screen,
+    error: float,
+    peak: float,
+    reference: AdaptiveIntegrator,
+    *,
+    stopped: tuple[str, float, bool] | None = None,
+    own_peak: float | None = None,
+    growth: float = 1.0,
+) -> str | None:
     """The warning for a run whose forces differ from the ``reference`` run's by more than
-    :data:`FORCE_ERROR_LIMIT` of their ``peak`` [N] (``error`` [N]), or None."""
+    :data:`FORCE_ERROR_LIMIT` of their ``peak`` [N] (``error`` [N]), or None. ``stopped``: the
+    reference stopped early — (why, at t [s], whether it diverged) — and was compared up to there;
+    ``own_peak``: the run's own force peak over that span [N]; ``growth``: the reference's force
+    peak over the last third of that span over its first third. A reference that diverged, or
+    whose forces grow (:data:`UNSTABLE_GROWTH`) to dwarf the run's (:data:`UNSTABLE_RATIO`), is
+    said plainly: the closed loop is unstable when its modes are resolved, and the run's calm
+    forces are its integrator's."""
     if not error > FORCE_ERROR_LIMIT * max(peak, FORCE_FLOOR):
         return None
     share = f"{error / peak:.0%} of their {peak:.4g} N peak" if peak > 0 else "where the reference's are zero"
+    span = f"this {s.duration:g} s run"
+    if stopped is not None:
+        span = f"the first {stopped[1]:.4g} s of this {s.duration:g} s run (where the reference stopped: {stopped[0]})"
+    unstable = ""
+    diverged = stopped is not None and stopped[2]
+    dwarfed = own_peak is not None and peak > UNSTABLE_RATIO * max(own_peak, FORCE_FLOOR) and growth > UNSTABLE_GROWTH
+    if diverged or dwarfed:
+        grew = "diverged" if diverged else f"has forces growing to {peak:.4g} N where this run's stay below {own_peak:.4g} N"
+        unstable = (
+            f" The reference, which resolves the modes, {grew}: this closed loop is most likely unstable once its fast "
+            "modes are resolved, and this run's calm forces are its integrator's damping, not the physics. Check the "
+            "controller (its gains on a flexible or stiff object) before trusting any step."
+        )
     return (
-        f"{s.method.name} at dt = {s.dt * 1e3:.4g} ms gets the interconnection forces of this {s.duration:g} s run wrong by up "
+        f"{s.method.name} at dt = {s.dt * 1e3:.4g} ms gets the interconnection forces of {span} wrong by up "
         f"to {error:.4g} N, {share} (checked against {described(reference)} from the same start, "
-        f"Result.force_error_estimate). The likely cause is {_mode_text(s)}. {_advice(s)}"
+        f"Result.force_error_estimate).{unstable} The likely cause is {_mode_text(s)}. {_advice(s)}"
     )
 
 

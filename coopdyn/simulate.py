@@ -262,6 +262,7 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
     name = accuracy.described(reference)
     unchecked = "accuracy_check='screen'" if mode == "screen" else "a streamed run is not run twice" if streamed else ""
     checked = None
+    stopped: tuple[str, float, bool] | None = None  # (why, when [s], diverged) a reference stopped early
     if not unchecked:
         interval = float(result.t[1] - result.t[0]) if len(result.t) > 1 else t_final
         if rerun.pop("progress"):
@@ -281,25 +282,37 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
                 )
         except SimulationInterrupted:
             raise SimulationInterrupted(f"interrupted while checking the run's forces against {name}", result=result) from None
-        except StepBudgetError:
-            unchecked = f"{name} needed more than {budget} steps"
+        except (StepBudgetError, DivergenceError) as exc:  # compared as far as the reference got
+            diverged = isinstance(exc, DivergenceError)
+            stop = f"{name} diverged" if diverged else f"{name} needed more than {budget} steps"
+            partial = exc.result
+            if isinstance(partial, Result) and len(partial.t) > 1 and partial.t[-1] > 0:
+                checked = partial
+                stopped = (stop, float(partial.t[-1]), diverged)
+            else:
+                unchecked = stop
         except CoopdynError as exc:
             unchecked = f"{name} stopped: {str(exc).splitlines()[0][:200]}"
     if checked is None:
         message = accuracy.screen_message(judged, unchecked)
     else:
-        mine = result.wrenches()[..., :3]
+        n = min(len(checked.t), len(result.t))  # (a reference that stopped early: its part of the run)
+        mine = result.wrenches()[:n][..., :3]
         theirs = checked.wrenches()[..., :3]
-        if len(checked.t) != len(result.t) or not np.allclose(checked.t, result.t, rtol=0.0, atol=1e-9):
+        if len(checked.t) != n or not np.allclose(checked.t, result.t[:n], rtol=0.0, atol=1e-9):
             from scipy.interpolate import interp1d  # (both land on the same output grid; this is a guard)
 
-            theirs = interp1d(checked.t, theirs, axis=0)(result.t)
+            theirs = interp1d(checked.t, theirs, axis=0)(result.t[:n])
         error = float(np.max(np.linalg.norm(mine - theirs, axis=-1), initial=0.0))
         peak = float(np.max(np.linalg.norm(theirs, axis=-1), initial=0.0))
+        own_peak = float(np.max(np.linalg.norm(mine, axis=-1), initial=0.0))
+        size = np.linalg.norm(theirs, axis=-1).reshape(len(theirs), -1).max(axis=1)  # the reference's force over time
+        third = max(len(size) // 3, 1)
+        growth = float(size[-third:].max() / max(size[:third].max(), accuracy.FORCE_FLOOR)) if len(size) >= 3 else 1.0
         readouts = result.readouts
         result = dataclasses.replace(result, force_error_estimate=error)
         result.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
-        message = accuracy.checked_message(judged, error, peak, reference)
+        message = accuracy.checked_message(judged, error, peak, reference, stopped=stopped, own_peak=own_peak, growth=growth)
     if message is not None:
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result

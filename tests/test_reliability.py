@@ -980,3 +980,41 @@ def test_exact_numbers_are_accepted() -> None:
 
     task = GripLiftOscillate(start=(0.0, 0.0, 0.5), squeeze=Fraction(41, 2), lift=Decimal("0.1"))
     assert task(10.0).squeeze == pytest.approx(20.5)
+
+
+def test_a_calm_run_of_an_unstable_loop_is_called_what_it_is() -> None:
+    """The message logic: a reference that diverged, or whose forces grow to dwarf the run's,
+    says the closed loop is unstable when resolved and the calm is the integrator's; a
+    reference that is merely larger (an oscillation the run damped away, not growing) does not
+    claim instability."""
+    from coopdyn import accuracy
+    from coopdyn.closed_loop import System
+    from coopdyn.control import GravityCompensationPD as PD
+    from coopdyn.dynamics import Dynamics
+    from coopdyn.integrators import AdaptiveROS2, get_integrator
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4)
+    s = accuracy.screen(System(Dynamics(scene), PD(scene)), scene.q0, scene.v0 + 0.3, get_integrator("implicit_euler"), 5e-3, 1.0)
+    ref = AdaptiveROS2(rtol=1e-4, atol=1e-7)
+    diverged = accuracy.checked_message(s, 50.0, 60.0, ref, stopped=("ros2_adaptive diverged", 0.4, True), own_peak=5.0)
+    assert diverged is not None and "first 0.4 s" in diverged and "reference, which resolves the modes, diverged" in diverged
+    assert "most likely unstable" in diverged
+    grew = accuracy.checked_message(s, 50.0, 60.0, ref, own_peak=5.0, growth=8.0)
+    assert grew is not None and "forces growing to 60 N where this run's stay below 5 N" in grew
+    damped = accuracy.checked_message(s, 50.0, 60.0, ref, own_peak=5.0, growth=1.0)
+    assert damped is not None and "unstable" not in damped
+
+
+@pytest.mark.slow
+def test_the_old_flexible_beam_setting_is_flagged_as_an_unstable_loop() -> None:
+    """The flexible-beam example's former gains (500 N/m, 30 N·s/m) under implicit Euler at 1 ms:
+    a calm 5 N run whose resolved reference grows to ~90 N before its step budget runs out. The
+    warning says the loop is unstable when resolved (it used to pass silently)."""
+    from coopdyn.scenes import held_beam, object_start
+
+    scene = held_beam()
+    task = GripLiftOscillate(start=object_start(scene), squeeze=5.0, amplitude=0.02, frequency=1.5, axis=(0.0, 0.0, 1.0))
+    ctrl = ObjectImpedance(scene, task, stiffness=(500.0, 10.0), damping=(30.0, 0.5))
+    with pytest.warns(cd.AccuracyWarning, match="most likely unstable once its fast modes are resolved"):
+        res = cd.simulate(scene, 5.0, controller=ctrl, integrator="implicit_euler", dt=1e-3, save_every=10)
+    assert np.abs(res.wrenches()[..., :3]).max() < 10.0  # (the calm the integrator drew)
