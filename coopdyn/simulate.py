@@ -110,8 +110,9 @@ def simulate(
             controller and start (the controller is called again from t = 0): dopri5 where its
             stability limit allows, else ros2_adaptive at rtol 1e-4 (stiff scenes), within
             max(30× the run's steps, 20 000) steps. An ``AccuracyWarning`` gives the force
-            error found (``Result.force_error_estimate`` [N]); past that budget the screen alone
-            decides.
+            error found (``Result.force_error_estimate`` [N]); a reference that runs out of that
+            budget or diverges is compared as far as it got (and one that diverges or grows to
+            dwarf the run's forces is reported as an unstable loop the run's step hides).
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
         control_dt: the controller's sample period [s], or ``None`` (default) to call it at every
