@@ -78,14 +78,26 @@ def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1
     scene = facing_arms("panda", stiffness=stiffness, n_arms=n_arms)
     ctrl = GravityCompensationPD(scene, 50.0, 5.0)
     v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
+    reference = _tight_reference(scene, ctrl, t_final, v0, reference_rtol)
+    note = f"dopri5 rtol={reference_rtol:g}"
+    name = f"pandas k={stiffness:.0e}" if n_arms == 2 else f"{n_arms} panda{'s' * (n_arms > 1)} k={stiffness:.0e}"
+    return Case(name, scene, ctrl, t_final, v0, reference, note)
+
+
+def _tight_reference(
+    scene: Scene, ctrl: Callable[..., np.ndarray], t_final: float, v0: np.ndarray, rtol: float
+) -> Callable[[Result], tuple[np.ndarray, np.ndarray]]:
+    """A case's reference: Dormand–Prince at ``rtol`` on the output grid; returns what
+    :attr:`Case.reference` gives a run (object positions, wrench forces), refusing another grid."""
     ref = simulate(
         scene,
         t_final,
         controller=ctrl,
-        integrator=INTEGRATORS["dopri5"](rtol=reference_rtol, atol=reference_rtol * 1e-2),  # type: ignore[call-arg]
+        integrator=INTEGRATORS["dopri5"](rtol=rtol, atol=rtol * 1e-2),  # type: ignore[call-arg]
         dt=OUTPUT_INTERVAL,
         v0=v0,
         energy_check="off",
+        max_steps=None,
     )
     ref_pos, ref_forces = ref.object_position(), _forces(ref)
 
@@ -94,9 +106,7 @@ def panda_case(stiffness: float, t_final: float = 0.2, reference_rtol: float = 1
             raise SimulationError("benchmark runs must save on the reference's output grid")
         return ref_pos, ref_forces
 
-    note = f"dopri5 rtol={reference_rtol:g}"
-    name = f"pandas k={stiffness:.0e}" if n_arms == 2 else f"{n_arms} panda{'s' * (n_arms > 1)} k={stiffness:.0e}"
-    return Case(name, scene, ctrl, t_final, v0, reference, note)
+    return reference
 
 
 #: the task benchmark's pace: the demo's grip, lift and oscillation compressed into 1.2 s
@@ -114,21 +124,5 @@ def task_case(stiffness: float, t_final: float = 1.25, reference_rtol: float = 1
     scene = facing_arms("panda", stiffness=stiffness, damping=TASK_DAMPING)
     ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), **TASK_PACE))
     v0 = np.zeros(scene.nv)
-    ref = simulate(
-        scene,
-        t_final,
-        controller=ctrl,
-        integrator=INTEGRATORS["dopri5"](rtol=reference_rtol, atol=reference_rtol * 1e-2),  # type: ignore[call-arg]
-        dt=OUTPUT_INTERVAL,
-        v0=v0,
-        energy_check="off",
-        max_steps=None,
-    )
-    ref_pos, ref_forces = ref.object_position(), _forces(ref)
-
-    def reference(res: Result) -> tuple[np.ndarray, np.ndarray]:
-        if res.t.size != ref.t.size or np.max(np.abs(res.t - ref.t)) > 1e-9:
-            raise SimulationError("benchmark runs must save on the reference's output grid")
-        return ref_pos, ref_forces
-
+    reference = _tight_reference(scene, ctrl, t_final, v0, reference_rtol)
     return Case(f"task k={stiffness:.0e}", scene, ctrl, t_final, v0, reference, f"dopri5 rtol={reference_rtol:g}")
