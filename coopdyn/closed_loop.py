@@ -189,7 +189,7 @@ class System:
             hint = " (q and v are read-only: copy them to change them)" if "read-only" in str(exc) else ""
             raise ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}{hint}") from exc
         if type(out) is np.ndarray and out.dtype == np.float64:  # not a subclass (masked arrays)
-            tau = out
+            tau = out.copy()  # (a controller may return the same buffer every call: the run keeps each output)
         else:  # lists, other dtypes, and what is not a torque vector at all
             try:
                 tau = _validate.finite_array(out, "the controller's output", error=ControllerError)
@@ -267,7 +267,7 @@ class System:
         except Exception as exc:
             raise ControllerError(f"object_wrench raised {type(exc).__name__} at t = {t:.6g} s: {exc}") from exc
         if type(out) is np.ndarray and out.dtype == np.float64 and out.shape == (6,) and math.isfinite(out.sum()):
-            return out  # the common case, checked in one pass
+            return out.copy()  # the common case, checked in one pass (copied: a reused buffer is not the run's)
         try:
             return _validate.finite_array(out, "object_wrench(t)", (6,), error=ControllerError)
         except ControllerError as exc:

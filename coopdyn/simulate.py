@@ -169,6 +169,7 @@ def simulate(
         )
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
     budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
+    _check_samples(t_final, control_dt, budget)
 
     system = System(Dynamics(scene, backend), controller, object_wrench, control_dt)
     system.max_speed = max_speed
@@ -328,8 +329,13 @@ def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | N
         raise SimulationError(
             f"control_dt must be None (a controller called at every evaluation) or >= {MIN_DT:g} [s], got {period}"
         )
+    ratio = period / dt
+    if not ratio < 1e15:  # (also inf: a period beyond any run's count of steps)
+        raise SimulationError(
+            f"control_dt = {period:g} s is {ratio:.3g} steps of dt = {dt:g} s: the controller would be called once; give a "
+            "period a run can count, or None"
+        )
     if not method.adaptive:
-        ratio = period / dt
         if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * ratio:
             finer = period / math.ceil(ratio * (1.0 - 1e-9) + 1e-9) if ratio >= 1.0 else period
             raise SimulationError(
@@ -337,7 +343,22 @@ def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | N
                 f"each sample instant k·control_dt must be the start of a step (the held torque changes there). "
                 f"Use dt = {finer:.6g} s (or another divisor of control_dt), or an adaptive method (dopri5, ros2_adaptive)"
             )
+        return round(ratio) * dt  # the exact multiple: sample k is step k·ratio's start, however large k grows
     return period
+
+
+def _check_samples(t_final: float, control_dt: float | None, max_steps: int | None) -> None:
+    """Refuse, before it starts, a run whose control samples alone (each starts a step) exceed
+    ``max_steps``."""
+    if control_dt is None or max_steps is None:
+        return
+    samples = t_final / control_dt
+    if samples > max_steps:
+        raise SimulationError(
+            f"control_dt = {control_dt:g} s over t_final = {t_final:g} s is {samples:.3g} controller samples, each the start "
+            f"of a step: more than max_steps = {max_steps:,}. Give a longer control_dt (a robot's controller runs at "
+            "about 1 kHz: 1e-3 s), or max_steps=None"
+        )
 
 
 STREAM_BATCH = 1024  #: samples kept in memory between writes to ``stream_to``

@@ -18,7 +18,7 @@ from .errors import SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
 from .result import Result
-from .simulate import ENERGY_CHECKS, MIN_DT, _compiled_loop, _control_period, _Run, simulate
+from .simulate import ENERGY_CHECKS, MIN_DT, _check_samples, _compiled_loop, _control_period, _Run, simulate
 
 __all__ = ["Simulator"]
 
@@ -100,6 +100,7 @@ class Simulator:
         scene, method, system = self.scene, self.method, self.system
         q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
         budget = check_budget(scene, t_final, self.dt, self.save_every, self.max_steps, self.max_memory)
+        _check_samples(t_final, self.control_dt, budget)
         system.restart()
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed)
         run.budget = budget

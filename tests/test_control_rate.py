@@ -204,6 +204,7 @@ def test_the_accuracy_check_compares_with_a_reference_that_holds_too(pandas: cd.
         (-1e-3, 1e-3, r"control_dt must be None"),
         (float("nan"), 1e-3, r"control_dt"),
         ("1ms", 1e-3, r"control_dt"),
+        (1e308, 1e-3, r"controller would be called once"),  # (its ratio to dt overflowed: a raw OverflowError)
     ],
 )
 def test_a_sample_period_the_steps_cannot_land_on_is_refused(
@@ -230,3 +231,50 @@ def test_a_scene_file_and_a_sweep_carry_the_sample_period(tmp_path: object) -> N
         warnings.simplefilter("ignore")
         table = cd.sweep(lambda k: cd.Case(cd.scenes.linear_book(), duration=0.01, control_dt=k), {"k": [0.002]}, progress=False)
     assert list(table["control_dt_s"]) == [0.002]
+
+
+def test_a_period_of_more_samples_than_max_steps_is_refused_before_it_runs(book: cd.Scene) -> None:
+    """Every sample starts a step: a 1 ns period over 10 ms with dopri5 is 1e7 steps — refused up
+    front, naming control_dt (it ran 2e6 steps, then blamed "a fast mode")."""
+    with pytest.raises(SimulationError, match=r"control_dt = 1e-09 s over t_final = 0.01 s is 1e\+07 controller samples"):
+        cd.simulate(book, 0.01, integrator="dopri5", dt=1e-3, control_dt=1e-9)
+    with pytest.raises(SimulationError, match="controller samples"):
+        cd.Simulator(book, None, "dopri5", 1e-3, control_dt=1e-9).run(0.01)
+
+
+def test_a_period_a_hair_off_a_multiple_of_dt_stays_on_the_step_grid(pandas: cd.Scene, start: np.ndarray) -> None:
+    """A period accepted as 2·dt (within 1e-9) is that multiple: the controller is called at
+    0, 2, 4, … ms, not one step late once the round-off has accumulated (it was, from the 4th)."""
+    controller = Counting(pandas)
+    cd.simulate(pandas, 0.03, controller=controller, dt=1e-3, v0=start, control_dt=2e-3 * (1 + 5e-10), accuracy_check="off")
+    assert np.allclose(controller.times, np.arange(15) * 2e-3, rtol=0, atol=1e-12)
+
+
+def test_a_controller_that_reuses_its_output_buffer(pandas: cd.Scene, start: np.ndarray) -> None:
+    """A Python controller returning the same array every call: each saved torque is that call's
+    (the Python loop kept references, all showing the last output), the same in both loops, with
+    and without a hold, and no false energy alarm."""
+    pd = GravityCompensationPD(pandas)
+    buffer = np.zeros(pandas.n_actuated)
+
+    def reusing(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        buffer[:] = pd(t, q, v)
+        return buffer
+
+    for control_dt in (None, 1e-3):
+        runs = [
+            cd.simulate(
+                pandas,
+                0.06,
+                controller=reusing,
+                dt=5e-4,
+                v0=start,
+                control_dt=control_dt,
+                loop=loop,
+                accuracy_check="off",
+                energy_check="raise",
+            )
+            for loop in ("python", "compiled")
+        ]
+        assert np.max(np.abs(runs[0].tau - runs[1].tau)) < 1e-9
+        assert np.ptp(runs[0].tau, axis=0).max() > 1.0
