@@ -217,17 +217,69 @@ class Result:
         )
 
     def columns(self) -> dict[str, list[str]]:
-        """Names of the saved columns, with units: ``"t"``, ``"q"``, ``"v"``, ``"tau"`` (arm
-        joints) and ``"wrench"`` (per interconnection: fx, fy, fz [N], mx, my, mz [N·m]); a CSV column is
-        named by both, e.g. ``"q left/panda_joint1 [rad]"``, ``"wrench left.fz [N]"``."""
+        """Names of the saved columns, with units and frames: ``"t"``, ``"q"``, ``"v"``,
+        ``"tau"`` (arm joints) and ``"wrench"`` (per interconnection, on the object: fx, fy, fz
+        [N] and mx, my, mz [N·m] about the grasp point, world axes); a CSV column is named by
+        both, e.g. ``"q left/panda_joint1 [rad]"``, ``"v object.vx [m/s; body axes]"``,
+        ``"wrench left.fz [N; world axes]"``."""
         q_names, v_names = self.scene.coordinates()
         tau = [v_names[i].replace("[rad/s]", "[N·m]").replace("[m/s]", "[N]") for i in self.scene.actuated]
         wrench = [
-            f"{lk.name}.{c} [{'N' if c[0] == 'f' else 'N·m'}]"
+            f"{lk.name}.{c} [{'N; world axes' if c[0] == 'f' else 'N·m; world axes; about the grasp'}]"
             for lk in self.scene.links
             for c in ("fx", "fy", "fz", "mx", "my", "mz")
         ]
         return {"t": ["t [s]"], "q": q_names, "v": v_names, "tau": tau, "wrench": wrench}
+
+    def to_dataframe(self) -> Any:
+        """The run as a pandas DataFrame, one row per sample, every column named with its unit
+        and frame:
+
+        * ``t [s]``;
+        * the object frame's pose in the world: ``object.x/y/z [m; world]``, its orientation as
+          ``object.roll/pitch/yaw [rad; world]`` (Pinocchio's ``rpy``: R = Rz(yaw) Ry(pitch)
+          Rx(roll)) and as a quaternion ``object.qx/qy/qz/qw [1; world]``;
+        * its velocity in world axes at its origin: ``object.vx/vy/vz [m/s; world axes]``,
+          ``object.wx/wy/wz [rad/s; world axes]``;
+        * each grasp's squeeze ``{link}.squeeze [N; + = compression]``;
+        * every saved column of :meth:`columns` (q, v — a free flyer's in its body axes —, τ and
+          the wrenches), named ``"q …"``, ``"v …"``, ``"tau …"``, ``"wrench …"`` as in the CSV.
+        """
+        import pandas as pd
+
+        model = self.scene.model
+        data = model.createData()
+        frame = self.scene.object_frame
+        n = len(self.t)
+        pose, twist = np.empty((n, 10)), np.empty((n, 6))
+        for k in range(n):
+            pin.forwardKinematics(model, data, self.q[k], self.v[k])
+            oMo = pin.updateFramePlacement(model, data, frame)
+            x, y, z, w = pin.Quaternion(oMo.rotation).coeffs()
+            pose[k] = (*oMo.translation, *pin.rpy.matrixToRpy(oMo.rotation), x, y, z, w)
+            twist[k] = pin.getFrameVelocity(model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).vector
+        table: dict[str, np.ndarray] = {"t [s]": np.asarray(self.t, dtype=float)}
+        for i, c in enumerate(("x", "y", "z")):
+            table[f"object.{c} [m; world]"] = pose[:, i]
+        for i, c in enumerate(("roll", "pitch", "yaw")):
+            table[f"object.{c} [rad; world]"] = pose[:, 3 + i]
+        for i, c in enumerate(("qx", "qy", "qz", "qw")):
+            table[f"object.{c} [1; world]"] = pose[:, 6 + i]
+        for i, c in enumerate(("vx", "vy", "vz")):
+            table[f"object.{c} [m/s; world axes]"] = twist[:, i]
+        for i, c in enumerate(("wx", "wy", "wz")):
+            table[f"object.{c} [rad/s; world axes]"] = twist[:, 3 + i]
+        if len(self.scene.links) >= 2:
+            squeeze = self.squeeze()
+            for i, lk in enumerate(self.scene.links):
+                table[f"{lk.name}.squeeze [N; + = compression]"] = squeeze[:, i]
+        W = self.wrenches().reshape(n, -1)
+        saved = {"q": self.q, "v": self.v, "tau": self.tau, "wrench": W}
+        for key, names in self.columns().items():
+            if key != "t":
+                for j, name in enumerate(names):
+                    table[f"{key} {name}"] = saved[key][:, j]
+        return pd.DataFrame(table)
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the result atomically (temporary file, then rename) and return the path.

@@ -29,8 +29,8 @@ def test_demo_writes_everything(tmp_path: Path, capsys: pytest.CaptureFixture[st
     with np.load(tmp_path / "trajectory.npz") as z:
         assert z["q"].shape == (31, 21) and z["wrenches"].shape == (31, 12)
     header = (tmp_path / "trajectory.csv").read_text().splitlines()[0]
-    assert header.startswith("t [s],q left/panda_joint1 [rad],") and "v object.wz [rad/s]" in header
-    assert "tau left/panda_joint1 [N·m]" in header and header.endswith("wrench right.mz [N·m]")
+    assert header.startswith("t [s],q left/panda_joint1 [rad],") and "v object.wz [rad/s; body axes]" in header
+    assert "tau left/panda_joint1 [N·m]" in header and header.endswith("wrench right.mz [N·m; world axes; about the grasp]")
 
 
 def _chromium() -> str | None:
@@ -146,3 +146,37 @@ def test_a_bad_frame_rate_is_refused_before_any_viewer_starts(tmp_path: Path, bo
     for show in (lambda: view(res, fps=fps, loops=1), lambda: export_html(res, tmp_path / "a.html", fps=fps)):  # type: ignore[arg-type]
         with pytest.raises(cd.ViewerError, match="fps"):
             show()
+
+
+def test_a_result_as_a_dataframe_names_its_units_and_frames(tmp_path: Path) -> None:
+    """Result.to_dataframe: the object pose in the world (position, rpy and quaternion giving the
+    same rotation), its velocity in world axes (R times Pinocchio's body-axes v), the squeeze,
+    and every CSV column under the CSV's own name, with the same numbers; every name carries its
+    unit, and the frame where one applies."""
+    import pandas as pd
+    import pinocchio as pin
+
+    from coopdyn.control import GravityCompensationPD
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4)
+    v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
+    res = cd.simulate(scene, 0.05, controller=GravityCompensationPD(scene), v0=v0, save_every=5, accuracy_check="off")
+    df = res.to_dataframe()
+    assert len(df) == len(res.t) and all("[" in c for c in df.columns)
+    assert np.allclose(df[[f"object.{c} [m; world]" for c in "xyz"]].to_numpy(), res.object_position(), atol=1e-12)
+    k = len(res.t) - 1
+    joint = scene.model.joints[scene.model.frames[scene.object_frame].parentJoint]
+    quat = df.loc[k, [f"object.{c} [1; world]" for c in ("qx", "qy", "qz", "qw")]].to_numpy(dtype=float)
+    R = pin.Quaternion(quat[3], *quat[:3]).matrix()
+    rpy = df.loc[k, [f"object.{c} [rad; world]" for c in ("roll", "pitch", "yaw")]].to_numpy(dtype=float)
+    assert np.allclose(pin.rpy.rpyToMatrix(*rpy), R, atol=1e-12)
+    v_body = res.v[k, joint.idx_v : joint.idx_v + 6]
+    v_world = df.loc[k, [f"object.{c} [m/s; world axes]" for c in ("vx", "vy", "vz")]].to_numpy(dtype=float)
+    w_world = df.loc[k, [f"object.{c} [rad/s; world axes]" for c in ("wx", "wy", "wz")]].to_numpy(dtype=float)
+    assert np.allclose(v_world, R @ v_body[:3], atol=1e-12) and np.allclose(w_world, R @ v_body[3:], atol=1e-12)
+    assert np.allclose(df["left.squeeze [N; + = compression]"], res.squeeze()[:, 0])
+    csv = pd.read_csv(res.save(tmp_path / "run.csv"))
+    shared = [c for c in csv.columns if c in df.columns]
+    assert len(shared) == len(csv.columns)  # (every CSV column is in the frame, under its name)
+    assert np.allclose(csv[shared].to_numpy(), df[shared].to_numpy(), rtol=0, atol=0)
+    assert "v object.vx [m/s; body axes]" in csv.columns and "wrench left.fz [N; world axes]" in csv.columns

@@ -139,10 +139,14 @@ def test_the_csv_names_its_columns_with_units(tmp_path: Path, book: cd.Scene) ->
     res = cd.simulate(book, 0.01, integrator="exponential", dt=1e-3, progress=False)
     header = res.save(tmp_path / "r.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
     assert header[:4] == ["t [s]", "q tip1/slide [m]", "q tip2/slide [m]", "q object [m]"]
-    assert "v object [m/s]" in header and "tau tip2/slide [N]" in header and header[-1] == "wrench tip2.mz [N·m]"
+    assert (
+        "v object [m/s]" in header
+        and "tau tip2/slide [N]" in header
+        and header[-1] == "wrench tip2.mz [N·m; world axes; about the grasp]"
+    )
     table = np.loadtxt(tmp_path / "r.csv", delimiter=",", skiprows=1)
     assert table.shape == (len(res.t), len(header))
-    assert np.array_equal(table[:, header.index("wrench tip1.fz [N]")], res.wrench(0)[:, 2])
+    assert np.array_equal(table[:, header.index("wrench tip1.fz [N; world axes]")], res.wrench(0)[:, 2])
 
 
 def test_the_csv_reads_back_to_the_same_doubles(tmp_path: Path) -> None:

@@ -307,8 +307,9 @@ class Scene:
     def coordinates(self) -> tuple[list[str], list[str]]:
         """Names of the entries of ``q`` and ``v``, each with its unit: a revolute joint's
         ``"left/panda_joint1 [rad]"`` and ``"… [rad/s]"``, a free flyer's ``"object.x [m]"`` …
-        ``"object.qw [1]"`` (quaternion) and ``"object.vx [m/s]"`` … ``"object.wz [rad/s]"``
-        (velocities in the body's own axes, as Pinocchio's)."""
+        ``"object.qw [1]"`` (quaternion) and ``"object.vx [m/s; body axes]"`` …
+        ``"object.wz [rad/s; body axes]"`` (a free flyer's velocities are in the body's own axes,
+        as Pinocchio's ``v``: the names say so)."""
         q_names: list[str] = []
         v_names: list[str] = []
         for i in range(1, self.model.njoints):
@@ -357,7 +358,7 @@ class Scene:
 _REVOLUTE = ([("", "rad")], [("", "rad/s")])
 _PRISMATIC_1 = ([("", "m")], [("", "m/s")])
 _QUATERNION = [(".qx", "1"), (".qy", "1"), (".qz", "1"), (".qw", "1")]
-_ANGULAR = [(".wx", "rad/s"), (".wy", "rad/s"), (".wz", "rad/s")]
+_ANGULAR = [(".wx", "rad/s; body axes"), (".wy", "rad/s; body axes"), (".wz", "rad/s; body axes")]  # (Pinocchio's v)
 #: per Pinocchio joint type: (suffix, unit) of each q entry and of each v entry
 _JOINT_COORDINATES: dict[str, tuple[list[tuple[str, str]], list[tuple[str, str]]]] = {
     **{f"JointModel{k}": _REVOLUTE for k in ("RX", "RY", "RZ", "RevoluteUnaligned")},
@@ -368,11 +369,11 @@ _JOINT_COORDINATES: dict[str, tuple[list[tuple[str, str]], list[tuple[str, str]]
     },
     "JointModelFreeFlyer": (
         [(".x", "m"), (".y", "m"), (".z", "m"), *_QUATERNION],
-        [(".vx", "m/s"), (".vy", "m/s"), (".vz", "m/s"), *_ANGULAR],
+        [(".vx", "m/s; body axes"), (".vy", "m/s; body axes"), (".vz", "m/s; body axes"), *_ANGULAR],
     ),
     "JointModelPlanar": (
         [(".x", "m"), (".y", "m"), (".cos", "1"), (".sin", "1")],
-        [(".vx", "m/s"), (".vy", "m/s"), (".wz", "rad/s")],
+        [(".vx", "m/s; body axes"), (".vy", "m/s; body axes"), (".wz", "rad/s")],
     ),
     "JointModelSpherical": (_QUATERNION, _ANGULAR),
 }
