@@ -139,25 +139,14 @@ def simulate(
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
-    t_final = _validate.number(t_final, "t_final", "s", SimulationError)
-    dt = _validate.number(dt, "dt", "s", SimulationError)
-    if t_final < 0.0:
-        raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
-    if not dt >= MIN_DT:
-        raise SimulationError(
-            f"dt must be >= {MIN_DT:g} [s] (a step shorter than this is below the clock's resolution), got {dt}"
-        )
-    save_every = _validate.count(save_every, "save_every", SimulationError)
-    max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
-    if max_speed <= 0.0:
-        raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {max_speed}")
+    t_final = _checked_duration(t_final)
+    dt, save_every, max_speed = _checked_steps(dt, save_every, max_speed)
     for name, value, valid in (
         ("energy_check", energy_check, ENERGY_CHECKS),
         ("loop", loop, LOOPS),
         ("accuracy_check", accuracy_check, ACCURACY_CHECKS),
     ):
-        if not isinstance(value, str) or value not in valid:
-            raise SimulationError(f"{name} must be one of {list(valid)}, got {_validate._short(value)}")
+        _checked_choice(name, value, valid)
     progress = _validate.flag(progress, "progress", SimulationError)
     method = get_integrator(integrator)
     check_integrator(scene, method)
@@ -318,6 +307,35 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
     if message is not None:
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
+
+
+def _checked_duration(t_final: Any) -> float:
+    """``t_final`` checked: a number ≥ 0 [s]."""
+    t_final = _validate.number(t_final, "t_final", "s", SimulationError)
+    if t_final < 0.0:
+        raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
+    return t_final
+
+
+def _checked_steps(dt: Any, save_every: Any, max_speed: Any) -> tuple[float, int, float]:
+    """(dt [s], save_every, max_speed [rad/s or m/s]) checked, as simulate and Simulator take them."""
+    dt = _validate.number(dt, "dt", "s", SimulationError)
+    if not dt >= MIN_DT:
+        raise SimulationError(
+            f"dt must be >= {MIN_DT:g} [s] (a step shorter than this is below the clock's resolution), got {dt}"
+        )
+    save_every = _validate.count(save_every, "save_every", SimulationError)
+    max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
+    if max_speed <= 0.0:
+        raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {max_speed}")
+    return dt, save_every, max_speed
+
+
+def _checked_choice(name: str, value: Any, valid: tuple[str, ...]) -> str:
+    """``value`` if it is one of ``valid``, else the SimulationError naming them."""
+    if not isinstance(value, str) or value not in valid:
+        raise SimulationError(f"{name} must be one of {list(valid)}, got {_validate._short(value)}")
+    return value
 
 
 def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | None:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _validate, compiled
+from . import compiled
 from .budget import check_budget
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
@@ -18,7 +18,17 @@ from .errors import SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
 from .result import Result
-from .simulate import ENERGY_CHECKS, MIN_DT, _check_samples, _compiled_loop, _control_period, _Run, simulate
+from .simulate import (
+    ENERGY_CHECKS,
+    _check_samples,
+    _checked_choice,
+    _checked_duration,
+    _checked_steps,
+    _compiled_loop,
+    _control_period,
+    _Run,
+    simulate,
+)
 
 __all__ = ["Simulator"]
 
@@ -72,16 +82,8 @@ class Simulator:
         if not isinstance(scene, Scene):
             raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
         self.scene, self.controller = scene, controller
-        self.dt = _validate.number(dt, "dt", "s", SimulationError)
-        if not self.dt >= MIN_DT:
-            raise SimulationError(f"dt must be >= {MIN_DT:g} [s], got {self.dt}")
-        self.save_every = _validate.count(save_every, "save_every", SimulationError)
-        self.max_speed = _validate.number(max_speed, "max_speed", "rad/s or m/s", SimulationError)
-        if self.max_speed <= 0.0:
-            raise SimulationError(f"max_speed must be > 0 [rad/s or m/s], got {self.max_speed}")
-        if not isinstance(energy_check, str) or energy_check not in ENERGY_CHECKS:
-            raise SimulationError(f"energy_check must be one of {list(ENERGY_CHECKS)}, got {_validate._short(energy_check)}")
-        self.energy_check = energy_check
+        self.dt, self.save_every, self.max_speed = _checked_steps(dt, save_every, max_speed)
+        self.energy_check = _checked_choice("energy_check", energy_check, ENERGY_CHECKS)
         self.method = get_integrator(integrator)
         check_integrator(scene, self.method)
         self.control_dt = _control_period(control_dt, self.dt, self.method)
@@ -94,9 +96,7 @@ class Simulator:
         """Simulate from (q0 (nq,), v0 (nv,)) (default: the scene's) over ``t_final`` [s]; the result as
         :func:`coopdyn.simulate` returns it (its errors too: a DivergenceError with the partial
         run, a ControllerError …)."""
-        t_final = _validate.number(t_final, "t_final", "s", SimulationError)
-        if t_final < 0.0:
-            raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
+        t_final = _checked_duration(t_final)
         scene, method, system = self.scene, self.method, self.system
         q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
         budget = check_budget(scene, t_final, self.dt, self.save_every, self.max_steps, self.max_memory)
