@@ -227,6 +227,9 @@ def test_a_scene_file_and_a_sweep_carry_the_sample_period(tmp_path: object) -> N
     bad.write_text(text.replace("[simulation]", "[simulation]\ncontrol_dt = -0.002"), encoding="utf-8")
     with pytest.raises(SceneFileError, match=r"control_dt.*>= 1e-12"):
         scenefile.load(bad)
+    bad.write_text(text.replace("[simulation]", "[simulation]\ncontrol_dt = 0.0003"), encoding="utf-8")  # (dt = 1 ms, rk4)
+    with pytest.raises(SceneFileError, match=r"line \d+: \[simulation\] control_dt: .*whole multiple of dt"):
+        scenefile.load(bad)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         table = cd.sweep(lambda k: cd.Case(cd.scenes.linear_book(), duration=0.01, control_dt=k), {"k": [0.002]}, progress=False)

@@ -26,7 +26,7 @@ from .. import _validate, scenes
 from .._validate import _short
 from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
-from ..errors import CoopdynError, SceneFileError
+from ..errors import CoopdynError, SceneFileError, SimulationError
 from ..integrators import INTEGRATORS
 from ..metrics import metric_lines, run_metrics
 from ..model.description import DescriptionError, build
@@ -256,6 +256,13 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         control_dt = _check_type(f, "simulation", "control_dt", sim["control_dt"], float)
         if not control_dt >= 1e-12:
             raise f.error(f"the controller's sample period must be >= 1e-12 [s], got {control_dt:g}", "simulation", "control_dt")
+        from ..integrators import get_integrator
+        from ..simulate import _control_period  # (the run's own check: a fixed-step method's steps land on every sample)
+
+        try:
+            control_dt = _control_period(control_dt, dt, get_integrator(integrator))
+        except SimulationError as exc:
+            raise f.error(str(exc), "simulation", "control_dt") from None
 
     task = _task(f, doc.get("task"), scene)
     controller = _controller(f, doc.get("controller", {"type": "none"}), scene, task, builder_name, kwargs)
