@@ -59,7 +59,7 @@ def test_peer_comparison_on_the_panda_scene() -> None:
     assert result["checks"]["pandas k=1e+04 (MuJoCo, Python callbacks)"] < 1e-12
     table = format_comparison(result)
     assert "pandas k=1e+04" in table and "1 panda k=1e+04" in table and "MuJoCo, compiled callbacks" in table
-    assert "best peer with Python callbacks" in table
+    assert "best peer with Python callbacks" in table and "load average" in table
     assert result["checks"]["1 panda k=1e+04 (MuJoCo)"] < 1e-12  # the chain holding the box, too
     if "pandas k=1e+04 (Drake)" in result["checks"]:  # Drake installed: checked, timed and tabled
         assert max(v for k, v in result["checks"].items() if k.endswith("(Drake)")) < 1e-12

@@ -17,6 +17,7 @@ since its spring law differs).
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -252,6 +253,7 @@ def compare(
                 for ex in EXUDYN
                 for dt in _steps(quick)
             ]
+    load_before = os.getloadavg()[0]  # (the machine's load, reported beside the figures)
     cpu: dict[int, list[float]] = {i: [] for i in range(len(plan))}
     results: dict[int, Result | None] = {}
     with _bar(len(plan) * rounds, "coopdyn vs peers", progress) as bar:
@@ -275,7 +277,8 @@ def compare(
         pos_err, force_err = errors_against(res, *reference)
         # an energy-flagged run is not counted as reaching a level (_best_to_reach)
         rows.append(measured_row(case, method, label, dt, rtol, res, pos_err, force_err, cpu[i], i in flags))
-    return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final, "task": task}
+    load = (load_before, os.getloadavg()[0])
+    return {"rows": rows, "checks": checks, "rounds": rounds, "t_final": t_final, "task": task, "load": load}
 
 
 def _fair(method: str) -> bool:
@@ -304,7 +307,7 @@ def format_comparison(result: dict[str, Any]) -> str:
     lines = [
         f"{what}: coopdyn vs MuJoCo with coopdyn's law and controller as compiled C callbacks (the fair peer), and vs "
         f"peers calling them from Python ({slow}); {result['t_final']:g} s, CPU median of {result['rounds']} interleaved "
-        "rounds",
+        f"rounds; load average {result['load'][0]:.2f} before the rounds, {result['load'][1]:.2f} after",
         "accelerations checked first, largest relative difference: "
         + ", ".join(f"{name}: {err:.1e}" for name, err in result["checks"].items()),
     ]
