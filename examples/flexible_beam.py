@@ -19,15 +19,15 @@ from coopdyn.scenes import facing_arms, held_beam, object_start
 
 T_FINAL = 5.0  # [s]
 DT = 1e-3  # [s]
-INTEGRATOR = "trapezoid"  # at 1 ms within 0.11 N and 0.04 mm of a run at 50 µs (tests/test_examples.py)
+INTEGRATOR = "trapezoid"  # at 1 ms within 0.11 N and 0.04 mm of 50 µs (benchmarks/flexible_beam_check.py; tested)
 BANDWIDTH = 15.0  # the drives' bandwidth [Hz]
 # Impedance gains for a flexible object. ObjectImpedance feeds back the strip's middle node,
 # which it reaches only through the strip's own compliance (non-collocated): stiffer gains
 # destabilise the bending mode. At 500 N/m and 30 N·s/m a run that resolves the modes swings
-# ±180 mm with ~440 N grasp forces (a damping integrator at 1 ms hides it: implicit Euler drew
-# a calm strip); at the default 2000 N/m implicit Euler diverges. These soft gains are stable
-# (the strip settles once the task ends) at the price of tracking: the lift lags by up to
-# 42 mm. A controller made for flexible objects is future work.
+# −170 to +150 mm with 443 N grasp forces (a damping integrator at 1 ms hides it: implicit
+# Euler drew a calm strip). These soft gains are stable (the strip settles once the task ends)
+# at the price of tracking: the lift lags by up to 42 mm. The figures:
+# benchmarks/flexible_beam_check.py. A controller made for flexible objects is future work.
 GAINS = {"stiffness": (100.0, 2.0), "damping": (10.0, 0.2)}  # [N/m, N·m/rad], [N·s/m, N·m·s/rad]
 OUT = "out/flexible_beam"
 

@@ -1,0 +1,101 @@
+"""The held strip (examples/flexible_beam.py) at the step its modes need: the figures the
+example, its docs and the CHANGELOG quote, from one command.
+
+* the example's settings (trapezoid, 1 ms) against 50 µs: sag range, grasp-force peak, tracking;
+* the example's former gains (500 N/m, 30 N·s/m) resolved (trapezoid, 0.1 ms): the unstable swing;
+* the example's gains resolved over 12 s (trapezoid, 0.25 ms): the sag range in each 2 s window
+  (it settles once the task ends at 4.25 s);
+* the former setting under implicit Euler at 1 ms with the accuracy check on: the warning's
+  force error and the span its reference covered;
+* ``advise_model``'s CPU per simulated second for the elastic model against a measured run;
+* with ``--memory``: the resident memory Pinocchio's ``createData`` adds for a 64-element strip
+  (about 2 GB: its nv³ derivative tensors).
+
+    .venv/bin/python benchmarks/flexible_beam_check.py [--memory]      # about 1.5 min
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import coopdyn as cd
+from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.scenes import held_beam, object_start
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+from flexible_beam import GAINS, deflection
+
+FORMER = {"stiffness": (500.0, 10.0), "damping": (30.0, 0.5)}  # the example's gains before
+
+
+def _task(scene: cd.Scene) -> GripLiftOscillate:
+    return GripLiftOscillate(start=object_start(scene), squeeze=5.0, amplitude=0.02, frequency=1.5, axis=(0.0, 0.0, 1.0))
+
+
+def _run(gains: dict, integrator: str, dt: float, t_final: float = 5.0, check: str = "off") -> cd.Result:
+    scene = held_beam()
+    controller = ObjectImpedance(scene, _task(scene), **gains)
+    return cd.simulate(
+        scene, t_final, controller=controller, integrator=integrator, dt=dt, save_every=max(1, round(1e-2 / dt)),
+        accuracy_check=check,
+    )  # fmt: skip
+
+
+def _line(label: str, res: cd.Result) -> str:
+    sag = deflection(res)
+    force = np.abs(res.wrenches()[..., :3]).max()
+    track = res.tracking_error(_task(res.scene)).max()
+    return (
+        f"{label:44s} sag {sag.min() * 1e3:7.2f} … {sag.max() * 1e3:7.2f} mm, grasp force peak {force:7.2f} N, "
+        f"tracking max {track * 1e3:6.1f} mm"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--memory", action="store_true", help="also measure createData of a 64-element strip (~2 GB)")
+    args = parser.parse_args()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mine, fine = _run(GAINS, "trapezoid", 1e-3), _run(GAINS, "trapezoid", 5e-5)
+        print(_line("example: trapezoid 1 ms", mine))
+        print(_line("example gains: trapezoid 50 µs", fine))
+        df = np.abs(mine.wrenches()[..., :3] - fine.wrenches()[..., :3]).max()
+        dsag = np.abs(deflection(mine) - deflection(fine)).max()
+        print(f"  1 ms against 50 µs: forces within {df:.3f} N, sag within {dsag * 1e3:.3f} mm")
+        print(_line("former gains: trapezoid 0.1 ms (resolved)", _run(FORMER, "trapezoid", 1e-4)))
+        long = _run(GAINS, "trapezoid", 2.5e-4, 12.0)
+        sag = deflection(long)
+        windows = ", ".join(f"{np.ptp(sag[(long.t >= a) & (long.t < a + 2)]) * 1e3:.3g}" for a in range(0, 12, 2))
+        print(f"example gains over 12 s (trapezoid 0.25 ms): sag range per 2 s window [mm]: {windows}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        former = _run(FORMER, "implicit_euler", 1e-3, check="auto")
+    print(_line("former setting: implicit Euler 1 ms", former))
+    messages = [str(w.message) for w in caught if issubclass(w.category, cd.AccuracyWarning)]
+    said = messages[0][:260] if messages else "none"
+    print(f"  its force_error_estimate: {former.force_error_estimate:.4g} N; AccuracyWarning: {said}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        advice = cd.advise_model(held_beam(), bandwidth=15.0, dt=1e-3)
+        elastic = next(c for c in advice.costs if c.model == "elastic")
+        run = cd.simulate(held_beam(), 2.0, integrator="implicit_euler", dt=1e-3, accuracy_check="off", energy_check="off")
+    print(
+        f"advise_model, elastic: {elastic.cpu_per_second:.3g} s CPU per simulated s; a 2 s run measures {run.cpu_time / 2.0:.3g}"
+    )
+    if args.memory:
+        scene = held_beam(n_elements=64)
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        scene.model.createData()
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        print(f"createData of a 64-element strip (nv = {scene.nv}): max resident memory +{(after - before) / 2**20:.2f} GB")
+
+
+if __name__ == "__main__":
+    main()
