@@ -24,6 +24,7 @@ from .errors import (
     SweepInterrupted,
     ViewerError,
 )
+from .linearize import Linearization, linearize
 from .model import (
     Arm,
     Beam,
@@ -58,6 +59,7 @@ __all__ = [
     "EnergyBalanceError",
     "EnergyBalanceWarning",
     "Interconnection",
+    "Linearization",
     "ModelAdvice",
     "ModelLoadError",
     "OutputError",
@@ -84,6 +86,7 @@ __all__ = [
     "cooperative",
     "diagonal",
     "integrators",
+    "linearize",
     "measure_stable_dt",
     "quasi_static",
     "reference",

@@ -28,6 +28,7 @@ from ..errors import KernelError, SceneError, StepMatrixError
 from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
+from .derivatives import Derivatives, dynamics_derivatives
 
 LOCAL = pin.ReferenceFrame.LOCAL
 
@@ -206,6 +207,26 @@ class Dynamics:
         act = self.scene.actuated
         K[act, act] += kp
         D[act, act] += kd
+
+    def derivatives(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> Derivatives:
+        """Exact ∂q̈/∂(q, v, τ) and the elements' wrenches with their derivatives at (q, v) for the
+        torques ``tau`` (n_actuated,) and an optional object wrench (as :meth:`acceleration`);
+        :mod:`coopdyn.dynamics.derivatives` says how. Pinocchio's Python bindings and the
+        elements' Python laws compute it on either backend (the kernel has no twin yet).
+
+        Raises:
+            KernelError: the scene has rigid grasps (constraints), or a shape is wrong.
+        """
+        if self.scene.constraints:
+            raise KernelError("derivatives: the scene has rigid grasps (constraints); linearise its elastic scene instead")
+        if np.shape(tau) != (self.scene.n_actuated,):
+            raise KernelError(f"tau must have shape ({self.scene.n_actuated},), got {np.shape(tau)}")
+        tau_full = np.zeros(self.scene.nv)
+        tau_full[self.actuated_index] += tau
+        frame = self.scene.object_frame
+        return dynamics_derivatives(
+            self.model, self.data, self._forces, self._damping, self.actuated_index, frame, q, v, tau_full, object_wrench
+        )
 
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad], at (q, v):

@@ -49,6 +49,7 @@ class BallSpring(SpringDamper):
     rigid: ClassVar[str | None] = "rigid_point"
     deformation_size: ClassVar[int] = 3
     linear: ClassVar[bool] = True  # with translations only, the deformation is the relative translation
+    exact_tangent: ClassVar[bool] = True
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         D = np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m")
@@ -72,3 +73,21 @@ class BallSpring(SpringDamper):
             S_D[:3, :3] = R.T @ self.D @ R
         theta = float(np.linalg.norm(pin.log3(R)))
         return ElementEval(0.5 * float(p @ self.K @ p), p.copy(), G_f_G, power, S_K, S_D, theta)
+
+    def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact ``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)`` (see :meth:`Element.tangent`). With ``f = K p + D R ξ_v``
+        and ``G_f_G = −Rᵀ f``, a perturbation ``T_M_G·exp6(δ)`` moves p by ``R δ_v`` and R by
+        ``R δ_ω^``: ``∂/∂δ_v = −Rᵀ K R``, ``∂/∂δ_ω = [G_f_G]^ + Rᵀ D R [ξ_v]^``, ``∂/∂ξ_v = −Rᵀ D R``."""
+        R, p = T_M_G.rotation, T_M_G.translation
+        f = self.K @ p + (self.D @ (R @ xi[:3]) if self._damped else 0.0)
+        f_G = -(R.T @ f)
+        RDR = R.T @ self.D @ R
+        F_d, F_x = np.zeros((6, 6)), np.zeros((6, 6))
+        F_d[:3, :3] = -(R.T @ self.K @ R)
+        F_d[:3, 3:] = _skew(f_G) + RDR @ _skew(xi[:3])
+        F_x[:3, :3] = -RDR
+        return F_d, F_x
+
+
+def _skew(x: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])

@@ -12,7 +12,10 @@ so ``d/dt T_M_G = T_M_G ξ^``) [m/s, rad/s]:
 * the power its damping dissipates [W] (≥ 0);
 * for linearly implicit integrators, the Gauss–Newton stiffness and damping in relative-twist
   coordinates, ``S_K`` and ``S_D`` (6, 6): the dynamics add ``Jrᵀ S_K Jr`` and ``Jrᵀ S_D Jr``
-  to K̃ and D̃, with ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` the relative Jacobian (6, nv).
+  to K̃ and D̃, with ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` the relative Jacobian (6, nv);
+* for the exact linearisation (:func:`coopdyn.linearize`), :meth:`Element.tangent`: the
+  derivatives of ``G_f_G`` with respect to a right perturbation of the pose, ``T_M_G·exp6(δ)``,
+  and to ξ — the full second derivative of U, geometric stiffness included.
 
 Elements are immutable: their constructor validates the parameters and keeps them as read-only
 arrays. The same :meth:`Element.evaluate` serves the dynamics, the implicit terms and every
@@ -50,6 +53,10 @@ class Parameter(NamedTuple):
     doc: str  #: what it is, for messages and the scene-file schema
 
 
+#: step of the default :meth:`Element.tangent`'s central differences, relative (cube root of ε)
+_FD_STEP = 6e-6
+
+
 def read_only(array: np.ndarray) -> np.ndarray:
     """``array`` with its write flag cleared (a parameter of an immutable element)."""
     array.setflags(write=False)
@@ -80,6 +87,8 @@ class Element(ABC):
     #: ``__init__`` and an attribute of the element, a key of ``Interconnection.parameters`` and of
     #: a scene file's ``parameters`` table, and a field its C++ twin reads by name
     parameters: ClassVar[tuple[Parameter, ...]] = ()
+    #: True when :meth:`tangent` is exact to round-off; the default central differences are not
+    exact_tangent: ClassVar[bool] = False
 
     @abstractmethod
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
@@ -89,6 +98,28 @@ class Element(ABC):
     def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
         """Energy, deformation, wrench on G, dissipated power and (with ``jacobians``) S_K, S_D
         at the relative pose ``T_M_G`` and relative twist ``xi`` (6,) [m/s, rad/s]."""
+
+    def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)``, each (6, 6): the derivatives of the wrench on G with
+        respect to a right perturbation of the pose, ``T_M_G·exp6(δ)`` (δ [m, rad], body axes
+        of G), and to the relative twist ξ [m/s, rad/s].
+
+        This default takes central differences of :meth:`evaluate` (about 1e-8 relative; the
+        element's :attr:`exact_tangent` stays False and :func:`coopdyn.linearize` says so);
+        the built-in elements override it with exact derivatives."""
+        xi = np.asarray(xi, dtype=float)
+        F_d, F_x = np.zeros((6, 6)), np.zeros((6, 6))
+        h_d = _FD_STEP * max(1.0, float(np.linalg.norm(T_M_G.translation)))
+        h_x = _FD_STEP * max(1.0, float(np.linalg.norm(xi)))
+        for k in range(6):
+            d = np.zeros(6)
+            d[k] = h_d
+            plus = self.evaluate(T_M_G * pin.exp6(d), xi).G_f_G
+            minus = self.evaluate(T_M_G * pin.exp6(-d), xi).G_f_G
+            F_d[:, k] = (plus - minus) / (2.0 * h_d)
+            d[k] = h_x
+            F_x[:, k] = (self.evaluate(T_M_G, xi + d).G_f_G - self.evaluate(T_M_G, xi - d).G_f_G) / (2.0 * h_x)
+        return F_d, F_x
 
     @property
     def has_damping(self) -> bool:

@@ -58,5 +58,12 @@ class HardeningSpring(SE3Spring):
             S_K = ev.S_K + J.T @ (self.hardening * (p2 * np.eye(3) + 2.0 * np.outer(p, p))) @ J
         return ev._replace(energy=ev.energy + 0.25 * self.hardening * p2 * p2, G_f_G=G_f_G, S_K=S_K)
 
+    def gradient(self, e: np.ndarray) -> np.ndarray:
+        """∂U/∂e = K e + κ |p|² [p; 0] (analytic in e: |p|² is pᵀp, no conjugate)."""
+        p = e[:3]
+        g = self.K @ e
+        g[:3] += self.hardening * (p @ p) * p
+        return g
+
     def __repr__(self) -> str:
         return f"{super().__repr__()[:-1]}, hardening {self.hardening:g} N/m³)"

@@ -19,6 +19,7 @@ The C++ twin is ``src/native/lie.hpp``; the two agree to round-off.
 from __future__ import annotations
 
 import math
+from typing import TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -33,8 +34,11 @@ _BETA = tuple(-c for c in _A[1:])
 _BETA_DOT = tuple(2 * (k + 1) * c for k, c in enumerate(_BETA[1:]))
 
 
-def _poly(coefficients: tuple[float, ...], t2: float) -> float:
-    out = 0.0
+_Number = TypeVar("_Number", float, complex)
+
+
+def _poly(coefficients: tuple[float, ...], t2: _Number) -> _Number:
+    out = 0.0 * t2
     for c in reversed(coefficients):
         out = out * t2 + c
     return out
@@ -79,6 +83,48 @@ def jlog6(M: pin.SE3, e: np.ndarray, theta: float) -> np.ndarray:
     A[np.diag_indices(3)] += a
     wTp = float(w @ p)
     v = (beta_dot * wTp) * w - (theta * theta * beta_dot + 2.0 * beta) * p
+    C = np.outer(v, w) + beta * np.outer(w, p) + 0.5 * _skew(p)
+    C[np.diag_indices(3)] += wTp * beta
+    J[:3, :3] = A
+    J[3:, 3:] = A
+    J[:3, 3:] = C @ A
+    return J
+
+
+# Series of the coefficients of V(w) = I + b(θ) ŵ + c(θ) ŵ², the left Jacobian of exp3 that maps
+# the logarithm's linear part to the translation: b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³.
+_B = tuple((-1.0) ** k / math.factorial(2 * k + 2) for k in range(9))
+_C = tuple((-1.0) ** k / math.factorial(2 * k + 3) for k in range(9))
+
+
+def _coefficients_t2(t2: complex) -> tuple[complex, complex, complex, complex, complex]:
+    """(a, β, β'/θ, b, c) as analytic functions of t2 = θ² (real or complex: complex-step safe)."""
+    if abs(t2.real) < SERIES_BELOW * SERIES_BELOW:
+        return _poly(_A, t2), _poly(_BETA, t2), _poly(_BETA_DOT, t2), _poly(_B, t2), _poly(_C, t2)
+    theta = np.sqrt(t2 + 0j) if isinstance(t2, complex) else math.sqrt(t2)
+    st, ct = np.sin(theta), np.cos(theta)
+    a = 0.5 * theta * st / (1.0 - ct)
+    inv_2_2ct = 1.0 / (2.0 * (1.0 - ct))
+    beta = 1.0 / t2 - st / theta * inv_2_2ct
+    beta_dot = -2.0 / (t2 * t2) + (1.0 + st / theta) / t2 * inv_2_2ct
+    return a, beta, beta_dot, (1.0 - ct) / t2, (theta - st) / (t2 * theta)
+
+
+def jlog6_of_log(e: np.ndarray) -> np.ndarray:
+    """Jlog6 (6, 6) as a function of the logarithm ``e = log6(M)`` alone (equal to
+    :func:`jlog6` to round-off). Every operation is analytic in e, so a complex e gives the
+    complex-step derivative of Jlog6 — how the elements' exact second derivatives are taken."""
+    rho, w = e[:3], e[3:]
+    t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]  # no conjugate: analytic
+    a, beta, beta_dot, b, c = _coefficients_t2(t2)
+    W = _skew(w)
+    p = rho + b * (W @ rho) + c * (W @ (W @ rho))  # the translation of M
+    dtype = np.result_type(e, complex) if np.iscomplexobj(e) else float
+    J = np.zeros((6, 6), dtype=dtype)
+    A = beta * np.outer(w, w) + 0.5 * W
+    A[np.diag_indices(3)] += a
+    wTp = w @ p
+    v = (beta_dot * wTp) * w - (t2 * beta_dot + 2.0 * beta) * p
     C = np.outer(v, w) + beta * np.outer(w, p) + 0.5 * _skew(p)
     C[np.diag_indices(3)] += wTp * beta
     J[:3, :3] = A

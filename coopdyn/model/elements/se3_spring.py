@@ -4,7 +4,9 @@ With ``e = log6(T_M_G)`` ([linear; angular] [m, rad]) the elastic energy is ``U 
 ``ė = Jlog6(T_M_G) ξ`` and the wrench on the object at G, in G axes, is
 ``G_f_G = −Jlog6ᵀ (K e + D ė)`` — the exact gradient of U (no Euler angles, no gimbal lock)
 plus the damping. ``S_K = Jlog6ᵀ K Jlog6`` and ``S_D = Jlog6ᵀ D Jlog6`` are the Gauss–Newton
-terms (the force-proportional geometric stiffness is left out). K and D are in the tip frame's
+terms (the force-proportional geometric stiffness is left out); :meth:`SE3Spring.tangent` gives
+the exact derivatives, geometric stiffness included, by complex-step differentiation of
+``Jlog6(e)`` (exact to round-off: no difference is taken). K and D are in the tip frame's
 axes, order [x, y, z, rx, ry, rz], blocks [N/m, N·m/rad] and [N·s/m, N·m·s/rad]. C++ twin:
 ``src/native/elements/se3_spring.hpp``.
 """
@@ -18,7 +20,10 @@ import pinocchio as pin
 
 from ... import _validate
 from .base import ElementEval, SpringDamper
-from .lie import jlog6, log6
+from .lie import jlog6, jlog6_of_log, log6
+
+#: complex step [m, rad]: far below round-off, so the derivative carries no truncation error
+COMPLEX_STEP = 1e-30
 
 
 class SE3Spring(SpringDamper):
@@ -34,6 +39,7 @@ class SE3Spring(SpringDamper):
     rigid: ClassVar[str | None] = "rigid"
     deformation_size: ClassVar[int] = 6
     linear: ClassVar[bool] = True  # log6 of a pure translation is the translation
+    exact_tangent: ClassVar[bool] = True
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         K = _validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad")
@@ -55,3 +61,23 @@ class SE3Spring(SpringDamper):
             S_K = J.T @ self.K @ J
             S_D = J.T @ self.D @ J
         return ElementEval(0.5 * float(e @ self.K @ e), e, -(J.T @ w), power, S_K, S_D, theta)
+
+    def gradient(self, e: np.ndarray) -> np.ndarray:
+        """∂U/∂e (6,) at the logarithm e; analytic in e (a complex e is allowed)."""
+        return self.K @ e
+
+    def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact ``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)`` (see :meth:`Element.tangent`): ``G_f_G =
+        −Jlog6(e)ᵀ (∂U/∂e + D Jlog6(e) ξ)`` is differentiated along ``e + i·h·Jlog6 δ``
+        (``e(T_M_G·exp6(δ)) = e + Jlog6 δ + O(δ²)``) by complex step."""
+        e, theta = log6(T_M_G)
+        J = jlog6(T_M_G, e, theta)
+        F_d = np.empty((6, 6))
+        for k in range(6):
+            e_c = e + (1j * COMPLEX_STEP) * J[:, k]
+            J_c = jlog6_of_log(e_c)
+            w = self.gradient(e_c)
+            if self._damped:
+                w = w + self.D @ (J_c @ xi)
+            F_d[:, k] = -(J_c.T @ w).imag / COMPLEX_STEP
+        return F_d, -(J.T @ self.D @ J)

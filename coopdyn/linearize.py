@@ -1,0 +1,104 @@
+"""The exact linearisation of a scene's open-loop dynamics at one state: ``ẋ ≈ A x + B u``.
+
+The state is ``x = (δq, v)`` (2·nv): δq the tangent coordinates of the configuration about q,
+``q ⊕ δq = pin.integrate(model, q, δq)`` (a free-flyer's δq is a body twist times time, linear
+part first), and v the joint velocities; the input u is the torque of the actuated joints
+[N·m or N]. ::
+
+    A = [[Ω(v),   I    ],        B = [[0     ],
+         [∂q̈/∂q, ∂q̈/∂v]]             [∂q̈/∂τ]]
+
+``Ω(v)`` is zero for ordinary joints and ``−ad(v_j)`` on a free-flyer's block (−[ω]^ on a
+spherical joint): the tangent coordinates about a moving reference drift as ``δq̇ = δv −
+ad(v) δq``. Nothing is approximated: Pinocchio's ABA derivatives for the arms and the object,
+the elements' exact second derivatives (geometric stiffness) for the interconnections —
+:mod:`coopdyn.dynamics.derivatives` says how, ``tests/test_linearize.py`` checks every built-in
+element against finite differences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from . import _validate
+from .dynamics import Dynamics
+from .dynamics.derivatives import motion_cross
+from .errors import SceneError
+from .model.scene import Scene
+
+#: joints whose tangent coordinates add like vectors (Ω = 0); shortnames without "JointModel"
+_FLAT_LIE = ("RUBX", "RUBY", "RUBZ", "RevoluteUnboundedUnaligned")
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """The result of :func:`linearize` (see the module docstring for the state)."""
+
+    A: np.ndarray  #: (2nv, 2nv) ∂ẋ/∂x
+    B: np.ndarray  #: (2nv, n_actuated) ∂ẋ/∂τ
+    acceleration: np.ndarray  #: q̈ (nv,) at the state [m/s², rad/s²]
+    wrench: np.ndarray  #: (L, 6) each interconnection's wrench on G at G, G axes [N, N·m]
+    dwrench_dx: np.ndarray  #: (L, 6, 2nv) its derivative with respect to x
+    exact: bool  #: False when an element's tangent is finite differences (a user element without one)
+    q: np.ndarray  #: the configuration (nq,)
+    v: np.ndarray  #: the velocity (nv,)
+    tau: np.ndarray  #: the torques (n_actuated,)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """The eigenvalues of A [1/s], sorted by imaginary part (a mode at f Hz: ±2πf·i)."""
+        lam = np.linalg.eigvals(self.A)
+        return lam[np.argsort(lam.imag, kind="stable")]
+
+
+def _omega(model: pin.Model, v: np.ndarray) -> np.ndarray:
+    """Ω(v) (nv, nv): the drift of tangent coordinates about a reference moving at v."""
+    out = np.zeros((model.nv, model.nv))
+    for joint in model.joints[1:]:
+        kind, i, n = joint.shortname().removeprefix("JointModel"), joint.idx_v, joint.nv
+        if kind == "FreeFlyer":
+            out[i : i + 6, i : i + 6] = -motion_cross(v[i : i + 6])
+        elif kind == "Spherical":
+            w = v[i : i + 3]
+            out[i : i + 3, i : i + 3] = -np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+        elif joint.nq != n and kind not in _FLAT_LIE:
+            raise SceneError(f"linearize: joint type {kind} ({model.names[joint.id]}) is not supported")
+    return out
+
+
+def linearize(scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, object_wrench: Any = None) -> Linearization:
+    """The exact linearisation of the scene's open-loop dynamics at (q, v, τ).
+
+    Args:
+        scene: the scene (elastic interconnections; rigid grasps are refused).
+        q: the configuration (nq,); default ``scene.q0``.
+        v: the velocities (nv,) [m/s, rad/s]; default zero.
+        tau: the actuated joints' torques (n_actuated,) [N·m or N]; default zero (no control:
+            wrap a controller's gains into A yourself, or pass its torque at this state).
+        object_wrench: a constant external wrench on the object (6,) [N, N·m], world axes, at
+            the object frame's origin; default none.
+
+    Raises:
+        SceneError: a bad argument, a rigid grasp, or a joint type without tangent coordinates here.
+    """
+    if not isinstance(scene, Scene):
+        raise SceneError(f"linearize: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+    if scene.constraints:
+        raise SceneError("linearize: the scene has rigid grasps (constraints); linearise the elastic scene they stand for")
+    nv = scene.nv
+    q, v = scene.check_state(scene.q0 if q is None else q, np.zeros(nv) if v is None else v)
+    tau = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
+    wrench = None if object_wrench is None else _validate.finite_array(object_wrench, "object_wrench [N, N·m]", (6,))
+    omega = _omega(scene.model, v)
+    d = Dynamics(scene, "python").derivatives(q, v, tau, wrench)  # (the kernel has no twin of it yet)
+    A = np.zeros((2 * nv, 2 * nv))
+    A[:nv, :nv], A[:nv, nv:] = omega, np.eye(nv)
+    A[nv:, :nv], A[nv:, nv:] = d.da_dq, d.da_dv
+    B = np.zeros((2 * nv, scene.n_actuated))
+    B[nv:] = d.da_dtau
+    dW = np.concatenate([d.dwrench_dq, d.dwrench_dv], axis=2)
+    return Linearization(A, B, d.acceleration, d.wrench, dW, d.exact, q, v, np.array(tau, dtype=float))

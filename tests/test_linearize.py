@@ -1,0 +1,266 @@
+"""The exact linearisation: the elements' second derivatives and ∂q̈/∂(q, v, τ) of the coupled system.
+
+Every element's :meth:`tangent` is compared with Richardson-extrapolated central differences of
+its own law (error O(h⁴)) at small and large rotations; :func:`coopdyn.linearize` with the same
+differences of :meth:`Dynamics.acceleration` on scenes that exercise every built-in element,
+damping, an external wrench, a fixture and a beam; the book's linear system with its closed-form
+state matrices; the tangent-coordinate drift of a spinning free-flyer with the flow it describes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.dynamics import Dynamics
+from coopdyn.model.elements import BallSpring, Element, ElementEval, HardeningSpring, SE3Spring
+from coopdyn.model.elements.lie import jlog6, jlog6_of_log, log6
+from coopdyn.reference import BookParameters
+
+
+def richardson(f: Callable[[float], np.ndarray], h: float) -> np.ndarray:
+    """df/ds at s = 0 from central differences at h and h/2, extrapolated (error O(h⁴))."""
+
+    def central(step: float) -> np.ndarray:
+        return (f(step) - f(-step)) / (2.0 * step)
+
+    return (4.0 * central(h / 2) - central(h)) / 3.0
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _elements() -> dict[str, Element]:
+    rng = np.random.default_rng(5)
+    L = rng.normal(size=(6, 6))
+    K_full = L @ L.T * 2e3 + np.diag([1e4, 2e4, 3e4, 50.0, 60.0, 70.0])
+    K = cd.diagonal([1e4, 2e4, 3e4], [50.0, 60.0, 70.0])
+    D = cd.diagonal([10.0, 20.0, 30.0], [0.1, 0.2, 0.3])
+    M = rng.normal(size=(3, 3))
+    return {
+        "se3 (full K, damped)": SE3Spring(K_full, D),
+        "se3 undamped": SE3Spring(K),
+        "hardening": HardeningSpring(K, D, hardening=1e7),
+        "ball": BallSpring(M @ M.T * 1e3 + np.eye(3) * 1e4, np.diag([5.0, 6.0, 7.0])),
+    }
+
+
+ELEMENTS = _elements()
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-4, 0.2, 0.26, 1.0, 2.8])
+@pytest.mark.parametrize("name", ELEMENTS)
+def test_element_tangent_is_the_derivative_of_its_wrench(name: str, theta: float) -> None:
+    element = ELEMENTS[name]
+    rng = np.random.default_rng(int(theta * 1000) + len(name))
+    axis = rng.normal(size=3)
+    X = pin.SE3(pin.exp3(theta * axis / np.linalg.norm(axis)), 0.05 * rng.normal(size=3))
+    xi = rng.normal(size=6)
+    F_d, F_x = element.tangent(X, xi)
+    for k in range(6):
+        e = np.zeros(6)
+        e[k] = 1.0
+        ref_d = richardson(lambda s, e=e: element.evaluate(X * pin.exp6(s * e), xi).G_f_G, 1e-3)
+        ref_x = richardson(lambda s, e=e: element.evaluate(X, xi + s * e).G_f_G, 1e-3)
+        scale = max(np.max(np.abs(F_d)), 1.0)
+        np.testing.assert_allclose(F_d[:, k], ref_d, rtol=0.0, atol=1e-8 * scale)
+        np.testing.assert_allclose(F_x[:, k], ref_x, rtol=0.0, atol=1e-8 * max(np.max(np.abs(F_x)), 1.0))
+    assert element.exact_tangent
+
+
+def test_the_logarithm_jacobian_as_a_function_of_the_logarithm_is_jlog6() -> None:
+    rng = np.random.default_rng(2)
+    for theta in (0.0, 1e-7, 0.1, 0.249, 0.251, 1.5, 3.0):
+        axis = rng.normal(size=3)
+        X = pin.SE3(pin.exp3(theta * axis / np.linalg.norm(axis)), rng.normal(size=3))
+        e, th = log6(X)
+        np.testing.assert_allclose(jlog6_of_log(e), jlog6(X, e, th), rtol=0.0, atol=1e-14 * max(1.0, np.max(np.abs(e))))
+
+
+class _PlainSE3(Element):
+    """A user element with the SE(3) law and no tangent of its own: the default differences."""
+
+    kind = "plain_se3_for_linearize"
+    deformation_size = 6
+
+    def __init__(self, stiffness: object, damping: object = None, name: str = "interconnection") -> None:
+        self._law = SE3Spring(stiffness, damping, name)
+
+    def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+        return self._law.evaluate(T_M_G, xi, jacobians)
+
+
+def test_an_element_without_a_tangent_gets_central_differences_and_says_so() -> None:
+    K, D = cd.diagonal(1e4, 50.0), cd.diagonal(10.0, 0.1)
+    exact, plain = SE3Spring(K, D), _PlainSE3(K, D)
+    X = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.5])), np.array([0.02, -0.01, 0.03]))
+    xi = np.array([0.1, -0.2, 0.3, 1.0, -0.5, 0.2])
+    for a, b in zip(plain.tangent(X, xi), exact.tangent(X, xi), strict=True):
+        assert _rel(a, b) < 1e-7
+    assert not plain.exact_tangent
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0])
+    scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=K, damping=D, element=_PlainSE3, grasp=[0.0, 0.0, 0.05])])
+    assert not cd.linearize(scene).exact
+
+
+def _ball_pandas() -> cd.Scene:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    links = [
+        cd.Interconnection(ic.arm, stiffness=np.diag([1e4, 2e4, 3e4]), damping=np.eye(3) * 20.0, element="ball")
+        for ic in base.interconnection_specs
+    ]
+    return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
+
+
+def _hardening_pandas() -> cd.Scene:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    K = cd.diagonal(1e4, 100.0)
+    links = [
+        cd.Interconnection(ic.arm, stiffness=K, damping=0.002 * K, element="hardening", parameters={"hardening": 1e8})
+        for ic in base.interconnection_specs
+    ]
+    return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
+
+
+def _hung_box() -> cd.Scene:
+    box = cd.RigidObject.box(2.0, (0.2, 0.1, 0.3), pose=[0.1, -0.2, 1.0])
+    K = cd.diagonal([1e3, 2e3, 3e3], [10.0, 20.0, 30.0])
+    return cd.Scene([], box, [cd.Interconnection(None, stiffness=K, damping=0.01 * K, grasp=[0.0, 0.0, 0.15])])
+
+
+SCENES: dict[str, Callable[[], cd.Scene]] = {
+    "pandas, damped SE(3) grasps and joints": lambda: cd.scenes.facing_arms(
+        "panda", stiffness=1e5, damping=30.0, joint_damping=0.5
+    ),
+    "pandas, ball grasps": _ball_pandas,
+    "pandas, hardening grasps": _hardening_pandas,
+    "box hung from a fixture": _hung_box,
+    "beam held by two pandas": lambda: cd.scenes.held_beam(n_elements=2, damping=5.0),
+    "book": cd.scenes.linear_book,
+}
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+@pytest.mark.parametrize("name", SCENES)
+def test_linearize_is_the_derivative_of_the_acceleration(name: str, backend: str) -> None:
+    """A and B against differences of either backend's Dynamics.acceleration in Pinocchio's tangent
+    coordinates, at a state with loaded, turned and moving grasps, torques and a world-fixed wrench
+    on the object."""
+    if backend == "native" and not cd.backend.native_available():
+        pytest.skip("coopdyn._native is not built")
+    scene = SCENES[name]()
+    rng = np.random.default_rng(11)
+    nv, model = scene.nv, scene.model
+    q = pin.integrate(model, scene.q0, 0.05 * rng.normal(size=nv))
+    v, tau = 0.5 * rng.normal(size=nv), 3.0 * rng.normal(size=scene.n_actuated)
+    wrench = np.array([3.0, -2.0, 5.0, 0.4, -0.1, 0.2])
+    lin = cd.linearize(scene, q, v, tau, object_wrench=wrench)
+    dyn = Dynamics(scene, backend)
+    a = dyn.acceleration(q, v, tau, wrench)
+    np.testing.assert_allclose(lin.acceleration, a, rtol=0.0, atol=1e-9 * np.max(np.abs(a)))
+    da_dq, da_dv, da_dtau = lin.A[nv:, :nv], lin.A[nv:, nv:], lin.B[nv:]
+    for k in range(nv):
+        e = np.zeros(nv)
+        e[k] = 1.0
+        ref_q = richardson(lambda s, e=e: dyn.acceleration(pin.integrate(model, q, s * e), v, tau, wrench), 1e-4)
+        ref_v = richardson(lambda s, e=e: dyn.acceleration(q, v + s * e, tau, wrench), 1e-4)
+        np.testing.assert_allclose(da_dq[:, k], ref_q, rtol=0.0, atol=1e-7 * np.max(np.abs(da_dq)))
+        np.testing.assert_allclose(da_dv[:, k], ref_v, rtol=0.0, atol=1e-7 * max(np.max(np.abs(da_dv)), 1.0))
+    for k in range(scene.n_actuated):
+        e = np.zeros(scene.n_actuated)
+        e[k] = 1.0
+        ref_t = richardson(lambda s, e=e: dyn.acceleration(q, v, tau + s * e, wrench), 1.0)
+        np.testing.assert_allclose(da_dtau[:, k], ref_t, rtol=0.0, atol=1e-9 * np.max(np.abs(da_dtau)))
+    assert lin.exact
+
+
+def test_grasp_wrench_derivatives_match_differences() -> None:
+    scene = SCENES["pandas, damped SE(3) grasps and joints"]()
+    rng = np.random.default_rng(4)
+    nv, model = scene.nv, scene.model
+    q, v = pin.integrate(model, scene.q0, 0.05 * rng.normal(size=nv)), 0.5 * rng.normal(size=nv)
+    lin = cd.linearize(scene, q, v)
+    dyn = Dynamics(scene, "python")
+
+    def wrenches(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        return np.array([ev.G_f_G for ev in dyn.element_states(qq, vv)])
+
+    np.testing.assert_allclose(lin.wrench, wrenches(q, v), rtol=0.0, atol=1e-12 * np.max(np.abs(lin.wrench)))
+    for k in range(2 * nv):
+        e = np.zeros(nv)
+        e[k % nv] = 1.0
+        if k < nv:
+            ref = richardson(lambda s, e=e: wrenches(pin.integrate(model, q, s * e), v), 1e-4)
+        else:
+            ref = richardson(lambda s, e=e: wrenches(q, v + s * e), 1e-4)
+        np.testing.assert_allclose(lin.dwrench_dx[:, :, k], ref, rtol=0.0, atol=1e-7 * np.max(np.abs(lin.dwrench_dx)))
+
+
+def test_book_linearisation_is_its_closed_form_state_matrix() -> None:
+    """The book's system is linear: A and B are its state matrices exactly, at any state."""
+    params = BookParameters(c_p=3e4, d_k=700.0)
+    scene = cd.scenes.linear_book(c_p=3e4, d_k=700.0)
+    A_ref, B_ref, _ = params.state_matrices()
+    rng = np.random.default_rng(0)
+    lin = cd.linearize(scene, scene.q0 + 0.01 * rng.normal(size=3), rng.normal(size=3), rng.normal(size=2))
+    order = [scene.arms[0].v_index[0], scene.object_v[0], scene.arms[1].v_index[0]]
+    perm = order + [3 + i for i in order]
+    np.testing.assert_allclose(lin.A[np.ix_(perm, perm)], A_ref, rtol=1e-12, atol=1e-9)
+    columns = [list(scene.actuated).index(order[0]), list(scene.actuated).index(order[2])]
+    np.testing.assert_allclose(lin.B[perm][:, columns], B_ref, rtol=1e-12, atol=1e-15)
+
+
+def test_tangent_coordinates_of_a_spinning_object_drift_as_omega_says() -> None:
+    """Ω(v) = −ad(v) on a free-flyer: the rate of δ = difference(q̄(t), q(t)) between two free
+    motions, differentiated with respect to δ at δ = 0, equals A's upper-left block."""
+    scene = _hung_box()
+    model, nv = scene.model, scene.nv
+    q_ref, v_ref = scene.q0, np.array([0.3, -0.2, 0.1, 2.0, -1.0, 3.0])
+    omega = cd.linearize(scene, q_ref, v_ref).A[:nv, :nv]
+
+    def drift(delta: np.ndarray) -> np.ndarray:  # d/dt difference(q̄ ⊕ t v̄, (q̄ ⊕ δ) ⊕ t v̄) at t = 0
+        q = pin.integrate(model, q_ref, delta)
+
+        def apart(t: float) -> np.ndarray:
+            return pin.difference(model, pin.integrate(model, q_ref, t * v_ref), pin.integrate(model, q, t * v_ref))
+
+        return richardson(apart, 1e-3)
+
+    for k in range(nv):
+        e = np.zeros(nv)
+        e[k] = 1.0
+        np.testing.assert_allclose(omega[:, k], richardson(lambda s, e=e: drift(s * e), 1e-3), rtol=0.0, atol=1e-8)
+    assert np.any(omega)
+
+
+def test_a_held_box_has_the_modes_of_its_stiffness_and_mass() -> None:
+    """A box hung by one undamped spring, without gravity, at rest: the eigenvalues of A are
+    ±i·ω with ω² the eigenvalues of M⁻¹K (K = Ad-transported stiffness at the grasp)."""
+    box = cd.RigidObject.box(2.0, (0.2, 0.1, 0.3), pose=[0.0, 0.0, 1.0])
+    K = cd.diagonal([1e3, 2e3, 3e3], [10.0, 20.0, 30.0])
+    scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=K, grasp=[0.0, 0.0, 0.0])], gravity=[0.0, 0.0, 0.0])
+    lam = cd.linearize(scene).eigenvalues
+    mass = np.diag([2.0, 2.0, 2.0])
+    inertia = np.diag(box.inertia)  # a box's principal moments, about its centre
+    w2 = np.concatenate([np.diag(K)[:3] / np.diag(mass), np.diag(K)[3:] / inertia])
+    np.testing.assert_allclose(np.sort(lam.imag[lam.imag > 0]), np.sort(np.sqrt(w2)), rtol=1e-12)
+    np.testing.assert_allclose(lam.real, 0.0, atol=1e-9)
+
+
+def test_linearize_refuses_what_it_cannot_do() -> None:
+    scene = cd.scenes.linear_book()
+    with pytest.raises(cd.SceneError, match=r"tau \[N·m or N\] must have shape \(2,\)"):
+        cd.linearize(scene, tau=[1.0])
+    with pytest.raises(cd.SceneError, match="v \\(a velocity\\) must have shape"):
+        cd.linearize(scene, v=[0.0])
+    with pytest.raises(cd.SceneError, match=r"object_wrench .* must be finite"):
+        cd.linearize(scene, object_wrench=[np.nan, 0, 0, 0, 0, 0])
+    with pytest.raises(cd.SceneError, match="rigid grasps"):
+        cd.linearize(cd.rigid_limit(cd.scenes.facing_arms("panda", stiffness=1e4)))
+    with pytest.raises(cd.SceneError, match=r"must be a coopdyn\.Scene"):
+        cd.linearize("scene.toml")  # type: ignore[arg-type]
