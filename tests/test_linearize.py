@@ -264,3 +264,21 @@ def test_linearize_refuses_what_it_cannot_do() -> None:
         cd.linearize(cd.rigid_limit(cd.scenes.facing_arms("panda", stiffness=1e4)))
     with pytest.raises(cd.SceneError, match=r"must be a coopdyn\.Scene"):
         cd.linearize("scene.toml")  # type: ignore[arg-type]
+
+
+def test_the_exact_jacobian_variant_equals_gauss_newton_where_the_law_is_linear() -> None:
+    """On the book's prismatic system the Gauss–Newton K̃, D̃ are exact: the measurement variant's
+    −M ∂q̈/∂q, −M ∂q̈/∂v equal them; on two Pandas they differ (geometry, gravity, Coriolis)."""
+    from coopdyn.bench.exact_jacobian import ExactJacobian, jacobian
+
+    for scene, same in ((cd.scenes.linear_book(), True), (SCENES["pandas, damped SE(3) grasps and joints"](), False)):
+        rng = np.random.default_rng(1)
+        q = pin.integrate(scene.model, scene.q0, 0.05 * rng.normal(size=scene.nv))
+        v, tau = rng.normal(size=scene.nv), rng.normal(size=scene.n_actuated)
+        _, _, K, D = Dynamics(scene, "python").implicit_terms(q, v, tau)
+        with jacobian("exact"):
+            exact = Dynamics(scene, "python")
+        assert isinstance(exact, ExactJacobian)
+        _, _, K_x, D_x = exact.implicit_terms(q, v, tau)
+        assert (_rel(K_x, K) < 1e-12 and _rel(D_x, D) < 1e-12) == same
+    assert type(Dynamics(scene, "python")) is not ExactJacobian  # the block restored the backend
