@@ -31,12 +31,22 @@ class EnergyMonitor:
         every: steps between energy evaluations.
         rtol: relative tolerance (default 5 %).
         mode: ``"warn"`` or ``"raise"``.
+        method: the integrator's name, for the message.
     """
 
     def __init__(
-        self, system: System, t: float, q: np.ndarray, v: np.ndarray, *, every: int, rtol: float = ENERGY_RTOL, mode: str = "warn"
+        self,
+        system: System,
+        t: float,
+        q: np.ndarray,
+        v: np.ndarray,
+        *,
+        every: int,
+        rtol: float = ENERGY_RTOL,
+        mode: str = "warn",
+        method: str = "",
     ):
-        self.system, self.every, self.rtol, self.mode = system, max(1, int(every)), rtol, mode
+        self.system, self.every, self.rtol, self.mode, self.method = system, max(1, int(every)), rtol, mode, method
         self.dynamics = system.dynamics
         e = self.dynamics.energy(q, v)
         self.E0 = e.total
@@ -97,7 +107,7 @@ class EnergyMonitor:
         self.max_excess = max(self.max_excess, excess)
         if excess > tol and self.first_violation is None:
             self.first_violation = t
-            msg = violation_message(t, e.total - self.E0, self.work, excess, self.rtol, self.scale)
+            msg = violation_message(t, e.total - self.E0, self.work, excess, self.rtol, self.scale, self.method)
             if self.mode == "raise":
                 raise EnergyBalanceError(msg)
             _progress.warn(
@@ -105,11 +115,21 @@ class EnergyMonitor:
             )  # _check, after_step or finish, the loop, simulate, its caller
 
 
-def violation_message(t: float, growth: float, work: float, excess: float, rtol: float, scale: float) -> str:
-    """What :class:`EnergyMonitor` says when the balance breaks (the compiled loop says the same)."""
+#: what the energy warning suggests instead of a method that is not one of them: stable at any
+#: step, and dissipating what they cannot resolve rather than keeping it
+DISSIPATIVE = ("implicit_euler", "ros2")
+
+
+def violation_message(t: float, growth: float, work: float, excess: float, rtol: float, scale: float, method: str = "") -> str:
+    """What :class:`EnergyMonitor` says when the balance breaks (the compiled loop says the same);
+    ``method``: the integrator's name (a dissipative method is not told to use itself)."""
+    if method in DISSIPATIVE:
+        fix = "reduce dt, or use an error-controlled method ('dopri5', 'ros2_adaptive')"
+    else:
+        fix = f"reduce dt, or use {' or '.join(repr(m) for m in DISSIPATIVE)}"
     return (
         f"energy balance broken at t = {t:.6g} s: the energy grew by {growth:.6g} J while the joint "
         f"torques did {work:.6g} J of net work (dissipation included); the excess {excess:.3g} J is more than "
-        f"{rtol:.0%} of the energy in play ({scale:.3g} J). The integrator is probably unstable or too "
-        "coarse here: reduce dt, or use 'implicit_euler'/'ros2' (see coopdyn.advise)"
+        f"{rtol:.0%} of the energy in play ({scale:.3g} J). The integrator{f' ({method})' if method else ''} is "
+        f"probably unstable or too coarse here: {fix} (see coopdyn.advise)"
     )

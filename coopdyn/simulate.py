@@ -195,7 +195,7 @@ def simulate(
     run.loop = "python" if config is None else "compiled"
     monitor = None
     if config is None and energy_check != "off" and not method.exact_discretisation:
-        monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check)
+        monitor = EnergyMonitor(system, 0.0, q, v, every=max(1, round(5e-3 / dt)), mode=energy_check, method=method.name)
     bar = _progress_bar(t_final, method.name) if progress else None
     try:
         with np.errstate(over="ignore", invalid="ignore"), _progress.showing(bar):  # a blow-up: a DivergenceError
@@ -601,7 +601,7 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
                 if kind == compiled.ROTATION_ALARM:  # (link, θ, t)
                     run.warn_rotation(int(a), b, c, stacklevel=4)
                 else:  # energy balance: (t, growth, work, excess, scale)
-                    message = violation_message(a, b, c, d, ENERGY_RTOL, e)
+                    message = violation_message(a, b, c, d, ENERGY_RTOL, e, run.method.name)
                     if status == compiled.ENERGY:
                         raise EnergyBalanceError(message)
                     _progress.warn(message, EnergyBalanceWarning, stacklevel=3)

@@ -286,7 +286,7 @@ def test_simulate_then_view_and_plot_what_it_wrote(tmp_path: Path, capsys: pytes
         assert "MB)" in capsys.readouterr().out
     assert main(["plot", str(out), "--out", str(tmp_path / "p.png")]) == 0 and (tmp_path / "p.png").stat().st_size > 10_000
     assert main(["view", str(tmp_path)]) == 2
-    assert "holds no trajectory.npz: run `coopdyn simulate` or `coopdyn demo` first" in capsys.readouterr().err
+    assert f"{tmp_path} holds no trajectory.npz: run `coopdyn simulate` or `coopdyn demo` first" in capsys.readouterr().err
     reader_gone = subprocess.Popen(  # `coopdyn plot … | head -c0`: the pipe is closed before coopdyn writes
         [sys.executable, "-m", "coopdyn", "plot", str(out), "--out", str(tmp_path / "p2.png")],
         stdout=subprocess.PIPE,

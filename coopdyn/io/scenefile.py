@@ -544,7 +544,7 @@ def open_result(path: str | Path, *, task: bool = False) -> Saved:
         raise SceneFileError(f"{path}: give a result (.npz), an output folder holding trajectory.npz, or a scene file (.toml)")
     if not npz.is_file():
         where = "holds no trajectory.npz" if path.is_dir() else "does not exist"
-        raise SceneFileError(f"{npz if path.is_dir() else path} {where}: run `coopdyn simulate` or `coopdyn demo` first")
+        raise SceneFileError(f"{path} {where}: run `coopdyn simulate` or `coopdyn demo` first")
     from ..result import Result
 
     result = Result.load(npz)
