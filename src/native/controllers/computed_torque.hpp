@@ -10,9 +10,9 @@ namespace coopdyn_native {
 
 // τ = M(q)(Kp (q_d − q) − Kd q̇) + h(q, q̇), holding q_d (ComputedTorque with its default reference).
 struct ComputedTorqueHold : Controller {
-  ComputedTorqueHold(const Model & model, const Eigen::VectorXi & act, const Eigen::VectorXi & q_index, VectorXd kp,
+  ComputedTorqueHold(const Model & model, Kernel::LentData lent, const Eigen::VectorXi & act, const Eigen::VectorXi & q_index, VectorXd kp,
                      VectorXd kd, VectorXd q_d)
-    : model(model), data(model), act(act), q_index(q_index), kp(std::move(kp)), kd(std::move(kd)), q_d(std::move(q_d)),
+    : model(model), lent(std::move(lent)), data(*this->lent), act(act), q_index(q_index), kp(std::move(kp)), kd(std::move(kd)), q_d(std::move(q_d)),
       e(act.size()), M(act.size(), act.size()) {}
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
     pinocchio::crba(model, data, q);
@@ -27,7 +27,8 @@ struct ComputedTorqueHold : Controller {
     for (Eigen::Index i = 0; i < n; ++i) tau[i] += h[act[i]];
   }
   const Model & model;
-  Data data;
+  Kernel::LentData lent;
+  Data & data;
   Eigen::VectorXi act, q_index;
   VectorXd kp, kd, q_d, e;
   MatrixXd M;
@@ -40,7 +41,7 @@ inline std::unique_ptr<Controller> make_computed_torque(Settings & c, Kernel & k
   const Eigen::VectorXi q_index = c.get<Eigen::VectorXi>("q_index");
   if (q_index.size() != na || (na && (q_index.minCoeff() < 0 || q_index.maxCoeff() >= model.nq)))
     throw std::invalid_argument("compiled loop: q_index must hold one configuration index per actuated joint");
-  return std::make_unique<ComputedTorqueHold>(model, k.actuated(), q_index, c.vec("kp", na), c.vec("kd", na),
+  return std::make_unique<ComputedTorqueHold>(model, k.lend_data(), k.actuated(), q_index, c.vec("kp", na), c.vec("kd", na),
                                               c.vec("q_d", na));
 }
 

@@ -13,7 +13,7 @@ namespace coopdyn_native {
 // Pinocchio's generalized gravity.
 struct GravityPD : Controller {
   GravityPD(Kernel & kernel, VectorXd kp, VectorXd kd, VectorXd q_des)
-    : kernel(kernel), model(kernel.model()), data(model), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
+    : kernel(kernel), model(kernel.model()), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
       q_des(std::move(q_des)), dq(model.nv), g_rnea(act.size()) {}
   bool reads_kernel() const override { return kernel.kinematic_gravity(); }
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
@@ -23,13 +23,14 @@ struct GravityPD : Controller {
   }
   // g(q) on the actuated joints by Pinocchio's RNEA, for joints actuated_gravity does not take.
   const VectorXd & rnea_gravity(const VectorXd & q) {
-    const VectorXd & full = pinocchio::computeGeneralizedGravity(model, data, q);
+    if (!data) data = kernel.lend_data();  // (only for joints actuated_gravity does not take)
+    const VectorXd & full = pinocchio::computeGeneralizedGravity(model, *data, q);
     for (Eigen::Index i = 0; i < act.size(); ++i) g_rnea[i] = full[act[i]];
     return g_rnea;
   }
   Kernel & kernel;
   const Model & model;
-  Data data;
+  Kernel::LentData data;
   Eigen::VectorXi act;
   VectorXd kp, kd, q_des, dq, g_rnea;
 };

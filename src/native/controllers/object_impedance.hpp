@@ -68,10 +68,10 @@ struct ObjectImpedanceLaw : Controller {
     std::vector<int> v_index;
   };
 
-  ObjectImpedanceLaw(const Model & model, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
+  ObjectImpedanceLaw(const Model & model, Kernel::LentData lent, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
                    double mass, Vector3 com, Vector3 gravity, Vector3 Kp, Vector3 Kr, Vector3 Dp, Vector3 Dr,
                    double joint_damping, double null_k, double null_d, VectorXd q0)
-    : model(model), data(model), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
+    : model(model), lent(std::move(lent)), data(*this->lent), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
       mass(mass), com(com), gravity(gravity), Kp(Kp), Kr(Kr), Dp(Dp), Dr(Dr), joint_damping(joint_damping),
       null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv) {}
 
@@ -188,7 +188,8 @@ struct ObjectImpedanceLaw : Controller {
   }
 
   const Model & model;
-  Data data;
+  Kernel::LentData lent;
+  Data & data;
   pinocchio::FrameIndex object_frame;
   std::vector<Grasp> grasps;
   ObjectTask task;
@@ -248,7 +249,7 @@ inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & 
   const pinocchio::FrameIndex object_frame = c.get<pinocchio::FrameIndex>("object_frame");
   if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
   return std::make_unique<ObjectImpedanceLaw>(
-    model, object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
+    model, k.lend_data(), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
     c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
     c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq));
 }
