@@ -28,9 +28,9 @@ BYTES_PER_SAMPLE = 480.0
 def check_budget(scene: Scene, t_final: float, dt: float, save_every: int, max_steps: Any, max_memory: Any) -> int | None:
     """Refuse a run that would not finish in reasonable time or memory, before it starts; returns the
     step budget (``None``: unlimited). An adaptive method's budget counts its attempts."""
-    if max_steps is not None:
+    if max_steps is not None and not (type(max_steps) is int and max_steps > 0):  # (an int > 0 is already valid)
         max_steps = _validate.count(max_steps, "max_steps", SimulationError, none="no limit")
-    if max_memory is not None:
+    if max_memory is not None and not (type(max_memory) is float and 1.0 <= max_memory < math.inf):
         max_memory = _validate.number(max_memory, "max_memory", "bytes", SimulationError)
         if not max_memory >= 1.0:
             raise SimulationError(f"max_memory must be at least 1 [byte] or None (no limit), got {max_memory:g}")

@@ -311,6 +311,8 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
 
 def _checked_duration(t_final: Any) -> float:
     """``t_final`` checked: a number ≥ 0 [s]."""
+    if type(t_final) is float and 0.0 <= t_final < math.inf:  # the common case, without the general checks
+        return t_final
     t_final = _validate.number(t_final, "t_final", "s", SimulationError)
     if t_final < 0.0:
         raise SimulationError(f"t_final must be >= 0 [s], got {t_final}")
