@@ -70,7 +70,9 @@ def _omega(model: pin.Model, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def linearize(scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, object_wrench: Any = None) -> Linearization:
+def linearize(
+    scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, object_wrench: Any = None, backend: str | None = None
+) -> Linearization:
     """The exact linearisation of the scene's open-loop dynamics at (q, v, τ).
 
     Args:
@@ -81,6 +83,8 @@ def linearize(scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, ob
             wrap a controller's gains into A yourself, or pass its torque at this state).
         object_wrench: a constant external wrench on the object (6,) [N, N·m], world axes, at
             the object frame's origin; default none.
+        backend: ``"native"`` (the compiled kernel's twin), ``"python"`` or ``"auto"``, as for
+            :class:`coopdyn.Dynamics`; the two agree to round-off.
 
     Raises:
         SceneError: a bad argument, a rigid grasp, or a joint type without tangent coordinates here.
@@ -94,7 +98,7 @@ def linearize(scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, ob
     tau = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
     wrench = None if object_wrench is None else _validate.finite_array(object_wrench, "object_wrench [N, N·m]", (6,))
     omega = _omega(scene.model, v)
-    d = Dynamics(scene, "python").derivatives(q, v, tau, wrench)  # (the kernel has no twin of it yet)
+    d = Dynamics(scene, backend).derivatives(q, v, tau, wrench)
     A = np.zeros((2 * nv, 2 * nv))
     A[:nv, :nv], A[:nv, nv:] = omega, np.eye(nv)
     A[nv:, :nv], A[nv:, nv:] = d.da_dq, d.da_dv

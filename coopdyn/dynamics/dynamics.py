@@ -211,8 +211,7 @@ class Dynamics:
     def derivatives(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> Derivatives:
         """Exact ∂q̈/∂(q, v, τ) and the elements' wrenches with their derivatives at (q, v) for the
         torques ``tau`` (n_actuated,) and an optional object wrench (as :meth:`acceleration`);
-        :mod:`coopdyn.dynamics.derivatives` says how. Pinocchio's Python bindings and the
-        elements' Python laws compute it on either backend (the kernel has no twin yet).
+        :mod:`coopdyn.dynamics.derivatives` says how (the kernel's twin computes the same).
 
         Raises:
             KernelError: the scene has rigid grasps (constraints), or a shape is wrong.
@@ -221,12 +220,10 @@ class Dynamics:
             raise KernelError("derivatives: the scene has rigid grasps (constraints); linearise its elastic scene instead")
         if np.shape(tau) != (self.scene.n_actuated,):
             raise KernelError(f"tau must have shape ({self.scene.n_actuated},), got {np.shape(tau)}")
-        tau_full = np.zeros(self.scene.nv)
-        tau_full[self.actuated_index] += tau
-        frame = self.scene.object_frame
-        return dynamics_derivatives(
-            self.model, self.data, self._forces, self._damping, self.actuated_index, frame, q, v, tau_full, object_wrench
-        )
+        return self._derivatives(q, v, tau, object_wrench)
+
+    def _derivatives(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None) -> Derivatives:
+        raise NotImplementedError
 
     def stiffness(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M, K̃, D̃), each (nv, nv) [kg or kg·m², N/m or N·m/rad, N·s/m or N·m·s/rad], at (q, v):
@@ -361,6 +358,14 @@ class PythonDynamics(Dynamics):
         S_inv, K_g, gh = self._step
         k_v = S_inv @ (Mf_v - gh * (K_g @ f_q))
         return f_q + gh * k_v, k_v
+
+    def _derivatives(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None) -> Derivatives:
+        tau_full = np.zeros(self.scene.nv)
+        tau_full[self.actuated_index] += tau
+        frame = self.scene.object_frame
+        return dynamics_derivatives(
+            self.model, self.data, self._forces, self._damping, self.actuated_index, frame, q, v, tau_full, object_wrench
+        )
 
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
         model, data = self.model, self.data

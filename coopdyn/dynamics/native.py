@@ -16,6 +16,7 @@ from ..errors import CoopdynError, KernelError
 from ..model.elements import ElementEval
 from ..model.scene import Scene
 from . import backend as _backend
+from .derivatives import Derivatives
 from .dynamics import KINDS, Dynamics, Readouts, step_coefficients
 
 
@@ -117,6 +118,21 @@ class NativeDynamics(Dynamics):
         """A compiled run of this scene (coopdyn.compiled writes ``config``); the kernel object
         it steps stays alive with it."""
         return self._call("the compiled loop's configuration", _backend.kernel_module().make_loop, self._kernel, config)
+
+    def _derivatives(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None) -> Derivatives:
+        raw = self._call("derivatives(q, v, tau, object_wrench)", self._kernel.derivatives, q, v, tau, object_wrench)
+        a, da_dq, da_dv, da_dtau, W, dW_dq, dW_dv, exact = raw
+        nv, L = self.scene.nv, len(self.scene.elements)  # reshape all: eigenpy returns a 1-row or 1-column matrix as a vector
+        return Derivatives(
+            a,
+            da_dq.reshape(nv, nv),
+            da_dv.reshape(nv, nv),
+            da_dtau.reshape(nv, self.scene.n_actuated),
+            W.reshape(L, 6),
+            dW_dq.reshape(L, 6, nv),
+            dW_dv.reshape(L, 6, nv),
+            bool(exact),
+        )
 
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:
         raw = self._call("element_states(q, v)", self._kernel.element_states, q, v)

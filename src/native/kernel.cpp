@@ -161,6 +161,7 @@ BOOST_PYTHON_MODULE(_native) {
     .def("gravity", &Kernel::gravity, bp::args("self", "q"))
     .def("element_states", &Kernel::element_states, bp::args("self", "q", "v"))
     .def("readouts", &Kernel::readouts, bp::args("self", "Q", "V"))
+    .def("derivatives", &Kernel::derivatives, bp::args("self", "q", "v", "tau", "wrench"))
     .def("clear_rotation_alarm", &Kernel::clear_rotation_alarm, bp::args("self"))
     .add_property("last_dissipation", &Kernel::last_dissipation)
     .add_property("rotation_alarm", &Kernel::rotation_alarm)

@@ -10,6 +10,9 @@
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/algorithm/aba-derivatives.hpp>
+#include <pinocchio/algorithm/frames-derivatives.hpp>
+#include <pinocchio/algorithm/kinematics-derivatives.hpp>
 
 #include <eigenpy/eigenpy.hpp>
 #include <boost/python.hpp>
@@ -306,6 +309,103 @@ public:
       out.append(bp::make_tuple(ev_.energy, Vector6(ev_.deformation), Vector6(ev_.f), ev_.power, Matrix6(ev_.SK),
                                 Matrix6(ev_.SD), ev_.theta));
     }
+    return out;
+  }
+
+  // Exact ∂q̈/∂(q, v, τ) and every element's wrench G_f_G with its derivatives at (q, v, τ): the
+  // twin of coopdyn/dynamics/derivatives.py, same equations (see there): the elements' wrenches as
+  // body-fixed external forces of Pinocchio's ABA derivatives, plus M⁻¹ times their own variation
+  // through Element::tangent. Returns (q̈ (nv), ∂q̈/∂q, ∂q̈/∂v (nv, nv), ∂q̈/∂τ (nv, na),
+  // W (L, 6), ∂W/∂q, ∂W/∂v (6L, nv), exact).
+  bp::tuple derivatives(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
+    check_size(q, model_.nq, "q");
+    check_size(v, model_.nv, "v");
+    check_size(tau, actuated_.size(), "tau");
+    kinematics_ = NONE;
+    const Eigen::Index nv = model_.nv, L = static_cast<Eigen::Index>(links_.size()), na = actuated_.size();
+    pinocchio::computeForwardKinematicsDerivatives(model_, data_, q, v, VectorXd::Zero(nv));
+    pinocchio::computeJointJacobians(model_, data_, q);
+    pinocchio::updateFramePlacements(model_, data_);
+    ForceList fext(model_.njoints, pinocchio::Force::Zero());
+    MatrixXd dQ_dq = MatrixXd::Zero(nv, nv), dQ_dv = MatrixXd::Zero(nv, nv);
+    dQ_dv.diagonal() = -damping_;
+    MatrixXd W(L, 6), dW_dq(6 * L, nv), dW_dv(6 * L, nv);
+    Matrix6x J_G(6, nv), J_T(6, nv), dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
+    Matrix6 F_d, F_x;
+    bool exact = true;
+    auto add_wrench = [&](FrameIndex frame, const Vector6 & f) {
+      const pinocchio::Frame & fr = model_.frames[frame];
+      fext[fr.parentJoint] += fr.placement.act(pinocchio::Force(f));
+    };
+    for (Eigen::Index i = 0; i < L; ++i) {
+      const Link & lk = links_[static_cast<std::size_t>(i)];
+      const SE3 X = data_.oMf[lk.tip].actInv(data_.oMf[lk.grasp]);
+      J_G.setZero();
+      J_T.setZero();
+      pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G);
+      pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T);
+      const Matrix6 Ad_inv = X.toActionMatrixInverse();
+      const Matrix6x Jr = J_G - Ad_inv * J_T;
+      dVG_dq.setZero();
+      dVG_dv.setZero();
+      dVT_dq.setZero();
+      dVT_dv.setZero();
+      pinocchio::getFrameVelocityDerivatives(model_, data_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
+      pinocchio::getFrameVelocityDerivatives(model_, data_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
+      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, data_, lk.tip, pinocchio::LOCAL).toVector();
+      const Vector6 xi = pinocchio::getFrameVelocity(model_, data_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
+      const Matrix6x dxi_dq = dVG_dq - motion_cross(V_T) * Jr - Ad_inv * dVT_dq;
+      lk.element->evaluate(X, xi, false, ev_);
+      exact = lk.element->tangent(X, xi, F_d, F_x) && exact;
+      const Matrix6x df_dq = F_d * Jr + F_x * dxi_dq, df_dv = F_x * Jr;
+      const Matrix6 dual = X.toDualActionMatrix();
+      const Vector6 f_G = ev_.f;
+      dQ_dq.noalias() += J_G.transpose() * df_dq - J_T.transpose() * (dual * (df_dq + force_cross_map(f_G) * Jr));
+      dQ_dv.noalias() += J_G.transpose() * df_dv - J_T.transpose() * (dual * df_dv);
+      add_wrench(lk.grasp, f_G);
+      add_wrench(lk.tip, -dual * f_G);
+      W.row(i) = f_G.transpose();
+      dW_dq.middleRows(6 * i, 6) = df_dq;
+      dW_dv.middleRows(6 * i, 6) = df_dv;
+    }
+    if (!wrench.is_none()) {  // constant in world axes: its body-axes value turns with the object
+      const Vector6 w = object_wrench(wrench);
+      const coopdyn::Matrix3 & R = data_.oMf[object_frame_].rotation();
+      Vector6 f_o;
+      f_o << R.transpose() * w.head<3>(), R.transpose() * w.tail<3>();
+      Matrix6x J_o = Matrix6x::Zero(6, nv);
+      pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_o);
+      Matrix6 df = Matrix6::Zero();
+      df.topRightCorner<3, 3>() = coopdyn::skew(f_o.head<3>());
+      df.bottomRightCorner<3, 3>() = coopdyn::skew(f_o.tail<3>());
+      dQ_dq.noalias() += J_o.transpose() * (df * J_o);
+      add_wrench(object_frame_, f_o);
+    }
+    VectorXd tau_full = -damping_.cwiseProduct(v);
+    for (Eigen::Index i = 0; i < na; ++i) tau_full[actuated_[i]] += tau[i];
+    pinocchio::computeABADerivatives(model_, data_, q, v, tau_full, fext);
+    MatrixXd Minv = data_.Minv;
+    Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
+    const MatrixXd da_dq = data_.ddq_dq + Minv * dQ_dq, da_dv = data_.ddq_dv + Minv * dQ_dv;
+    MatrixXd da_dtau(nv, na);
+    for (Eigen::Index i = 0; i < na; ++i) da_dtau.col(i) = Minv.col(actuated_[i]);
+    if (!da_dq.allFinite() || !da_dv.allFinite() || !data_.ddq.allFinite())
+      throw std::runtime_error("the dynamics' derivatives are not finite at this state");
+    return bp::make_tuple(VectorXd(data_.ddq), da_dq, da_dv, da_dtau, W, dW_dq, dW_dv, exact);
+  }
+
+  // ad(w) for a twist w = [v; ω] (derivatives.py: motion_cross).
+  static Matrix6 motion_cross(const Vector6 & w) {
+    Matrix6 out = Matrix6::Zero();
+    out.topLeftCorner<3, 3>() = out.bottomRightCorner<3, 3>() = coopdyn::skew(w.tail<3>());
+    out.topRightCorner<3, 3>() = coopdyn::skew(w.head<3>());
+    return out;
+  }
+  // Λ(f) with Λ(f)·δ = δ ×* f for a wrench f = [force; torque] (derivatives.py: force_cross_map).
+  static Matrix6 force_cross_map(const Vector6 & f) {
+    Matrix6 out = Matrix6::Zero();
+    out.topRightCorner<3, 3>() = out.bottomLeftCorner<3, 3>() = -coopdyn::skew(f.head<3>());
+    out.bottomRightCorner<3, 3>() = -coopdyn::skew(f.tail<3>());
     return out;
   }
 

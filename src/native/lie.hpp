@@ -5,6 +5,7 @@
 #include <pinocchio/spatial.hpp>
 
 #include <cmath>
+#include <complex>
 
 namespace coopdyn {
 
@@ -70,6 +71,64 @@ inline void jlog6(const pinocchio::SE3 & M, const Vector6 & e, double theta, Mat
   J.topLeftCorner<3, 3>() = A;
   J.bottomRightCorner<3, 3>() = A;
   J.topRightCorner<3, 3>() = C * A;
+}
+
+// Jlog6 as a function of e = log6(M) alone (lie.py: jlog6_of_log), for a real or a complex e:
+// every operation is analytic in e (θ² is wᵀw, not |w|², and no dot product conjugates), so a
+// complex e gives the complex-step derivative of Jlog6 — the elements' exact tangents.
+template <typename S>
+Eigen::Matrix<S, 6, 6> jlog6_of_log(const Eigen::Matrix<S, 6, 1> & e) {
+  using V3 = Eigen::Matrix<S, 3, 1>;
+  using M3 = Eigen::Matrix<S, 3, 3>;
+  const V3 rho = e.template head<3>(), w = e.template tail<3>();
+  const S t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+  S a, beta, beta_dot, b, c;
+  if (std::abs(std::real(t2)) < SERIES_BELOW * SERIES_BELOW) {
+    static const double A[7] = {1.0, -1.0 / 12.0, -1.0 / 720.0, -1.0 / 30240.0, -1.0 / 1209600.0,
+                                -1.0 / 47900160.0, -691.0 / 1307674368000.0};
+    a = beta = beta_dot = b = c = S(0.0);
+    for (int k = 6; k >= 0; --k) a = a * t2 + A[k];
+    for (int k = 6; k >= 1; --k) beta = beta * t2 - A[k];
+    for (int k = 6; k >= 2; --k) beta_dot = beta_dot * t2 - 2.0 * (k - 1) * A[k];
+    double fact_b = 1.0, fact_c = 1.0;  // (2k+2)! and (2k+3)!, k = 0
+    double B[9], C[9];
+    for (int k = 0; k < 9; ++k) {
+      fact_b = k == 0 ? 2.0 : fact_b * (2 * k + 1) * (2 * k + 2);
+      fact_c = k == 0 ? 6.0 : fact_c * (2 * k + 2) * (2 * k + 3);
+      B[k] = (k % 2 ? -1.0 : 1.0) / fact_b;
+      C[k] = (k % 2 ? -1.0 : 1.0) / fact_c;
+    }
+    for (int k = 8; k >= 0; --k) {
+      b = b * t2 + B[k];
+      c = c * t2 + C[k];
+    }
+  } else {
+    const S th = std::sqrt(t2), st = std::sin(th), ct = std::cos(th);
+    a = S(0.5) * th * st / (S(1.0) - ct);
+    const S inv_2_2ct = S(1.0) / (S(2.0) * (S(1.0) - ct));
+    beta = S(1.0) / t2 - st / th * inv_2_2ct;
+    beta_dot = S(-2.0) / (t2 * t2) + (S(1.0) + st / th) / t2 * inv_2_2ct;
+    b = (S(1.0) - ct) / t2;
+    c = (th - st) / (t2 * th);
+  }
+  auto hat = [](const V3 & x) {
+    M3 out;
+    out << S(0.0), -x[2], x[1], x[2], S(0.0), -x[0], -x[1], x[0], S(0.0);
+    return out;
+  };
+  const M3 W = hat(w);
+  const V3 p = rho + b * (W * rho) + c * (W * (W * rho));  // the translation of M
+  M3 A = beta * (w * w.transpose()) + S(0.5) * W;
+  A.diagonal().array() += a;
+  const S wTp = (w.transpose() * p)(0);
+  const V3 v = (beta_dot * wTp) * w - (t2 * beta_dot + S(2.0) * beta) * p;
+  M3 C = v * w.transpose() + beta * (w * p.transpose()) + S(0.5) * hat(p);
+  C.diagonal().array() += wTp * beta;
+  Eigen::Matrix<S, 6, 6> J = Eigen::Matrix<S, 6, 6>::Zero();
+  J.template topLeftCorner<3, 3>() = A;
+  J.template bottomRightCorner<3, 3>() = A;
+  J.template topRightCorner<3, 3>() = C * A;
+  return J;
 }
 
 }  // namespace coopdyn

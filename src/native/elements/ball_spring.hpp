@@ -41,6 +41,21 @@ public:
     out.theta = pinocchio::log3(R).norm();
   }
 
+  // Exact, closed form (ball_spring.py: BallSpring.tangent).
+  bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const override {
+    const Matrix3 & R = T_M_G.rotation();
+    Vector3 f = K_ * T_M_G.translation();
+    if (damped_) f += D_ * (R * xi.head<3>());
+    const Vector3 f_G = -R.transpose() * f;
+    const Matrix3 RDR = R.transpose() * D_ * R;
+    F_d.setZero();
+    F_x.setZero();
+    F_d.topLeftCorner<3, 3>().noalias() = -R.transpose() * K_ * R;
+    F_d.topRightCorner<3, 3>() = skew(f_G) + RDR * skew(Vector3(xi.head<3>()));
+    F_x.topLeftCorner<3, 3>() = -RDR;
+    return true;
+  }
+
 private:
   Matrix3 K_, D_;
   bool damped_;

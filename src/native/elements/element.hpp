@@ -8,6 +8,7 @@
 
 #include <boost/python.hpp>
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <set>
@@ -33,6 +34,26 @@ public:
   virtual bool damped() const = 0;
   // Fill `out` at (T_M_G, ξ); with `jacobians`, also out.SK and out.SD.
   virtual void evaluate(const pinocchio::SE3 & T_M_G, const Vector6 & xi, bool jacobians, ElementEval & out) const = 0;
+  // The exact derivatives of out.f with respect to a right perturbation T_M_G·exp6(δ) (F_d) and
+  // to ξ (F_x), as Element.tangent in Python; true when exact. This default takes central
+  // differences of evaluate (as base.py's default, same steps) and returns false.
+  virtual bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const {
+    constexpr double step = 6e-6;  // base.py's _FD_STEP
+    const double h_d = step * std::max(1.0, T_M_G.translation().norm()), h_x = step * std::max(1.0, xi.norm());
+    ElementEval plus, minus;
+    for (int k = 0; k < 6; ++k) {
+      Vector6 d = Vector6::Zero();
+      d[k] = h_d;
+      evaluate(T_M_G * pinocchio::exp6(pinocchio::Motion(d)), xi, false, plus);
+      evaluate(T_M_G * pinocchio::exp6(pinocchio::Motion(-d)), xi, false, minus);
+      F_d.col(k) = (plus.f - minus.f) / (2.0 * h_d);
+      d[k] = h_x;
+      evaluate(T_M_G, xi + d, false, plus);
+      evaluate(T_M_G, xi - d, false, minus);
+      F_x.col(k) = (plus.f - minus.f) / (2.0 * h_x);
+    }
+    return false;
+  }
 };
 
 // An element's parameters as its Python twin gives them (Element.native_parameters(): a dict of

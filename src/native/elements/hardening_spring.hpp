@@ -28,6 +28,15 @@ public:
     if (jacobians) out.SK.noalias() += Jp.transpose() * (kappa_ * (p2 * Matrix3::Identity() + 2.0 * p * p.transpose())) * Jp;
   }
 
+protected:
+  // K e + κ |p|² [p; 0] at a complex e (|p|² = pᵀp, no conjugate).
+  Eigen::Matrix<std::complex<double>, 6, 1> gradient(const Eigen::Matrix<std::complex<double>, 6, 1> & e) const override {
+    Eigen::Matrix<std::complex<double>, 6, 1> g = SE3Spring::gradient(e);
+    const std::complex<double> p2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+    g.head<3>() += (kappa_ * p2) * e.head<3>();
+    return g;
+  }
+
 private:
   double kappa_;
 };

@@ -61,10 +61,29 @@ public:
     }
   }
 
+  // Its Python tangent (its own, or base.py's central differences) and its exact_tangent.
+  bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const override {
+    namespace bp = boost::python;
+    const struct Gil {
+      PyGILState_STATE state = PyGILState_Ensure();
+      ~Gil() { PyGILState_Release(state); }
+    } gil;
+    try {
+      const bp::object out = element_.attr("tangent")(T_M_G, Eigen::VectorXd(xi));
+      F_d = matrix6(out[0], "derivative with respect to the pose");
+      F_x = matrix6(out[1], "derivative with respect to the twist");
+      return bp::extract<bool>(element_.attr("exact_tangent"))();
+    } catch (const bp::error_already_set &) {
+      throw std::runtime_error("the Python element " + describe() + "'s tangent raised " + fetch_error());
+    } catch (const std::invalid_argument & e) {
+      throw std::runtime_error("the Python element " + describe() + "'s tangent: " + e.what());
+    }
+  }
+
 private:
   static Matrix6 matrix6(const boost::python::object & value, const char * name) {
     const Eigen::MatrixXd m = boost::python::extract<Eigen::MatrixXd>(value);
-    if (m.rows() != 6 || m.cols() != 6) throw std::invalid_argument(std::string("evaluate returned a ") + name + " that is not 6x6");
+    if (m.rows() != 6 || m.cols() != 6) throw std::invalid_argument(std::string("it returned a ") + name + " that is not 6x6");
     return m;
   }
   std::string describe() const {

@@ -38,7 +38,33 @@ public:
     }
   }
 
+  // Exact, by complex step through jlog6_of_log (se3_spring.py: SE3Spring.tangent).
+  bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const override {
+    using Complex = std::complex<double>;
+    using Vector6c = Eigen::Matrix<Complex, 6, 1>;
+    constexpr double h = 1e-30;  // far below round-off: no truncation error
+    Vector6 e;
+    const double theta = log6(T_M_G, e);
+    Matrix6 J;
+    jlog6(T_M_G, e, theta, J);
+    const Vector6c xi_c = xi.cast<Complex>();
+    for (int k = 0; k < 6; ++k) {
+      const Vector6c e_c = e.cast<Complex>() + Complex(0.0, h) * J.col(k).cast<Complex>();
+      const Eigen::Matrix<Complex, 6, 6> J_c = jlog6_of_log(e_c);
+      Vector6c w = gradient(e_c);
+      if (damped_) w += D_.cast<Complex>() * (J_c * xi_c);
+      F_d.col(k) = -(J_c.transpose() * w).imag() / h;
+    }
+    F_x.noalias() = -J.transpose() * (D_ * J);
+    return true;
+  }
+
 protected:
+  // ∂U/∂e at a complex e (analytic in e).
+  virtual Eigen::Matrix<std::complex<double>, 6, 1> gradient(const Eigen::Matrix<std::complex<double>, 6, 1> & e) const {
+    return K_.cast<std::complex<double>>() * e;
+  }
+
   Matrix6 K_, D_;
   bool damped_;
   mutable Matrix6 J_;  // scratch: Jlog6 at the last evaluation (hardening_spring.hpp reads it)
