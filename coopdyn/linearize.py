@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _validate
+from .closed_loop import Controller
 from .dynamics import Dynamics
 from .dynamics.derivatives import motion_cross
 from .errors import SceneError
@@ -43,10 +44,12 @@ class Linearization:
     acceleration: np.ndarray  #: q̈ (nv,) at the state [m/s², rad/s²]
     wrench: np.ndarray  #: (L, 6) each interconnection's wrench on G at G, G axes [N, N·m]
     dwrench_dx: np.ndarray  #: (L, 6, 2nv) its derivative with respect to x
-    exact: bool  #: False when an element's tangent is finite differences (a user element without one)
+    exact: bool  #: False when something is finite differences: a user element's tangent, or the controller
+    controller_gain: np.ndarray | None  #: (n_actuated, 2nv) ∂τ/∂x of the controller (closed loop), else None
     q: np.ndarray  #: the configuration (nq,)
     v: np.ndarray  #: the velocity (nv,)
     tau: np.ndarray  #: the torques (n_actuated,)
+    t: float  #: the time the controller was evaluated at [s]
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -71,16 +74,29 @@ def _omega(model: pin.Model, v: np.ndarray) -> np.ndarray:
 
 
 def linearize(
-    scene: Scene, q: Any = None, v: Any = None, tau: Any = None, *, object_wrench: Any = None, backend: str | None = None
+    scene: Scene,
+    q: Any = None,
+    v: Any = None,
+    tau: Any = None,
+    *,
+    controller: Controller | None = None,
+    t: float = 0.0,
+    object_wrench: Any = None,
+    backend: str | None = None,
 ) -> Linearization:
-    """The exact linearisation of the scene's open-loop dynamics at (q, v, τ).
+    """The exact linearisation of the scene's open-loop dynamics at (q, v, τ) — or of the closed
+    loop under ``controller``.
 
     Args:
         scene: the scene (elastic interconnections; rigid grasps are refused).
         q: the configuration (nq,); default ``scene.q0``.
         v: the velocities (nv,) [m/s, rad/s]; default zero.
-        tau: the actuated joints' torques (n_actuated,) [N·m or N]; default zero (no control:
-            wrap a controller's gains into A yourself, or pass its torque at this state).
+        tau: the actuated joints' torques (n_actuated,) [N·m or N]; default zero, or the
+            controller's at (t, q, v).
+        controller: ``controller(t, q, v) -> τ``: A becomes the closed loop's, ``A + B·∂τ/∂x``,
+            with ∂τ/∂x (``controller_gain``) by central differences of the controller (4·nv
+            calls at time ``t`` [s]; ``exact`` is then False). A controller with internal state
+            (a hold, a filter) must not mind being probed.
         object_wrench: a constant external wrench on the object (6,) [N, N·m], world axes, at
             the object frame's origin; default none.
         backend: ``"native"`` (the compiled kernel's twin), ``"python"`` or ``"auto"``, as for
@@ -95,6 +111,11 @@ def linearize(
         raise SceneError("linearize: the scene has rigid grasps (constraints); linearise the elastic scene they stand for")
     nv = scene.nv
     q, v = scene.check_state(scene.q0 if q is None else q, np.zeros(nv) if v is None else v)
+    t = _validate.number(t, "t", "s")
+    if controller is not None and not callable(controller):
+        raise SceneError(f"linearize: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}")
+    if tau is None and controller is not None:
+        tau = _controller_torque(scene, controller, t, q, v)
     tau = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
     wrench = None if object_wrench is None else _validate.finite_array(object_wrench, "object_wrench [N, N·m]", (6,))
     omega = _omega(scene.model, v)
@@ -105,4 +126,31 @@ def linearize(
     B = np.zeros((2 * nv, scene.n_actuated))
     B[nv:] = d.da_dtau
     dW = np.concatenate([d.dwrench_dq, d.dwrench_dv], axis=2)
-    return Linearization(A, B, d.acceleration, d.wrench, dW, d.exact, q, v, np.array(tau, dtype=float))
+    gain = None if controller is None else controller_gain(scene, controller, t, q, v)
+    if gain is not None:
+        A += B @ gain
+    exact = d.exact and gain is None
+    return Linearization(A, B, d.acceleration, d.wrench, dW, exact, gain, q, v, np.array(tau, dtype=float), t)
+
+
+def _controller_torque(scene: Scene, controller: Controller, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    out = controller(t, q, v)
+    return _validate.finite_array(out, "the controller's torque [N·m or N]", (scene.n_actuated,))
+
+
+def controller_gain(scene: Scene, controller: Controller, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """∂τ/∂x (n_actuated, 2nv) of ``controller`` at (t, q, v) in the tangent coordinates of
+    :func:`linearize`, by central differences (steps 1e-6 in δq [m or rad], 1e-6·max(1, |v|) in v)."""
+    nv, model = scene.nv, scene.model
+    out = np.empty((scene.n_actuated, 2 * nv))
+    h_q, h_v = 1e-6, 1e-6 * max(1.0, float(np.max(np.abs(v), initial=0.0)))
+    for k in range(nv):
+        e = np.zeros(nv)
+        e[k] = h_q
+        plus = _controller_torque(scene, controller, t, pin.integrate(model, q, e), v)
+        minus = _controller_torque(scene, controller, t, pin.integrate(model, q, -e), v)
+        out[:, k] = (plus - minus) / (2.0 * h_q)
+        e[k] = h_v
+        plus, minus = _controller_torque(scene, controller, t, q, v + e), _controller_torque(scene, controller, t, q, v - e)
+        out[:, nv + k] = (plus - minus) / (2.0 * h_v)
+    return out
