@@ -1,9 +1,14 @@
 """The held strip (examples/flexible_beam.py) at the step its modes need: the figures the
 example, its docs and the CHANGELOG quote, from one command.
 
+* the largest real part of the linearised closed loop's eigenvalues [1/s] at the start, for
+  ObjectImpedance's default gains read at the tool frames (the example) and at the strip's
+  middle node, and for the example's former gains at the middle node;
 * the example's settings (trapezoid, 1 ms) against 50 µs: sag range, grasp-force peak, tracking;
-* the example's former gains (500 N/m, 30 N·s/m) resolved (trapezoid, 0.1 ms): the unstable swing;
-* the example's gains resolved over 12 s (trapezoid, 0.25 ms): the sag range in each 2 s window
+* the default gains at the middle node, resolved (trapezoid, 50 µs): how the unstable loop ends;
+* the example's former gains (500 N/m, 30 N·s/m, middle node) resolved (trapezoid, 0.1 ms): the
+  unstable swing;
+* the example resolved over 12 s (trapezoid, 0.25 ms): the sag range in each 2 s window
   (it settles once the task ends at 4.25 s);
 * the former setting under implicit Euler at 1 ms with the accuracy check on: the warning's
   force error and the span its reference covered;
@@ -29,9 +34,11 @@ from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
 from coopdyn.scenes import held_beam, object_start
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
-from flexible_beam import GAINS, deflection
+from flexible_beam import deflection
 
-FORMER = {"stiffness": (500.0, 10.0), "damping": (30.0, 0.5)}  # the example's gains before
+GAINS: dict = {}  # the example's: ObjectImpedance's defaults, read at the tool frames (its default for a strip)
+AT_MIDDLE = {"measure": "object"}  # the same gains fed back at the strip's middle node
+FORMER = {"stiffness": (500.0, 10.0), "damping": (30.0, 0.5), "measure": "object"}  # the example's gains before
 
 
 def _task(scene: cd.Scene) -> GripLiftOscillate:
@@ -61,6 +68,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--memory", action="store_true", help="also measure createData of a 64-element strip (~2 GB)")
     args = parser.parse_args()
+    scene = held_beam()
+    cases = (
+        ("defaults at the tool frames (example)", GAINS),
+        ("defaults at the middle node", AT_MIDDLE),
+        ("former gains at the middle node", FORMER),
+    )
+    for label, gains in cases:
+        lam = cd.linearize(scene, controller=ObjectImpedance(scene, **gains)).eigenvalues
+        top = lam[np.argmax(lam.real)]
+        print(f"closed loop at the start, {label:38s}: largest Re λ {top.real:8.3g} /s ({abs(top.imag) / (2 * np.pi):.0f} Hz)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         mine, fine = _run(GAINS, "trapezoid", 1e-3), _run(GAINS, "trapezoid", 5e-5)
@@ -69,6 +86,10 @@ def main() -> None:
         df = np.abs(mine.wrenches()[..., :3] - fine.wrenches()[..., :3]).max()
         dsag = np.abs(deflection(mine) - deflection(fine)).max()
         print(f"  1 ms against 50 µs: forces within {df:.3f} N, sag within {dsag * 1e3:.3f} mm")
+        try:
+            print(_line("defaults at the middle node: trapezoid 50 µs", _run(AT_MIDDLE, "trapezoid", 5e-5)))
+        except cd.DivergenceError as exc:
+            print(f"{'defaults at the middle node: trapezoid 50 µs':44s} diverged: {str(exc)[:120]}")
         print(_line("former gains: trapezoid 0.1 ms (resolved)", _run(FORMER, "trapezoid", 1e-4)))
         long = _run(GAINS, "trapezoid", 2.5e-4, 12.0)
         sag = deflection(long)

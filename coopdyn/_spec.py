@@ -181,3 +181,5 @@ class ObjectImpedanceSpec(ControllerSpec):
     null_k: float  #: posture stiffness in the null space [N·m/rad]
     null_d: float  #: posture damping in the null space [N·m·s/rad]
     q0: np.ndarray  #: (nq,) the posture
+    collocated: bool  #: measure="tips": the object's pose and velocity read at the tool frames
+    tip_offsets: np.ndarray  #: (4·n_grasps, 4): each tool frame's pose in the object frame at the start

@@ -310,3 +310,23 @@ def test_the_exact_jacobian_variant_equals_gauss_newton_where_the_law_is_linear(
         _, _, K_x, D_x = exact.implicit_terms(q, v, tau)
         assert (_rel(K_x, K) < 1e-12 and _rel(D_x, D) < 1e-12) == same
     assert type(Dynamics(scene, "python")) is not ExactJacobian  # the block restored the backend
+
+
+def test_the_closed_loop_adds_the_controllers_gain() -> None:
+    """A joint PD without gravity: ∂τ/∂x is −Kp on the actuated joints' positions and −Kd on
+    their velocities, and the closed loop's A is the open loop's plus B times it."""
+    from coopdyn.control import GravityCompensationPD
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, gravity=(0.0, 0.0, 0.0))
+    pd = GravityCompensationPD(scene, 40.0, 4.0)
+    closed = cd.linearize(scene, controller=pd)
+    gain = np.zeros((scene.n_actuated, 2 * scene.nv))
+    gain[np.arange(scene.n_actuated), scene.actuated] = -40.0
+    gain[np.arange(scene.n_actuated), scene.nv + scene.actuated] = -4.0
+    assert closed.controller_gain is not None and not closed.exact
+    np.testing.assert_allclose(closed.controller_gain, gain, atol=1e-6)
+    open_loop = cd.linearize(scene, tau=closed.tau)
+    expected = open_loop.A + open_loop.B @ closed.controller_gain
+    np.testing.assert_allclose(closed.A, expected, rtol=0.0, atol=1e-9 * np.max(np.abs(closed.A)))
+    with pytest.raises(cd.SceneError, match="controller must be a callable"):
+        cd.linearize(scene, controller="pd")  # type: ignore[arg-type]

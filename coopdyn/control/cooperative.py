@@ -36,6 +36,8 @@ from ..grasp import squeeze_directions
 from ..model.scene import Scene
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+#: where ObjectImpedance reads the object's pose and velocity (its ``measure``)
+MEASURES = ("auto", "object", "tips")
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -281,6 +283,15 @@ class ObjectImpedance:
         joint_damping: extra joint damping on every arm joint [N·m·s/rad].
         null_stiffness, null_damping: posture task in the tip Jacobians' null space
             [N·m/rad], [N·m·s/rad] (redundant arms).
+        measure: where the law reads the object's pose and velocity. ``"object"``: the object
+            frame itself (a rigid object's pose as a camera or motion capture gives it).
+            ``"tips"``: the arms' own tool frames (their joint encoders), each carried to the
+            object frame by its offset at the start and averaged — collocated with the arms'
+            actuators, so the loop through an elastic object is passive and stable at any
+            gains. ``"auto"`` (default): ``"tips"`` for an elastic object (one with elements of
+            its own, a :class:`~coopdyn.Beam`), ``"object"`` otherwise. Feeding back a flexible
+            object's own frame reaches the arms only through its compliance (non-collocated)
+            and destabilises its bending modes (docs/physics.md, "Cooperative control").
     """
 
     def __init__(
@@ -292,9 +303,14 @@ class ObjectImpedance:
         joint_damping: float = 3.0,
         null_stiffness: float = 20.0,
         null_damping: float = 5.0,
+        measure: str = "auto",
     ) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"ObjectImpedance: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+        if measure not in MEASURES:
+            raise SceneError(f"ObjectImpedance: measure must be one of {MEASURES}, got {_validate._short(measure)}")
+        #: "object" or "tips": where the law reads the object's pose and velocity
+        self.measure = measure if measure != "auto" else ("tips" if len(scene.elements) > len(scene.links) else "object")
         if reference is not None and not callable(reference):
             raise SceneError(
                 f"ObjectImpedance: reference must be a callable reference(t) -> ObjectReference (e.g. a "
@@ -336,30 +352,58 @@ class ObjectImpedance:
         rigid = [arm.name for _, _, arm in self._links if arm.v_index.size == 0]
         if rigid:
             raise SceneError(f"ObjectImpedance commands the object through the arms' joints; every joint of {rigid} is locked")
+        # each tool frame's pose in the object frame at the start: a tip's pose times its inverse
+        # estimates the object frame's (measure="tips")
+        self._o_M_T = [oMo.actInv(data.oMf[t_id]) for _, t_id, _ in self._links]
+
+    def object_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The object frame's world position [m], rotation, linear velocity of its origin [m/s] and
+        angular velocity [rad/s] (world axes) as the law reads them (``measure``), at the
+        kinematics of the last ``forwardKinematics(q, v)`` on its data."""
+        model, data, scene = self.scene.model, self._data, self.scene
+        if self.measure == "object":
+            oMo = data.oMf[scene.object_frame]
+            V = pin.getFrameVelocity(model, data, scene.object_frame, LWA)
+            return oMo.translation, oMo.rotation, V.linear, V.angular
+        poses = [data.oMf[t_id] * o_M_T.inverse() for (_, t_id, _), o_M_T in zip(self._links, self._o_M_T, strict=True)]
+        p = np.mean([P.translation for P in poses], axis=0)
+        R0 = poses[0].rotation
+        R = R0 @ pin.exp3(np.mean([pin.log3(R0.T @ P.rotation) for P in poses], axis=0))
+        linear, angular = np.zeros(3), np.zeros(3)
+        for _, t_id, _ in self._links:  # the velocity of the point p on each tool, averaged
+            V = pin.getFrameVelocity(model, data, t_id, LWA)
+            linear += V.linear + _cross(V.angular, p - data.oMf[t_id].translation)
+            angular += V.angular
+        n = len(self._links)
+        return p, R, linear / n, angular / n
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
-        model, data, scene = self.scene.model, self._data, self.scene
+        return self._wrench(t, self.object_state())
+
+    def _wrench(self, t: float, state: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ObjectReference]:
+        scene = self.scene
         ref = self.reference(t)
-        oMo = data.oMf[scene.object_frame]
-        V = pin.getFrameVelocity(model, data, scene.object_frame, LWA)
-        e_p = ref.position - oMo.translation
-        e_r = pin.log3(ref.rotation @ oMo.rotation.T)
-        force = self.mass * (ref.acceleration - scene.gravity) + self.Kp * e_p + self.Dp * (ref.velocity - V.linear)
-        com_w = oMo.rotation @ self._com
-        moment = self.Kr * e_r + self.Dr * (ref.angular_velocity - V.angular) + _cross(com_w, -self.mass * scene.gravity)
+        p, R, linear, angular = state
+        e_p = ref.position - p
+        e_r = pin.log3(ref.rotation @ R.T)
+        force = self.mass * (ref.acceleration - scene.gravity) + self.Kp * e_p + self.Dp * (ref.velocity - linear)
+        moment = self.Kr * e_r + self.Dr * (ref.angular_velocity - angular) + _cross(R @ self._com, -self.mass * scene.gravity)
         return np.concatenate([force, moment]), ref
 
     def grasp_wrenches(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Commanded wrench of each interconnection on the object (N, 6), about its grasp point."""
-        model, data, scene = self.scene.model, self._data, self.scene
+        """Commanded wrench of each interconnection on the object (N, 6), about its grasp point
+        (about its tool frame's origin with ``measure="tips"``)."""
+        model, data = self.scene.model, self._data
         pin.forwardKinematics(model, data, q, v)
         pin.updateFramePlacements(model, data)
-        F, ref = self.object_wrench(t, q, v)
-        points = np.array([data.oMf[g].translation for g, _, _ in self._links])
+        state = self.object_state()
+        F, ref = self._wrench(t, state)
+        at = 1 if self.measure == "tips" else 0  # the tool frames or the grasp frames
+        points = np.array([data.oMf[frames[at]].translation for frames in self._links])
         c = points.mean(axis=0)
         r = points - c
-        o = data.oMf[scene.object_frame].translation
+        o = state[0]
         F_c = F.copy()
         F_c[3:] += _cross(o - c, F[:3])  # moment about the grasps' centroid
         A_inv = _moment_inverse(r)
@@ -380,10 +424,11 @@ class ObjectImpedance:
         out = []
         for (g_id, t_id, arm), f_i in zip(self._links, f, strict=True):
             J = pin.getFrameJacobian(model, data, t_id, LWA)[:, arm.v_index]
-            # the wrench is about the grasp point; the tip sits on it up to the (small) deformation
-            r = data.oMf[g_id].translation - data.oMf[t_id].translation
+            # the wrench is about the grasp point (the tip sits on it up to the small deformation),
+            # or already about the tip (measure="tips")
             w = f_i.copy()
-            w[3:] += _cross(r, f_i[:3])
+            if self.measure == "object":
+                w[3:] += _cross(data.oMf[g_id].translation - data.oMf[t_id].translation, f_i[:3])
             vi = v[arm.v_index]
             tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * vi
             tau += _null_space_part(J, self.null_stiffness * posture[arm.v_index] - self.null_damping * vi)
@@ -425,6 +470,8 @@ class ObjectImpedance:
             null_k=float(self.null_stiffness),
             null_d=float(self.null_damping),
             q0=scene.q0.copy(),
+            collocated=self.measure == "tips",
+            tip_offsets=np.concatenate([M.homogeneous for M in self._o_M_T]),
         )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:

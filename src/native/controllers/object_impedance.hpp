@@ -70,10 +70,49 @@ struct ObjectImpedanceLaw : Controller {
 
   ObjectImpedanceLaw(const Model & model, Kernel::LentData lent, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
                    double mass, Vector3 com, Vector3 gravity, Vector3 Kp, Vector3 Kr, Vector3 Dp, Vector3 Dr,
-                   double joint_damping, double null_k, double null_d, VectorXd q0)
+                   double joint_damping, double null_k, double null_d, VectorXd q0, bool collocated,
+                   std::vector<pinocchio::SE3> tip_offsets)
     : model(model), lent(std::move(lent)), data(*this->lent), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
       mass(mass), com(com), gravity(gravity), Kp(Kp), Kr(Kr), Dp(Dp), Dr(Dr), joint_damping(joint_damping),
-      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv) {}
+      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated) {
+    for (const pinocchio::SE3 & o_M_T : tip_offsets) T_M_o.push_back(o_M_T.inverse());
+  }
+
+  // The object frame's position, rotation, origin velocity and angular velocity (world axes) as
+  // the law reads them (ObjectImpedance.object_state): the object frame itself, or (collocated)
+  // each tool frame carried to it by its offset at the start, averaged.
+  void object_state(Vector3 & p, Matrix3 & R, Vector3 & lin, Vector3 & ang) {
+    if (!collocated) {
+      const pinocchio::SE3 & oMo = data.oMf[object_frame];
+      const pinocchio::Motion V = pinocchio::getFrameVelocity(model, data, object_frame, pinocchio::LOCAL_WORLD_ALIGNED);
+      p = oMo.translation();
+      R = oMo.rotation();
+      lin = V.linear();
+      ang = V.angular();
+      return;
+    }
+    const std::size_t n = grasps.size();
+    p.setZero();
+    Vector3 mean_log = Vector3::Zero();
+    Matrix3 R0 = Matrix3::Identity();
+    for (std::size_t i = 0; i < n; ++i) {
+      const pinocchio::SE3 estimate = data.oMf[grasps[i].tip] * T_M_o[i];
+      p += estimate.translation();
+      if (i == 0) R0 = estimate.rotation();
+      mean_log += pinocchio::log3(Matrix3(R0.transpose() * estimate.rotation()));
+    }
+    p /= double(n);
+    R = R0 * pinocchio::exp3(Vector3(mean_log / double(n)));
+    lin.setZero();
+    ang.setZero();
+    for (std::size_t i = 0; i < n; ++i) {
+      const pinocchio::Motion V = pinocchio::getFrameVelocity(model, data, grasps[i].tip, pinocchio::LOCAL_WORLD_ALIGNED);
+      lin += V.linear() + V.angular().cross(p - data.oMf[grasps[i].tip].translation());
+      ang += V.angular();
+    }
+    lin /= double(n);
+    ang /= double(n);
+  }
 
   void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
     pinocchio::forwardKinematics(model, data, q, v);
@@ -82,25 +121,27 @@ struct ObjectImpedanceLaw : Controller {
     Vector3 p_d, v_d, a_d;
     double squeeze;
     task.at(t, p_d, v_d, a_d, squeeze);
-    const pinocchio::SE3 & oMo = data.oMf[object_frame];
-    const pinocchio::Motion V = pinocchio::getFrameVelocity(model, data, object_frame, pinocchio::LOCAL_WORLD_ALIGNED);
-    const Vector3 e_p = p_d - oMo.translation();
-    const Matrix3 Rerr = task.R * oMo.rotation().transpose();
+    Vector3 p_o, lin, ang;
+    Matrix3 R_o;
+    object_state(p_o, R_o, lin, ang);
+    const Vector3 e_p = p_d - p_o;
+    const Matrix3 Rerr = task.R * R_o.transpose();
     const Vector3 e_r = pinocchio::log3(Rerr);
     Eigen::Matrix<double, 6, 1> F;
-    F.head<3>() = mass * (a_d - gravity) + Kp.cwiseProduct(e_p) + Dp.cwiseProduct(v_d - V.linear());
-    const Vector3 com_w = oMo.rotation() * com;
-    F.tail<3>() = Kr.cwiseProduct(e_r) + Dr.cwiseProduct(-V.angular()) + com_w.cross(-mass * gravity);
+    F.head<3>() = mass * (a_d - gravity) + Kp.cwiseProduct(e_p) + Dp.cwiseProduct(v_d - lin);
+    const Vector3 com_w = R_o * com;
+    F.tail<3>() = Kr.cwiseProduct(e_r) + Dr.cwiseProduct(-ang) + com_w.cross(-mass * gravity);
     // distribution over the grasps, moments about their centroid
     const std::size_t n = grasps.size();
     auto & r = r_;  // per-call scratch kept as members: no allocation on the hot path
     r.resize(n, 3);
     Vector3 c = Vector3::Zero();
-    for (std::size_t i = 0; i < n; ++i) r.row(i) = data.oMf[grasps[i].grasp].translation().transpose();
+    for (std::size_t i = 0; i < n; ++i)  // the grasp points, or the tool frames' origins (collocated)
+      r.row(i) = data.oMf[collocated ? grasps[i].tip : grasps[i].grasp].translation().transpose();
     c = r.colwise().sum().transpose() / double(n);
     r.rowwise() -= c.transpose();
     Eigen::Matrix<double, 6, 1> F_c = F;
-    F_c.tail<3>() += (oMo.translation() - c).cross(F.head<3>());
+    F_c.tail<3>() += (p_o - c).cross(F.head<3>());
     const Matrix3 A = (double(n) + r.squaredNorm()) * Matrix3::Identity() - r.transpose() * r;
     const Matrix3 A_inv = A.inverse();
     f.resize(n, 6);
@@ -144,9 +185,11 @@ struct ObjectImpedanceLaw : Controller {
         vi[j] = v[gr.v_index[j]];
         x[j] = null_k * posture[gr.v_index[j]] - null_d * vi[j];
       }
-      const Vector3 rr = data.oMf[gr.grasp].translation() - data.oMf[gr.tip].translation();
       Eigen::Matrix<double, 6, 1> w = f.row(i).transpose();
-      w.tail<3>() += rr.cross(Vector3(f.block<1, 3>(i, 0).transpose()));
+      if (!collocated) {  // the wrench is about the grasp point: moved to the tip
+        const Vector3 rr = data.oMf[gr.grasp].translation() - data.oMf[gr.tip].translation();
+        w.tail<3>() += rr.cross(Vector3(f.block<1, 3>(i, 0).transpose()));
+      }
       auto & ti = ti_;
       ti.noalias() = J.transpose() * w;
       for (Eigen::Index j = 0; j < m; ++j) ti[j] = (ti[j] + nle[gr.v_index[j]]) - joint_damping * vi[j];
@@ -205,6 +248,8 @@ struct ObjectImpedanceLaw : Controller {
   VectorXd vi_, x_, ti_;
   Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt6_;
   Eigen::LLT<MatrixXd> llt_;
+  bool collocated;
+  std::vector<pinocchio::SE3> T_M_o;  // each tool frame's inverse offset from the object frame at the start
 };
 
 // {grasps: (grasp frame, tip frame, arm velocity indices) each, task: {hold, start, rotation, and
@@ -247,11 +292,18 @@ inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & 
   }
   t.check_all_read();
   const pinocchio::FrameIndex object_frame = c.get<pinocchio::FrameIndex>("object_frame");
+  const MatrixXd stacked = c.matrix("tip_offsets", 4 * static_cast<Eigen::Index>(grasps.size()), 4);
+  std::vector<pinocchio::SE3> offsets;
+  for (std::size_t i = 0; i < grasps.size(); ++i) {
+    const Eigen::Matrix4d M = stacked.middleRows<4>(4 * static_cast<Eigen::Index>(i));
+    offsets.emplace_back(Matrix3(M.topLeftCorner<3, 3>()), Vector3(M.topRightCorner<3, 1>()));
+  }
   if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
   return std::make_unique<ObjectImpedanceLaw>(
     model, k.lend_data(), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
     c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
-    c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq));
+    c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq),
+    c.get<bool>("collocated"), offsets);
 }
 
 inline const bool object_impedance_registered = register_controller("object_impedance", &make_object_impedance);
