@@ -183,3 +183,5 @@ class ObjectImpedanceSpec(ControllerSpec):
     q0: np.ndarray  #: (nq,) the posture
     collocated: bool  #: measure="tips": the object's pose and velocity read at the tool frames
     tip_offsets: np.ndarray  #: (4·n_grasps, 4): each tool frame's pose in the object frame at the start
+    Ki: np.ndarray  #: (3,) internal rotational stiffness [N·m/rad] (collocated only)
+    Di: np.ndarray  #: (3,) internal rotational damping [N·m·s/rad] (collocated only)

@@ -305,6 +305,7 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         result.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
         message = accuracy.checked_message(judged, error, peak, reference, stopped=stopped, own_peak=own_peak, growth=growth)
     if message is not None:
+        message += accuracy.growth_text(system, q, v, t_final)
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
 
@@ -473,6 +474,12 @@ class _Run:
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
+        try:
+            mode = accuracy.unstable_mode(self.system, self.q[0], self.v[0], t)
+        except Exception:  # (as the diagnosis)
+            mode = ""
+        if mode:
+            diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
         partial = self.result("diverged")
         raise DivergenceError(
             f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "

@@ -15,11 +15,11 @@ import numpy as np
 
 import coopdyn as cd
 from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
-from coopdyn.scenes import facing_arms, held_beam, object_start
+from coopdyn.scenes import facing_arms, held_beam, midspan_deflection, object_start
 
 T_FINAL = 5.0  # [s]
 DT = 1e-3  # [s]
-INTEGRATOR = "trapezoid"  # at 1 ms within 0.11 N and 0.04 mm of 50 µs (benchmarks/flexible_beam_check.py; tested)
+INTEGRATOR = "trapezoid"  # at 1 ms within 0.088 N and 0.019 mm of 50 µs (benchmarks/flexible_beam_check.py; tested)
 BANDWIDTH = 15.0  # the drives' bandwidth [Hz]
 # ObjectImpedance with its default gains (2000 N/m, 120 N·s/m). For an elastic object it reads the
 # strip's pose and velocity at the arms' own tool frames (measure="tips", collocated with the
@@ -30,12 +30,8 @@ BANDWIDTH = 15.0  # the drives' bandwidth [Hz]
 OUT = "out/flexible_beam"
 
 
-def deflection(res: cd.Result) -> np.ndarray:
-    """Mid-span deflection (n,) [m]: the middle node's distance below the chord between the end nodes."""
-    beam = res.scene.object
-    ends = [res.frame_position(f"{beam.name}/node{k}") for k in (0, beam.n_elements)]
-    middle = res.frame_position(f"{beam.name}/node{beam.reference_node}")
-    return 0.5 * (ends[0][:, 2] + ends[1][:, 2]) - middle[:, 2]
+#: the strip's mid-span deflection along a run (n,) [m] (below the chord between its ends)
+deflection = midspan_deflection
 
 
 def main(t_final: float = T_FINAL, out: str = OUT, html: bool = True, integrator: str = INTEGRATOR, dt: float = DT) -> cd.Result:

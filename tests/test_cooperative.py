@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -244,3 +246,58 @@ def test_tips_and_object_measurements_agree_on_a_rigid_box_at_rest(pandas: cd.Sc
     np.testing.assert_allclose(R_t, R_o, atol=1e-12)
     with pytest.raises(cd.SceneError, match="measure must be one of"):
         ObjectImpedance(pandas, measure="grasps")
+
+
+def test_an_unstable_closed_loop_is_said_so_in_the_warning_and_the_divergence() -> None:
+    """The strip read at its middle node with the default gains: implicit Euler at 1 ms damps the
+    growing bending mode and its run is warned about, saying the closed loop is unstable with the
+    growing mode from the exact linearisation; a longer run diverges and says the same."""
+    scene = cd.scenes.held_beam(n_elements=4)
+    controller = ObjectImpedance(scene, measure="object")
+    growing = r"has a 3\d\d(\.\d)? Hz mode growing at \d+(\.\d+)? /s"
+    with pytest.warns(cd.AccuracyWarning, match=r"the closed loop " + growing + r" .*: it is unstable"):
+        cd.simulate(scene, 0.3, controller=controller, integrator="implicit_euler", dt=1e-3)
+    said = r"From the start the closed loop is unstable: linearised exactly there, it "
+    with pytest.raises(cd.DivergenceError, match=said + growing):
+        cd.simulate(scene, 1.0, controller=controller, integrator="implicit_euler", dt=1e-3, accuracy_check="off")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", cd.AccuracyWarning)  # read at the tips: stable, and the trapezoid resolves what matters
+        cd.simulate(scene, 0.3, controller=ObjectImpedance(scene), integrator="trapezoid", dt=1e-3)
+
+
+def test_internal_moments_hold_the_tools_orientations_with_no_resultant() -> None:
+    """With measure="tips", the internal moments pull each tool's estimate of the object's
+    orientation towards their mean, in pairs that exert no net moment (to first order in the
+    spread); internal=(0, 0) leaves them out."""
+    scene = cd.scenes.planar_arms_beam(n_elements=2)
+    rng = np.random.default_rng(5)
+    q = pin.integrate(scene.model, scene.q0, 0.02 * rng.normal(size=scene.nv))
+    law = ObjectImpedance(scene, internal=(100.0, 0.0))
+    pin.forwardKinematics(scene.model, law._data, q, np.zeros(scene.nv))
+    pin.updateFramePlacements(scene.model, law._data)
+    m = law.internal_moments()
+    assert np.linalg.norm(m) > 0.1 and np.linalg.norm(m.sum(axis=0)) < 1e-3 * np.linalg.norm(m)
+    off = ObjectImpedance(scene, internal=(0.0, 0.0))
+    assert not np.any(off.internal_moments())
+    with pytest.raises(cd.SceneError, match=r"internal must be a pair \(stiffness \[N·m/rad\], damping"):
+        ObjectImpedance(scene, internal=5.0)
+
+
+def test_two_planar_arms_carry_a_beam_stably() -> None:
+    """The benchmark scenario of flexible-object handling: two 3R arms in a vertical plane hold
+    a 1 m strip. The inverse kinematics puts each tool on its end of the beam, pointing along it;
+    read at the tools the linearised closed loop decays in every mode (read at the middle node,
+    it does not)."""
+    scene = cd.scenes.planar_arms_beam()
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    for lk, end, axis in zip(scene.links, (-0.5, 0.5), (1.0, -1.0), strict=True):
+        tip = data.oMf[lk.tip_frame]
+        np.testing.assert_allclose(tip.translation, [0.0, end, 0.5], atol=1e-12)
+        np.testing.assert_allclose(tip.rotation[:, 2], [0.0, axis, 0.0], atol=1e-12)
+    growth = {
+        m: cd.linearize(scene, controller=ObjectImpedance(scene, measure=m)).eigenvalues.real.max() for m in ("tips", "object")
+    }
+    assert growth["tips"] < 0.0 < growth["object"], growth
+    with pytest.raises(cd.SceneError, match="out of the arm's reach"):
+        cd.scenes.planar_arms_beam(reach=2.0)

@@ -251,8 +251,17 @@ def _warn_if_away(reference: Callable[[float], ObjectReference], oMo: pin.SE3, K
     )
 
 
-def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
-    """(linear, angular) object gains, each a non-negative scalar or 3-vector, as two (3,) arrays."""
+def _mean_rotation(rotations: list[np.ndarray]) -> np.ndarray:
+    """The mean of rotations in the tangent space of the first: ``R₀ exp(mean log(R₀ᵀ Rᵢ))``."""
+    R0 = rotations[0]
+    return R0 @ pin.exp3(np.mean([pin.log3(R0.T @ R) for R in rotations], axis=0))
+
+
+def _pair(
+    value: Any, name: str, units: tuple[str, str], parts: tuple[str, str] = ("linear", "angular")
+) -> tuple[np.ndarray, np.ndarray]:
+    """(linear, angular) object gains (or the two ``parts`` named), each a non-negative scalar or
+    3-vector, as two (3,) arrays."""
     if (
         isinstance(value, str | bytes)
         or not isinstance(value, Sequence | np.ndarray)
@@ -260,12 +269,12 @@ def _pair(value: Any, name: str, units: tuple[str, str]) -> tuple[np.ndarray, np
         or len(value) != 2
     ):
         raise SceneError(
-            f"ObjectImpedance: {name} must be a pair (linear [{units[0]}], angular [{units[1]}]), each a scalar or "
+            f"ObjectImpedance: {name} must be a pair ({parts[0]} [{units[0]}], {parts[1]} [{units[1]}]), each a scalar or "
             f"3-vector, e.g. {name}=(2000.0, 100.0); got {_validate._short(value)}"
         )
     linear, angular = (
         _validate.gain(part, f"ObjectImpedance: {name} ({label})", 3, unit, per="axis x, y, z")
-        for part, unit, label in zip(value, units, ("linear", "angular"), strict=True)
+        for part, unit, label in zip(value, units, parts, strict=True)
     )
     return linear, angular
 
@@ -292,6 +301,12 @@ class ObjectImpedance:
             its own, a :class:`~coopdyn.Beam`), ``"object"`` otherwise. Feeding back a flexible
             object's own frame reaches the arms only through its compliance (non-collocated)
             and destabilises its bending modes (docs/physics.md, "Cooperative control").
+        internal: with ``measure="tips"``, the rotational stiffness and damping (scalars or (3,),
+            world axes) [N·m/rad], [N·m·s/rad] holding each tool's estimate of the object's
+            orientation to their mean — pairs of moments with no resultant, which keep an elastic
+            object's ends from turning against each other (the strip arching as it is lifted)
+            and damp that motion; default: the object's rotational ``stiffness`` and ``damping``.
+            ``(0, 0)`` turns it off. Collocated, so the loop stays passive.
     """
 
     def __init__(
@@ -304,6 +319,7 @@ class ObjectImpedance:
         null_stiffness: float = 20.0,
         null_damping: float = 5.0,
         measure: str = "auto",
+        internal: tuple[Any, Any] | None = None,
     ) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"ObjectImpedance: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -321,6 +337,11 @@ class ObjectImpedance:
         self._data = model.createData()
         self.Kp, self.Kr = _pair(stiffness, "stiffness", ("N/m", "N·m/rad"))
         self.Dp, self.Dr = _pair(damping, "damping", ("N·s/m", "N·m·s/rad"))
+        #: the internal rotational stiffness and damping (3,) [N·m/rad], [N·m·s/rad] (``measure="tips"``)
+        if internal is None:
+            self.Ki, self.Di = self.Kr.copy(), self.Dr.copy()
+        else:
+            self.Ki, self.Di = _pair(internal, "internal", ("N·m/rad", "N·m·s/rad"), ("stiffness", "damping"))
         self.joint_damping = _validate.non_negative(joint_damping, "ObjectImpedance: joint_damping", "N·m·s/rad")
         self.null_stiffness = _validate.non_negative(null_stiffness, "ObjectImpedance: null_stiffness", "N·m/rad")
         self.null_damping = _validate.non_negative(null_damping, "ObjectImpedance: null_damping", "N·m·s/rad")
@@ -365,10 +386,9 @@ class ObjectImpedance:
             oMo = data.oMf[scene.object_frame]
             V = pin.getFrameVelocity(model, data, scene.object_frame, LWA)
             return oMo.translation, oMo.rotation, V.linear, V.angular
-        poses = [data.oMf[t_id] * o_M_T.inverse() for (_, t_id, _), o_M_T in zip(self._links, self._o_M_T, strict=True)]
+        poses = self._tip_estimates()
         p = np.mean([P.translation for P in poses], axis=0)
-        R0 = poses[0].rotation
-        R = R0 @ pin.exp3(np.mean([pin.log3(R0.T @ P.rotation) for P in poses], axis=0))
+        R = _mean_rotation([P.rotation for P in poses])
         linear, angular = np.zeros(3), np.zeros(3)
         for _, t_id, _ in self._links:  # the velocity of the point p on each tool, averaged
             V = pin.getFrameVelocity(model, data, t_id, LWA)
@@ -376,6 +396,25 @@ class ObjectImpedance:
             angular += V.angular
         n = len(self._links)
         return p, R, linear / n, angular / n
+
+    def _tip_estimates(self) -> list[pin.SE3]:
+        """Each tool frame's estimate of the object frame's pose (its pose times its offset at the start)."""
+        data = self._data
+        return [data.oMf[t_id] * o_M_T.inverse() for (_, t_id, _), o_M_T in zip(self._links, self._o_M_T, strict=True)]
+
+    def internal_moments(self) -> np.ndarray:
+        """(N, 3) [N·m], world axes: with ``measure="tips"``, the moments that hold each tool's
+        estimate of the object's orientation to their mean, ``−Ki ⊙ e_i − Di ⊙ (ω_i − ω̄)`` with
+        ``e_i = R̄ log3(R̄ᵀ R_i)``; zero otherwise."""
+        n = len(self._links)
+        if self.measure != "tips" or not (np.any(self.Ki) or np.any(self.Di)):
+            return np.zeros((n, 3))
+        model, data = self.scene.model, self._data
+        rotations = [P.rotation for P in self._tip_estimates()]
+        mean = _mean_rotation(rotations)
+        omega = np.array([pin.getFrameVelocity(model, data, t_id, LWA).angular for _, t_id, _ in self._links])
+        spin = omega - omega.mean(axis=0)
+        return np.array([-self.Ki * (mean @ pin.log3(mean.T @ R)) - self.Di * w for R, w in zip(rotations, spin, strict=True)])
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
@@ -413,6 +452,7 @@ class ObjectImpedance:
             inward[:, :3] = ref.squeeze * squeeze_directions(points)
             resultant = np.concatenate([inward[:, :3].sum(axis=0), _cross_rows(r, inward[:, :3]).sum(axis=0)])
             f += inward - _distribute(r, A_inv, resultant)  # keep only its internal (null-space) part
+        f[:, 3:] += self.internal_moments()
         return f
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -471,6 +511,8 @@ class ObjectImpedance:
             null_d=float(self.null_damping),
             q0=scene.q0.copy(),
             collocated=self.measure == "tips",
+            Ki=self.Ki.copy(),
+            Di=self.Di.copy(),
             tip_offsets=np.concatenate([M.homogeneous for M in self._o_M_T]),
         )
 

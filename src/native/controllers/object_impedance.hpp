@@ -71,10 +71,10 @@ struct ObjectImpedanceLaw : Controller {
   ObjectImpedanceLaw(const Model & model, Kernel::LentData lent, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
                    double mass, Vector3 com, Vector3 gravity, Vector3 Kp, Vector3 Kr, Vector3 Dp, Vector3 Dr,
                    double joint_damping, double null_k, double null_d, VectorXd q0, bool collocated,
-                   std::vector<pinocchio::SE3> tip_offsets)
+                   std::vector<pinocchio::SE3> tip_offsets, Vector3 Ki, Vector3 Di)
     : model(model), lent(std::move(lent)), data(*this->lent), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
       mass(mass), com(com), gravity(gravity), Kp(Kp), Kr(Kr), Dp(Dp), Dr(Dr), joint_damping(joint_damping),
-      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated) {
+      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated), Ki(Ki), Di(Di) {
     for (const pinocchio::SE3 & o_M_T : tip_offsets) T_M_o.push_back(o_M_T.inverse());
   }
 
@@ -92,26 +92,38 @@ struct ObjectImpedanceLaw : Controller {
       return;
     }
     const std::size_t n = grasps.size();
+    tip_R.resize(n);
+    tip_w.resize(n);
     p.setZero();
     Vector3 mean_log = Vector3::Zero();
-    Matrix3 R0 = Matrix3::Identity();
     for (std::size_t i = 0; i < n; ++i) {
       const pinocchio::SE3 estimate = data.oMf[grasps[i].tip] * T_M_o[i];
       p += estimate.translation();
-      if (i == 0) R0 = estimate.rotation();
-      mean_log += pinocchio::log3(Matrix3(R0.transpose() * estimate.rotation()));
+      tip_R[i] = estimate.rotation();
+      mean_log += pinocchio::log3(Matrix3(tip_R[0].transpose() * tip_R[i]));
     }
     p /= double(n);
-    R = R0 * pinocchio::exp3(Vector3(mean_log / double(n)));
+    R = tip_R[0] * pinocchio::exp3(Vector3(mean_log / double(n)));
     lin.setZero();
     ang.setZero();
     for (std::size_t i = 0; i < n; ++i) {
       const pinocchio::Motion V = pinocchio::getFrameVelocity(model, data, grasps[i].tip, pinocchio::LOCAL_WORLD_ALIGNED);
       lin += V.linear() + V.angular().cross(p - data.oMf[grasps[i].tip].translation());
       ang += V.angular();
+      tip_w[i] = V.angular();
     }
     lin /= double(n);
     ang /= double(n);
+  }
+
+  // ObjectImpedance.internal_moments (collocated): each tool's estimate of the object's
+  // orientation held to their mean R̄, −Ki ⊙ R̄ log3(R̄ᵀ Rᵢ) − Di ⊙ (ωᵢ − ω̄), added to f's moments.
+  void add_internal_moments(const Matrix3 & R_mean, const Vector3 & w_mean) {
+    if (!collocated || (Ki.isZero(0.0) && Di.isZero(0.0))) return;
+    for (std::size_t i = 0; i < grasps.size(); ++i) {
+      const Vector3 e = R_mean * pinocchio::log3(Matrix3(R_mean.transpose() * tip_R[i]));
+      f.block<1, 3>(static_cast<Eigen::Index>(i), 3) -= (Ki.cwiseProduct(e) + Di.cwiseProduct(tip_w[i] - w_mean)).transpose();
+    }
   }
 
   void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
@@ -164,6 +176,7 @@ struct ObjectImpedanceLaw : Controller {
       distribute(r, A_inv, resultant, g);
       f += inward - g;
     }
+    add_internal_moments(R_o, ang);
     // joint torques
     pinocchio::computeJointJacobians(model, data, q);
     const VectorXd & nle = pinocchio::nonLinearEffects(model, data, q, v);  // data.nle, untouched below
@@ -249,7 +262,10 @@ struct ObjectImpedanceLaw : Controller {
   Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt6_;
   Eigen::LLT<MatrixXd> llt_;
   bool collocated;
+  Vector3 Ki, Di;
   std::vector<pinocchio::SE3> T_M_o;  // each tool frame's inverse offset from the object frame at the start
+  std::vector<Matrix3> tip_R;  // (collocated) each tool's estimate of the object's rotation, at the last torque()
+  std::vector<Vector3> tip_w;  // and each tool's angular velocity, world axes
 };
 
 // {grasps: (grasp frame, tip frame, arm velocity indices) each, task: {hold, start, rotation, and
@@ -303,7 +319,7 @@ inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & 
     model, k.lend_data(), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
     c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
     c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq),
-    c.get<bool>("collocated"), offsets);
+    c.get<bool>("collocated"), offsets, c.vec("Ki", 3), c.vec("Di", 3));
 }
 
 inline const bool object_impedance_registered = register_controller("object_impedance", &make_object_impedance);
