@@ -15,10 +15,15 @@ example, its docs and the CHANGELOG quote, from one command.
 * the former setting under implicit Euler at 1 ms with the accuracy check on: the warning's
   force error and the span its reference covered;
 * ``advise_model``'s CPU per simulated second for the elastic model against a measured run;
+* the gains tried: the linearised closed loop's largest real part, read at the tool frames, over
+  object stiffnesses 500 … 1e5 N/m (damping 0.06 s × stiffness, as the defaults), on the held
+  strip and on the planar arms' beam;
+* examples/planar_beam.py at its settings (trapezoid, 1 ms) against 0.1 ms and 50 µs (forces,
+  sag), and its start transient: the sag's range over 0–0.1 s and over 0.4–0.5 s;
 * with ``--memory``: the resident memory Pinocchio's ``createData`` adds for a 64-element strip
   (about 2 GB: its nv³ derivative tensors).
 
-    .venv/bin/python benchmarks/flexible_beam_check.py [--memory]      # about 1.5 min
+    .venv/bin/python benchmarks/flexible_beam_check.py [--memory]      # about 3 min
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
 from coopdyn.scenes import held_beam, object_start
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+import planar_beam
 from flexible_beam import deflection
 
 GAINS: dict = {}  # the example's: ObjectImpedance's defaults, read at the tool frames (its default for a strip)
@@ -120,6 +126,23 @@ def main() -> None:
     print(
         f"advise_model, elastic: {elastic.cpu_per_second:.3g} s CPU per simulated s; a 2 s run measures {run.cpu_time / 2.0:.3g}"
     )
+    for name, strip in (("held strip", held_beam()), ("planar arms' beam", cd.scenes.planar_arms_beam())):
+        tops = []
+        for k in (500.0, 2000.0, 1e4, 1e5):
+            law = ObjectImpedance(strip, stiffness=(k, 0.05 * k), damping=(0.06 * k, 0.003 * k))
+            tops.append(f"{k:g}: {cd.linearize(strip, controller=law).eigenvalues.real.max():.3g}")
+        print(f"gains tried, {name}, read at the tool frames: object stiffness [N/m]: largest Re λ [1/s]: " + ", ".join(tops))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runs = {dt: planar_beam.main(6.0, "/tmp/planar_beam_check", html=False, dt=dt) for dt in (1e-3, 1e-4, 5e-5)}
+    fine = runs[5e-5]
+    for dt in (1e-3, 1e-4):
+        df = np.abs(runs[dt].wrenches()[..., :3] - fine.wrenches()[..., :3]).max()
+        dsag = np.abs(cd.scenes.midspan_deflection(runs[dt]) - cd.scenes.midspan_deflection(fine)).max()
+        print(f"planar example, trapezoid {dt * 1e3:g} ms vs 50 µs: forces within {df:.3g} N, sag within {dsag * 1e6:.3g} µm")
+    sag, t = cd.scenes.midspan_deflection(runs[1e-3]), runs[1e-3].t
+    early, later = np.ptp(sag[t < 0.1]), np.ptp(sag[(t >= 0.4) & (t < 0.5)])
+    print(f"planar example, start transient: sag range {early * 1e3:.3g} mm over 0–0.1 s, {later * 1e3:.3g} mm over 0.4–0.5 s")
     if args.memory:
         scene = held_beam(n_elements=64)
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

@@ -39,13 +39,13 @@ _FLAT_LIE = ("RUBX", "RUBY", "RUBZ", "RevoluteUnboundedUnaligned")
 class Linearization:
     """The result of :func:`linearize` (see the module docstring for the state)."""
 
-    A: np.ndarray  #: (2nv, 2nv) ∂ẋ/∂x
-    B: np.ndarray  #: (2nv, n_actuated) ∂ẋ/∂τ
+    A: np.ndarray  #: (2nv, 2nv) ∂ẋ/∂x [1/s, 1/s² in the acceleration rows' position columns]
+    B: np.ndarray  #: (2nv, n_actuated) ∂ẋ/∂τ [1/(kg·m²·s) or 1/(kg·s): acceleration per N·m or N]
     acceleration: np.ndarray  #: q̈ (nv,) at the state [m/s², rad/s²]
     wrench: np.ndarray  #: (L, 6) each interconnection's wrench on G at G, G axes [N, N·m]
-    dwrench_dx: np.ndarray  #: (L, 6, 2nv) its derivative with respect to x
+    dwrench_dx: np.ndarray  #: (L, 6, 2nv) its derivative with respect to x [N or N·m per m, rad, m/s or rad/s]
     exact: bool  #: False when something is finite differences: a user element's tangent, or the controller
-    controller_gain: np.ndarray | None  #: (n_actuated, 2nv) ∂τ/∂x of the controller (closed loop), else None
+    controller_gain: np.ndarray | None  #: (n_actuated, 2nv) ∂τ/∂x of the controller [N·m per rad or rad/s, …], else None
     q: np.ndarray  #: the configuration (nq,)
     v: np.ndarray  #: the velocity (nv,)
     tau: np.ndarray  #: the torques (n_actuated,)
@@ -66,10 +66,12 @@ def _omega(model: pin.Model, v: np.ndarray) -> np.ndarray:
         if kind == "FreeFlyer":
             out[i : i + 6, i : i + 6] = -motion_cross(v[i : i + 6])
         elif kind == "Spherical":
-            w = v[i : i + 3]
-            out[i : i + 3, i : i + 3] = -np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            out[i : i + 3, i : i + 3] = -pin.skew(v[i : i + 3])
         elif joint.nq != n and kind not in _FLAT_LIE:
-            raise SceneError(f"linearize: joint type {kind} ({model.names[joint.id]}) is not supported")
+            raise SceneError(
+                f"linearize: joint type {kind} ({model.names[joint.id]}) has no tangent coordinates here; supported: "
+                "free-flyer, spherical, continuous (unbounded revolute) and every joint whose configuration is its coordinates"
+            )
     return out
 
 
@@ -95,8 +97,9 @@ def linearize(
             controller's at (t, q, v).
         controller: ``controller(t, q, v) -> τ``: A becomes the closed loop's, ``A + B·∂τ/∂x``,
             with ∂τ/∂x (``controller_gain``) by central differences of the controller (4·nv
-            calls at time ``t`` [s]; ``exact`` is then False). A controller with internal state
+            calls at time ``t``; ``exact`` is then False). A controller with internal state
             (a hold, a filter) must not mind being probed.
+        t: the time the controller is evaluated at [s] (default 0).
         object_wrench: a constant external wrench on the object (6,) [N, N·m], world axes, at
             the object frame's origin; default none.
         backend: ``"native"`` (the compiled kernel's twin), ``"python"`` or ``"auto"``, as for

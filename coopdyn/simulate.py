@@ -164,6 +164,7 @@ def simulate(
     system.max_speed = max_speed
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
+    run.start = (q, v)
     if stream_to is not None:
         n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
@@ -412,6 +413,7 @@ class _Run:
         self.loop = "python"
         self.budget: int | None = None  # an adaptive method's limit on attempted steps
         self.stream: SampleFiles | None = None  # samples go to files instead of these lists
+        self.start: tuple[np.ndarray, np.ndarray] | None = None  # (q, v) at t = 0 (a stream drops its samples)
 
     def flush(self, keep_last: bool = True) -> None:
         """Move the saved samples (all but the last, whose torque may be pending) to the stream."""
@@ -474,10 +476,8 @@ class _Run:
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
-        try:
-            mode = accuracy.unstable_mode(self.system, self.q[0], self.v[0], t)
-        except Exception:  # (as the diagnosis)
-            mode = ""
+        start = self.start if self.start is not None else (self.q[0], self.v[0])
+        mode = accuracy.unstable_mode(self.system, start[0], start[1], t)
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
         partial = self.result("diverged")

@@ -104,6 +104,7 @@ class Simulator:
         system.restart()
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed)
         run.budget = budget
+        run.start = (q, v)
         config, _ = compiled.plan(
             scene,
             system,

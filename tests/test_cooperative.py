@@ -265,22 +265,27 @@ def test_an_unstable_closed_loop_is_said_so_in_the_warning_and_the_divergence() 
         cd.simulate(scene, 0.3, controller=ObjectImpedance(scene), integrator="trapezoid", dt=1e-3)
 
 
-def test_internal_moments_hold_the_tools_orientations_with_no_resultant() -> None:
-    """With measure="tips", the internal moments pull each tool's estimate of the object's
-    orientation towards their mean, in pairs that exert no net moment (to first order in the
-    spread); internal=(0, 0) leaves them out."""
+def test_internal_moments_turn_a_tool_back_towards_the_other_and_damp_it() -> None:
+    """Two planar arms hold a beam; the left tool alone turns by δ about x (its last joint) and
+    spins at ω: the tools' estimates of the object's orientation are ±δ/2 from their mean and
+    ±ω/2 from their mean spin, so the internal moments are ∓(k δ/2 + d ω/2) about x on the left
+    and right tool — opposite, with no resultant — and torque the left arm's last joint back."""
     scene = cd.scenes.planar_arms_beam(n_elements=2)
-    rng = np.random.default_rng(5)
-    q = pin.integrate(scene.model, scene.q0, 0.02 * rng.normal(size=scene.nv))
-    law = ObjectImpedance(scene, internal=(100.0, 0.0))
-    pin.forwardKinematics(scene.model, law._data, q, np.zeros(scene.nv))
-    pin.updateFramePlacements(scene.model, law._data)
+    k, d, delta, omega = 100.0, 6.0, 1e-4, 2e-3
+    law = ObjectImpedance(scene, internal=(k, d))
+    last = scene.arms[0].v_index[-1]  # the left arm's wrist joint, about world x
+    q, v = scene.q0.copy(), np.zeros(scene.nv)
+    q[scene.arms[0].q_index[-1]] += delta
+    v[last] = omega
+    law(0.0, q, v)  # (reads the kinematics at this state)
     m = law.internal_moments()
-    assert np.linalg.norm(m) > 0.1 and np.linalg.norm(m.sum(axis=0)) < 1e-3 * np.linalg.norm(m)
-    off = ObjectImpedance(scene, internal=(0.0, 0.0))
-    assert not np.any(off.internal_moments())
+    expected = -(k * delta / 2 + d * omega / 2)
+    np.testing.assert_allclose(m[0], [expected, 0.0, 0.0], rtol=1e-3, atol=1e-9)
+    np.testing.assert_allclose(m[1], [-expected, 0.0, 0.0], rtol=1e-3, atol=1e-9)
     with pytest.raises(cd.SceneError, match=r"internal must be a pair \(stiffness \[N·m/rad\], damping"):
         ObjectImpedance(scene, internal=5.0)
+    with pytest.raises(cd.SceneError, match=r"internal .* needs measure='tips'"):
+        ObjectImpedance(scene, measure="object", internal=(1.0, 0.0))
 
 
 def test_two_planar_arms_carry_a_beam_stably() -> None:

@@ -180,7 +180,8 @@ def test_energy_monitor_flags_unexplained_growth() -> None:
     dt = 1.05 * cd.advise(scene, controller=ctrl).max_stable_dt("symplectic_euler")
     v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.05
     advice = r"\(symplectic_euler\) is probably unstable or too coarse here: reduce dt, or use 'implicit_euler' or 'ros2'"
-    for backend in ("python", "native"):  # the Python loop's monitor and the compiled loop's say the same
+    backends = ("python", "native") if cd.backend.native_available() else ("python",)
+    for backend in backends:  # the Python loop's monitor and the compiled loop's say the same
         with pytest.raises(cd.EnergyBalanceError, match=r"energy balance broken at t = (.|\n)*" + advice):
             cd.simulate(
                 scene, 0.5, controller=ctrl, integrator="symplectic_euler", dt=dt, v0=v0, energy_check="raise", backend=backend

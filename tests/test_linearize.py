@@ -330,3 +330,23 @@ def test_the_closed_loop_adds_the_controllers_gain() -> None:
     np.testing.assert_allclose(closed.A, expected, rtol=0.0, atol=1e-9 * np.max(np.abs(closed.A)))
     with pytest.raises(cd.SceneError, match="controller must be a callable"):
         cd.linearize(scene, controller="pd")  # type: ignore[arg-type]
+
+
+def test_a_subclass_that_changes_the_se3_law_loses_its_exact_tangent() -> None:
+    """An SE3Spring subclass with its own evaluate and no gradient or tangent of its own is
+    differentiated by central differences (and says so), not with the parent's exact tangent;
+    the hardening spring, which brings its gradient, keeps an exact one."""
+
+    class Stiffer(SE3Spring):
+        kind = "stiffer_for_linearize"
+
+        def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+            ev = super().evaluate(T_M_G, xi, jacobians)
+            return ev._replace(G_f_G=2.0 * ev.G_f_G)
+
+    element = Stiffer(cd.diagonal(1e4, 50.0))
+    X = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), np.array([0.01, 0.02, -0.01]))
+    F_d, _ = element.tangent(X, np.zeros(6))
+    exact, _ = SE3Spring(cd.diagonal(1e4, 50.0)).tangent(X, np.zeros(6))
+    assert not Stiffer.exact_tangent and HardeningSpring.exact_tangent and SE3Spring.exact_tangent
+    np.testing.assert_allclose(F_d, 2.0 * exact, rtol=0.0, atol=1e-6 * np.max(np.abs(exact)))

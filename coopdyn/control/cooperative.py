@@ -257,6 +257,10 @@ def _mean_rotation(rotations: list[np.ndarray]) -> np.ndarray:
     return R0 @ pin.exp3(np.mean([pin.log3(R0.T @ R) for R in rotations], axis=0))
 
 
+#: the example each pair's message gives
+_EXAMPLES = {"damping": (120.0, 6.0), "internal": (100.0, 6.0)}
+
+
 def _pair(
     value: Any, name: str, units: tuple[str, str], parts: tuple[str, str] = ("linear", "angular")
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -270,7 +274,7 @@ def _pair(
     ):
         raise SceneError(
             f"ObjectImpedance: {name} must be a pair ({parts[0]} [{units[0]}], {parts[1]} [{units[1]}]), each a scalar or "
-            f"3-vector, e.g. {name}=(2000.0, 100.0); got {_validate._short(value)}"
+            f"3-vector, e.g. {name}={_EXAMPLES.get(name, (2000.0, 100.0))}; got {_validate._short(value)}"
         )
     linear, angular = (
         _validate.gain(part, f"ObjectImpedance: {name} ({label})", 3, unit, per="axis x, y, z")
@@ -296,8 +300,8 @@ class ObjectImpedance:
             frame itself (a rigid object's pose as a camera or motion capture gives it).
             ``"tips"``: the arms' own tool frames (their joint encoders), each carried to the
             object frame by its offset at the start and averaged — collocated with the arms'
-            actuators, so the loop through an elastic object is passive and stable at any
-            gains. ``"auto"`` (default): ``"tips"`` for an elastic object (one with elements of
+            actuators, so the loop through an elastic object is passive (stable at every gain
+            tried: docs/physics.md). ``"auto"`` (default): ``"tips"`` for an elastic object (one with elements of
             its own, a :class:`~coopdyn.Beam`), ``"object"`` otherwise. Feeding back a flexible
             object's own frame reaches the arms only through its compliance (non-collocated)
             and destabilises its bending modes (docs/physics.md, "Cooperative control").
@@ -338,6 +342,11 @@ class ObjectImpedance:
         self.Kp, self.Kr = _pair(stiffness, "stiffness", ("N/m", "N·m/rad"))
         self.Dp, self.Dr = _pair(damping, "damping", ("N·s/m", "N·m·s/rad"))
         #: the internal rotational stiffness and damping (3,) [N·m/rad], [N·m·s/rad] (``measure="tips"``)
+        if internal is not None and self.measure != "tips":
+            raise SceneError(
+                "ObjectImpedance: internal holds the tools' estimates of the object's orientation together; it needs "
+                f"measure='tips' (this one reads the object frame: measure={measure!r} on a {type(scene.object).__name__})"
+            )
         if internal is None:
             self.Ki, self.Di = self.Kr.copy(), self.Dr.copy()
         else:

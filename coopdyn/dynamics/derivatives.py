@@ -39,33 +39,29 @@ LOCAL = pin.ReferenceFrame.LOCAL
 class Derivatives(NamedTuple):
     """First derivatives of the dynamics at one state (see the module docstring)."""
 
-    acceleration: np.ndarray  #: q̈ (nv,)
-    da_dq: np.ndarray  #: ∂q̈/∂δq (nv, nv) in tangent coordinates
-    da_dv: np.ndarray  #: ∂q̈/∂v (nv, nv)
-    da_dtau: np.ndarray  #: ∂q̈/∂τ (nv, n_actuated): the columns of M⁻¹ of the actuated joints
+    acceleration: np.ndarray  #: q̈ (nv,) [m/s², rad/s²]
+    da_dq: np.ndarray  #: ∂q̈/∂δq (nv, nv) in tangent coordinates [1/s²]
+    da_dv: np.ndarray  #: ∂q̈/∂v (nv, nv) [1/s]
+    da_dtau: np.ndarray  #: ∂q̈/∂τ (nv, n_actuated): the columns of M⁻¹ of the actuated joints [1/kg, 1/(kg·m²)]
     wrench: np.ndarray  #: (L, 6) every element's G_f_G: wrench on G at G, G axes [N, N·m]
-    dwrench_dq: np.ndarray  #: (L, 6, nv)
-    dwrench_dv: np.ndarray  #: (L, 6, nv)
+    dwrench_dq: np.ndarray  #: (L, 6, nv) [N or N·m per m or rad]
+    dwrench_dv: np.ndarray  #: (L, 6, nv) [N or N·m per m/s or rad/s]
     exact: bool  #: False when an element's tangent is finite differences (its exact_tangent)
-
-
-def _skew(x: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
 
 
 def motion_cross(w: np.ndarray) -> np.ndarray:
     """ad(w) (6, 6) for a twist w = [v; ω]: ``ad(w)·u = w × u`` (Pinocchio's Motion.cross)."""
     out = np.zeros((6, 6))
-    out[:3, :3] = out[3:, 3:] = _skew(w[3:])
-    out[:3, 3:] = _skew(w[:3])
+    out[:3, :3] = out[3:, 3:] = pin.skew(w[3:])
+    out[:3, 3:] = pin.skew(w[:3])
     return out
 
 
 def force_cross_map(f: np.ndarray) -> np.ndarray:
     """Λ(f) (6, 6) with ``Λ(f)·δ = δ ×* f`` for a wrench f = [force; torque] (linear in δ)."""
     out = np.zeros((6, 6))
-    out[:3, 3:] = out[3:, :3] = -_skew(f[:3])
-    out[3:, 3:] = -_skew(f[3:])
+    out[:3, 3:] = out[3:, :3] = -pin.skew(f[:3])
+    out[3:, 3:] = -pin.skew(f[3:])
     return out
 
 
@@ -137,7 +133,7 @@ def dynamics_derivatives(
         f_o = np.concatenate([R.T @ object_wrench[:3], R.T @ object_wrench[3:]])
         J_o = frame_jacobian(object_frame)
         df = np.zeros((6, 6))
-        df[:3, 3:], df[3:, 3:] = _skew(f_o[:3]), _skew(f_o[3:])
+        df[:3, 3:], df[3:, 3:] = pin.skew(f_o[:3]), pin.skew(f_o[3:])
         dQ_dq += J_o.T @ (df @ J_o)
         add_wrench(object_frame, f_o)
     tau = tau_full - damping * v

@@ -5,7 +5,7 @@ moved along a trajectory while its vibration is suppressed)."""
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -17,6 +17,9 @@ from ..model.elements import Section
 from ..model.interconnection import Interconnection, diagonal
 from ..model.scene import Scene
 from ..resources import urdf_path
+
+if TYPE_CHECKING:
+    from ..result import Result
 
 #: link lengths of urdf/planar_3r.urdf [m]
 LINKS = (0.4, 0.4, 0.2)
@@ -32,7 +35,10 @@ def planar_ik(y: float, z: float, direction: float, elbow_back: bool = True) -> 
     X, Y = wz, -wy  # planar coordinates in which a link at angle θ points at (cos θ, sin θ)
     c2 = (X * X + Y * Y - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
     if not -1.0 <= c2 <= 1.0:
-        raise SceneError(f"planar_ik: the wrist at ({wy:.3g}, {wz:.3g}) m is out of the arm's reach ({l1 + l2:g} m)")
+        raise SceneError(
+            f"planar_ik: the wrist at ({wy:.3g}, {wz:.3g}) m is {math.hypot(wy, wz):.3g} m from the base, out of the arm's "
+            f"reach ({abs(l1 - l2):g} to {l1 + l2:g} m): bring the tool nearer (a smaller reach or height)"
+        )
     best = None
     for sign in (1.0, -1.0):
         t2 = sign * math.acos(c2)
@@ -98,13 +104,14 @@ def planar_arms_beam(
     return Scene(arms, beam, links, gravity=gravity)
 
 
-def midspan_deflection(result: Any) -> np.ndarray:
+def midspan_deflection(result: Result) -> np.ndarray:
     """A beam's mid-span deflection (n,) [m] along a run (a :class:`coopdyn.Result` of a scene
     holding a :class:`~coopdyn.Beam`): how far its reference (middle) node lies below the chord
     between its end nodes, along world z (negative: above the chord)."""
     beam = result.scene.object
-    if not isinstance(getattr(beam, "n_elements", None), int) or not hasattr(beam, "reference_node"):  # (a Beam's)
+    n, middle_node = getattr(beam, "n_elements", None), getattr(beam, "reference_node", None)  # (a Beam's)
+    if not isinstance(n, int) or not isinstance(middle_node, int):
         raise SceneError(f"midspan_deflection needs a run of a scene holding a Beam, not a {type(beam).__name__}")
-    ends = [result.frame_position(f"{beam.name}/node{k}") for k in (0, beam.n_elements)]
-    middle = result.frame_position(f"{beam.name}/node{beam.reference_node}")
+    ends = [result.frame_position(f"{beam.name}/node{k}") for k in (0, n)]
+    middle = result.frame_position(f"{beam.name}/node{middle_node}")
     return np.asarray(0.5 * (ends[0][:, 2] + ends[1][:, 2]) - middle[:, 2])

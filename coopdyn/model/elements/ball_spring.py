@@ -84,10 +84,6 @@ class BallSpring(SpringDamper):
         RDR = R.T @ self.D @ R
         F_d, F_x = np.zeros((6, 6)), np.zeros((6, 6))
         F_d[:3, :3] = -(R.T @ self.K @ R)
-        F_d[:3, 3:] = _skew(f_G) + RDR @ _skew(xi[:3])
+        F_d[:3, 3:] = pin.skew(f_G[:3]) + RDR @ pin.skew(xi[:3])
         F_x[:3, :3] = -RDR
         return F_d, F_x
-
-
-def _skew(x: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])

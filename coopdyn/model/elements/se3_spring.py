@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from ... import _validate
-from .base import ElementEval, SpringDamper
+from .base import Element, ElementEval, SpringDamper
 from .lie import jlog6, jlog6_of_log, log6
 
 #: complex step [m, rad]: far below round-off, so the derivative carries no truncation error
@@ -40,6 +40,14 @@ class SE3Spring(SpringDamper):
     deformation_size: ClassVar[int] = 6
     linear: ClassVar[bool] = True  # log6 of a pure translation is the translation
     exact_tangent: ClassVar[bool] = True
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass that changes :meth:`evaluate` without its own :meth:`gradient` or
+        :meth:`tangent` gets the base class's central differences, not this law's exact tangent."""
+        super().__init_subclass__(**kwargs)
+        if "evaluate" in cls.__dict__ and not ({"gradient", "tangent"} & cls.__dict__.keys()):
+            cls.exact_tangent = False
+            cls.tangent = Element.tangent  # type: ignore[method-assign]
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         K = _validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad")

@@ -49,9 +49,9 @@ public:
       out.f = f;
       out.power = bp::extract<double>(ev[3]);
       if (jacobians) {
-        out.SK = matrix6(ev[4], "S_K");
+        out.SK = matrix6(ev[4], "evaluate returned an S_K");
         const bp::object S_D = ev[5];
-        out.SD = S_D.is_none() ? Matrix6::Zero().eval() : matrix6(S_D, "S_D");
+        out.SD = S_D.is_none() ? Matrix6::Zero().eval() : matrix6(S_D, "evaluate returned an S_D");
       }
       out.theta = bp::extract<double>(ev[6]);
     } catch (const bp::error_already_set &) {
@@ -70,8 +70,8 @@ public:
     } gil;
     try {
       const bp::object out = element_.attr("tangent")(T_M_G, Eigen::VectorXd(xi));
-      F_d = matrix6(out[0], "derivative with respect to the pose");
-      F_x = matrix6(out[1], "derivative with respect to the twist");
+      F_d = matrix6(out[0], "tangent returned a derivative with respect to the pose");
+      F_x = matrix6(out[1], "tangent returned a derivative with respect to the twist");
       return bp::extract<bool>(element_.attr("exact_tangent"))();
     } catch (const bp::error_already_set &) {
       throw std::runtime_error("the Python element " + describe() + "'s tangent raised " + fetch_error());
@@ -83,7 +83,7 @@ public:
 private:
   static Matrix6 matrix6(const boost::python::object & value, const char * name) {
     const Eigen::MatrixXd m = boost::python::extract<Eigen::MatrixXd>(value);
-    if (m.rows() != 6 || m.cols() != 6) throw std::invalid_argument(std::string("it returned a ") + name + " that is not 6x6");
+    if (m.rows() != 6 || m.cols() != 6) throw std::invalid_argument(std::string(name) + " that is not 6x6");
     return m;
   }
   std::string describe() const {
