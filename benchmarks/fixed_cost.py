@@ -12,9 +12,11 @@ of ``--calls`` calls each), BLAS on one thread:
   set the state, one ``mj_step``, read the state back — what a MuJoCo user's run costs.
 
 Prints wall time per call [µs] for rk4 and the trapezoid (whose fixed cost includes its first
-factorisation), with the load average.
+factorisation), with the load average. ``--parts`` also times the pieces of a ``Simulator.run``
+(rk4) one by one: its checks, the plan of the compiled loop's settings, the kernel's loop object,
+the step, the samples and the ``Result``.
 
-    .venv/bin/python benchmarks/fixed_cost.py [--calls 200] [--rounds 7]
+    .venv/bin/python benchmarks/fixed_cost.py [--calls 200] [--rounds 7] [--parts]
 """
 
 from __future__ import annotations
@@ -65,6 +67,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=200, help="calls per round (default 200)")
     parser.add_argument("--rounds", type=int, default=7, help="interleaved rounds (default 7)")
+    parser.add_argument("--parts", action="store_true", help="also time the pieces of Simulator.run")
     args = parser.parse_args()
     print(f"wall time per call [µs], median of {args.rounds} interleaved rounds of {args.calls} calls")
     with single_threaded_blas():
@@ -86,7 +89,58 @@ def main() -> None:
                 enter.__self__.__exit__(None, None, None)  # type: ignore[attr-defined]
             cells = "  ".join(f"{name}: {statistics.median(t) * 1e6:7.1f}" for name, t in times.items())
             print(f"{method:10s} {cells}")
+    if args.parts:
+        _parts(args.calls * args.rounds)
     print(f"load average {os.getloadavg()[0]:.2f}")
+
+
+def _parts(n: int) -> None:
+    """Simulator.run's pieces, each timed over n one-step rk4 runs (medians would hide nothing
+    here: each piece is one call), as its code runs them."""
+    from coopdyn import compiled
+    from coopdyn.budget import check_budget
+    from coopdyn.simulate import _check_samples, _checked_duration, _Run
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4)
+    sim = cd.Simulator(scene, GravityCompensationPD(scene), "rk4", 1e-3)
+    system, method = sim.system, sim.method
+    spent: dict[str, float] = {}
+
+    def lap(name: str, t0: float) -> float:
+        t = time.perf_counter()
+        spent[name] = spent.get(name, 0.0) + t - t0
+        return t
+
+    for i in range(n + 100):
+        if i == 100:  # (warmed up)
+            spent.clear()
+        t0 = time.perf_counter()
+        t_final = _checked_duration(1e-3)
+        q, v = scene.check_state(scene.q0, scene.v0)
+        budget = check_budget(scene, t_final, sim.dt, sim.save_every, sim.max_steps, sim.max_memory)
+        _check_samples(t_final, sim.control_dt, budget)
+        system.restart()
+        run = _Run(scene, system, method, sim.dt, sim.save_every, t_final, sim.max_speed)
+        t0 = lap("checks, the controller's gains", t0)
+        config, _ = compiled.plan(
+            scene, system, method, q0=q, v0=v, dt=sim.dt, t_final=t_final, n_steps=run.n_steps,
+            save_every=sim.save_every, max_speed=sim.max_speed, energy_check="off",
+        )  # fmt: skip
+        t0 = lap("the plan (settings from the typed specs)", t0)
+        native = system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
+        t0 = lap("the kernel's loop object", t0)
+        native.advance(compiled.FIRST_CHUNK)
+        native.take_events()
+        t0 = lap("the step", t0)
+        samples = compiled.samples(native, scene)
+        run.t, run.q, run.v, run.tau = samples.t.tolist(), list(samples.q), list(samples.v), list(samples.tau)
+        t0 = lap("the samples", t0)
+        run.result()
+        lap("the Result", t0)
+    print(f"Simulator.run's pieces, rk4, one step, mean of {n} runs [µs]:")
+    for name, total in spent.items():
+        print(f"  {name:45s} {total / n * 1e6:7.1f}")
+    print(f"  {'total':45s} {sum(spent.values()) / n * 1e6:7.1f}")
 
 
 if __name__ == "__main__":
