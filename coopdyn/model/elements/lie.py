@@ -19,7 +19,7 @@ The C++ twin is ``src/native/lie.hpp``; the two agree to round-off.
 from __future__ import annotations
 
 import math
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -76,13 +76,18 @@ def log6(M: pin.SE3) -> tuple[np.ndarray, float]:
 
 def jlog6(M: pin.SE3, e: np.ndarray, theta: float) -> np.ndarray:
     """Jlog6(M) (6, 6), given ``(e, θ) = log6(M)``: ė = Jlog6 ξ for the body twist ξ of M."""
-    w, p = e[3:], M.translation
     a, beta, beta_dot = coefficients(theta)
-    J = np.zeros((6, 6))
+    return _jlog6(e[3:], M.translation, theta * theta, a, beta, beta_dot, float)
+
+
+def _jlog6(w: np.ndarray, p: np.ndarray, t2: Any, a: Any, beta: Any, beta_dot: Any, dtype: Any) -> np.ndarray:
+    """Jlog6 from the rotation's logarithm w, the translation p, θ² and the coefficients (real
+    or complex: no operation conjugates)."""
+    J = np.zeros((6, 6), dtype=dtype)
     A = beta * np.outer(w, w) + 0.5 * _skew(w)
     A[np.diag_indices(3)] += a
-    wTp = float(w @ p)
-    v = (beta_dot * wTp) * w - (theta * theta * beta_dot + 2.0 * beta) * p
+    wTp = w @ p
+    v = (beta_dot * wTp) * w - (t2 * beta_dot + 2.0 * beta) * p
     C = np.outer(v, w) + beta * np.outer(w, p) + 0.5 * _skew(p)
     C[np.diag_indices(3)] += wTp * beta
     J[:3, :3] = A
@@ -119,15 +124,4 @@ def jlog6_of_log(e: np.ndarray) -> np.ndarray:
     a, beta, beta_dot, b, c = _coefficients_t2(t2)
     W = _skew(w)
     p = rho + b * (W @ rho) + c * (W @ (W @ rho))  # the translation of M
-    dtype = np.result_type(e, complex) if np.iscomplexobj(e) else float
-    J = np.zeros((6, 6), dtype=dtype)
-    A = beta * np.outer(w, w) + 0.5 * W
-    A[np.diag_indices(3)] += a
-    wTp = w @ p
-    v = (beta_dot * wTp) * w - (t2 * beta_dot + 2.0 * beta) * p
-    C = np.outer(v, w) + beta * np.outer(w, p) + 0.5 * _skew(p)
-    C[np.diag_indices(3)] += wTp * beta
-    J[:3, :3] = A
-    J[3:, 3:] = A
-    J[:3, 3:] = C @ A
-    return J
+    return _jlog6(w, p, t2, a, beta, beta_dot, np.result_type(e, complex) if np.iscomplexobj(e) else float)
