@@ -239,7 +239,9 @@ def _cli_warning(message: Warning | str, category: type[Warning], filename: str,
 def _cli_message(exc: BaseException) -> str:
     """The error's message in command-line terms: where the trajectory was saved (not the Python
     attribute ``.result``: its ``detail``), command-line options instead of keyword arguments."""
-    text = _MAX_STEPS[0].sub(_MAX_STEPS[1], getattr(exc, "detail", str(exc))).rstrip(".") + "."
+    text = _MAX_STEPS[0].sub(_MAX_STEPS[1], getattr(exc, "detail", str(exc))).rstrip(".")
+    if not text.endswith(("?", "!")):  # (a question keeps its own mark: no "?.")
+        text += "."
     saved = [Path(p) for p in getattr(exc, "saved", ())]
     if saved:
         folder = saved[0].parent

@@ -352,12 +352,19 @@ class Result:
             )
         try:
             meta = json.loads(str(arrays["meta"]))
-            if meta.pop("format") != RESULT_FORMAT:
-                raise ValueError("an unknown format")
+            written = meta.pop("format", None)
+            if written != RESULT_FORMAT:
+                by = meta.get("coopdyn", "an unknown version")
+                raise SimulationError(
+                    f"{path} is in format {written!r}, written by coopdyn {by}; this coopdyn ({__version__}) reads "
+                    f"{RESULT_FORMAT!r}: open it with the coopdyn that wrote it, or run the simulation again"
+                )
             meta.pop("coopdyn")
             meta.pop("columns")
             _check_meta(meta)
             scene = build(meta.pop("scene"))
+        except SimulationError:
+            raise
         except CoopdynError as exc:
             raise SimulationError(f"{path}: its scene cannot be rebuilt: {exc}") from exc
         except (ValueError, KeyError, TypeError, AttributeError) as exc:

@@ -104,3 +104,17 @@ def test_planar_beam_example_tells_the_resolved_runs_story(tmp_path: Path) -> No
     fine = example.main(2.0, str(tmp_path / "fine"), html=False, dt=1e-4)
     assert np.abs(short.wrenches()[..., :3] - fine.wrenches()[..., :3]).max() < 0.05
     assert np.abs(midspan_deflection(short) - midspan_deflection(fine)).max() < 1e-5
+
+
+def test_cli_messages_end_in_one_mark(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A message that ends in a question keeps its question mark alone ("…'[[arms]]'?", not "?.");
+    the others end in a full stop."""
+    from coopdyn.__main__ import main
+
+    scene = tmp_path / "typo.toml"
+    scene.write_text('[scene]\nbuilder = "linear_book"\n[simulation]\nduration = 0.1\n[[arm]]\nname = "left"\n')
+    assert main(["simulate", str(scene)]) == 2
+    assert capsys.readouterr().err.splitlines()[0].endswith("Did you mean '[[arms]]'?")
+    scene.write_text('[scene]\nbuilder = "linear_book"\n[simulation]\nduration = -1\n')
+    assert main(["simulate", str(scene)]) == 2
+    assert capsys.readouterr().err.splitlines()[0].endswith("must be >= 0 [s], got -1.")

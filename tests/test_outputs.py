@@ -122,6 +122,16 @@ dt = 1e-3
             r"\[simulation\] integrator: unknown integrator 'rk45'; valid: \[",
         ),
         (GOOD.replace("m = 25.0", "m = -1.0"), r"\[scene\]: linear book parameter m must be > 0 \[kg\], got -1.0"),
+        (
+            GOOD.replace("[simulation]", "[simulaton]"),
+            r"line 6: \[simulaton\]: unknown table; valid tables: .* Did you mean 'simulation'\?$",
+        ),
+        (
+            GOOD + '\n[[arm]]\nname = "left"\n',
+            r"line 10: \[\[arm\]\] #1: unknown array of tables; valid: .* Did you mean '\[\[arms\]\]'\?$",
+        ),
+        (GOOD.replace("duration = 0.1", "duration = -1"), r"line 7: \[simulation\] duration: must be >= 0 \[s\], got -1"),
+        (GOOD.replace("dt = 1e-3", "dt = 1e-3\nsave_every = 0"), r"line 9: \[simulation\] save_every: must be >= 1 .*, got 0"),
         ("[scene\nbuilder =", r"bad.toml: not valid TOML"),
         (GOOD.replace("[scene]", "[scene]\n[simulation]"), r"bad.toml: not valid TOML"),
     ],

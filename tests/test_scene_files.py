@@ -182,6 +182,10 @@ def test_loading_what_is_not_a_result_says_so(tmp_path: Path, book: cd.Scene) ->
         ({"q": res.q.astype(int)}, r"q is int64 of shape \(11, 3\); its scene and the 11 samples need floats of shape \(11, 3\)"),
         ({"meta": {**meta, "dt": "x"}}, r"dt = 'x' is not of type float"),
         ({"meta": {**meta, "n_rhs": float("nan")}}, r"n_rhs = nan is not of type int"),
+        (
+            {"meta": {**meta, "format": "coopdyn.result/2", "coopdyn": "9.0"}},
+            r"is in format 'coopdyn.result/2', written by coopdyn 9.0; this coopdyn \(.+\) reads 'coopdyn.result/1'",
+        ),
     ):
         bad = {**arrays, "meta": np.array(json.dumps(change.pop("meta", meta)))} | change
         np.savez(tmp_path / "damaged.npz", **{k: v for k, v in bad.items() if v is not None})

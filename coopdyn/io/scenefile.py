@@ -26,7 +26,7 @@ from .. import _validate, scenes
 from .._validate import _short
 from ..control import ComputedTorque, GravityCompensationPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
-from ..errors import CoopdynError, SceneFileError, SimulationError
+from ..errors import CoopdynError, SceneFileError, SimulationError, did_you_mean
 from ..integrators import INTEGRATORS
 from ..metrics import metric_lines, run_metrics
 from ..model.description import DescriptionError, build
@@ -227,11 +227,15 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     for table, value in doc.items():
         if table in ("arms", "interconnections") and isinstance(value, list):
             continue
+        if isinstance(value, list) and value and all(isinstance(x, dict) for x in value):  # [[table]], unknown
+            arrays = [f"[[{t}]]" for t in ("arms", "interconnections")]
+            hint = did_you_mean(f"[[{table}]]", arrays)
+            raise f.error(f"unknown array of tables; valid: {', '.join(arrays)}.{hint}", table, None, 0)
         if not isinstance(value, dict):
             hint = f" (write [[{table}]], one per entry)" if table in ("arms", "interconnections") else ""
             raise f.error(f"a top-level key; everything goes in one of the tables {list(TABLES)}{hint}", None, table)
         if table not in TABLES:
-            raise f.error(f"unknown table; valid tables: {list(TABLES)}", table)
+            raise f.error(f"unknown table; valid tables: {list(TABLES)}.{did_you_mean(table, TABLES)}", table)
     if "simulation" not in doc:
         raise SceneFileError(f"{path}: missing table [simulation]")
     scene, builder_name, kwargs = _scene(f, doc)
@@ -249,8 +253,10 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     if not dt >= 1e-12:
         raise f.error(f"must be >= 1e-12 [s], got {dt:g}", "simulation", "dt")
     save_every = _check_type(f, "simulation", "save_every", sim.get("save_every", max(1, round(0.01 / dt))), int)
-    if duration < 0 or save_every < 1:
-        raise f.error("need duration >= 0 [s], dt > 0 [s], save_every >= 1", "simulation")
+    if duration < 0:
+        raise f.error(f"must be >= 0 [s], got {duration:g}", "simulation", "duration")
+    if save_every < 1:
+        raise f.error(f"must be >= 1 (keep every k-th step), got {save_every}", "simulation", "save_every")
     control_dt = None
     if "control_dt" in sim:
         control_dt = _check_type(f, "simulation", "control_dt", sim["control_dt"], float)
