@@ -184,3 +184,28 @@ def test_stiffness_up_to_the_float_limit_is_validated_without_overflow() -> None
     np.testing.assert_array_equal(np.diag(scene.links[0].element.K), huge)
     with pytest.raises(cd.SceneError, match="smallest eigenvalue is -1e\\+308"):
         cd.Scene([], box, [cd.Interconnection(None, stiffness=np.diag([1e308] * 5 + [-1e308]))])
+
+
+def test_an_arm_with_continuous_joints_takes_its_angles_or_rounded_pairs() -> None:
+    """A Kinova (three continuous joints: nq 9, nv 6) takes q0 as six angles [rad] — each
+    continuous one becomes its (cos θ, sin θ) — or as the configuration, a pair rounded to two
+    decimals normalised (its angle is unchanged); a pair that is no (cos, sin), or a wrong
+    length, is refused with the joint and both accepted lengths."""
+    from coopdyn.model.arm import load_arm
+
+    angles = np.array([0.1, 2.9, 1.0, 0.4, 1.5, 0.6])
+    exact = load_arm(cd.Arm("k", "kinova", q0=angles))
+    assert exact.q0.shape == (9,)
+    np.testing.assert_allclose(exact.q0[:2], [np.cos(0.1), np.sin(0.1)], atol=1e-15)
+    rounded = load_arm(cd.Arm("k", "kinova", q0=np.round(exact.q0, 2)))
+    model = rounded.model
+    for j in range(1, model.njoints):
+        if model.joints[j].nq == 2:  # (each continuous pair: unit length, its angle as rounded)
+            i = model.joints[j].idx_q
+            assert np.hypot(*rounded.q0[i : i + 2]) == pytest.approx(1.0, abs=1e-15)
+            angle = np.arctan2(*np.round(exact.q0, 2)[i : i + 2][::-1])
+            assert np.arctan2(rounded.q0[i + 1], rounded.q0[i]) == pytest.approx(angle, abs=1e-14)
+    with pytest.raises(cd.SceneError, match=r"continuous joint 'j2s6s200_joint_1' takes \(cos θ, sin θ\).*got \(1, 1\)"):
+        load_arm(cd.Arm("k", "kinova", q0=np.ones(9)))
+    with pytest.raises(cd.SceneError, match=r"q0 must have 9 values \(the configuration\) or 6 \(one per joint"):
+        load_arm(cd.Arm("k", "kinova", q0=np.ones(4)))

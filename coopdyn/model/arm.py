@@ -47,8 +47,10 @@ class Arm:
         tip_frame: frame of the URDF where the interconnection attaches (the tool frame). Known
             robots have a default (Panda: ``panda_hand_tcp``).
         base: pose of the arm's root in the world: ``pin.SE3``, 4x4 matrix or translation [m].
-        q0: initial configuration of the unlocked joints, shape (nq_arm,) [rad or m]. Default:
-            the robot's reference posture (SRDF ``default``) or its neutral configuration.
+        q0: initial configuration of the unlocked joints, shape (nq_arm,) [rad or m] — a
+            continuous joint as its (cos θ, sin θ) pair — or, for an arm with continuous joints,
+            one value per joint (nv_arm,) [rad or m], a continuous joint's angle. Default: the
+            robot's reference posture (SRDF ``default``) or its neutral configuration.
         locked_joints: joints removed from the model, held at their ``q0``/reference value; a
             mapping gives the value explicitly. ``None`` uses the robot's default (Panda: fingers).
         joint_damping: viscous joint friction ``τ_f = -d q̇`` [N·m·s/rad or N·s/m]: a scalar, one
@@ -323,7 +325,7 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
         raise SceneError(f"{what}: tip_frame 'universe' is the world frame, not a frame of the arm")
 
     if arm.q0 is not None:
-        q0 = _validate.finite_array(arm.q0, f"{what}, q0", (model.nq,))
+        q0 = _configuration(model, arm.q0, what)
     else:
         q0 = q_default
     _check_limits(model, q0, what)
@@ -340,6 +342,36 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
         for g in visual.geometryObjects:
             g.name = f"{arm.name}/{g.name}"
     return LoadedArm(spec=arm, model=model, q0=q0, tip_frame=f"{arm.name}/{tip}", base=base, damping=damping, visual=visual)
+
+
+def _configuration(model: pin.Model, value: Any, what: str) -> np.ndarray:
+    """An arm's q0 (nq,): given as the configuration (nq values; a continuous joint as its
+    (cos θ, sin θ) pair, normalised when rounding left it within 5 % of unit length), or — when
+    the arm has continuous joints (nq > nv) — as one value per degree of freedom (nv values, a
+    continuous joint's angle θ [rad]), mapped by ``pin.integrate`` from the neutral configuration."""
+    shapes = [(model.nq,)] if model.nq == model.nv else [(model.nq,), (model.nv,)]
+    q = _validate.finite_array(value, f"{what}, q0", None)
+    if q.shape not in shapes:
+        per = f"{model.nq} values (the configuration)" + (
+            f" or {model.nv} (one per joint, a continuous joint's angle in rad)" if model.nq != model.nv else ""
+        )
+        raise SceneError(f"{what}, q0 must have {per}, got shape {q.shape}")
+    if model.nq != model.nv and q.shape == (model.nv,):
+        return pin.integrate(model, pin.neutral(model), q)
+    q = q.copy()
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        if joint.nq == 2 and joint.nv == 1:  # a continuous joint: (cos θ, sin θ)
+            pair = q[joint.idx_q : joint.idx_q + 2]
+            norm = float(np.hypot(*pair))
+            if abs(norm - 1.0) > 0.05:  # (rounding leaves it near 1; its angle, atan2, is unchanged by normalising)
+                raise SceneError(
+                    f"{what}, q0: the continuous joint {model.names[j]!r} takes (cos θ, sin θ), a pair of unit length; got "
+                    f"({pair[0]:.6g}, {pair[1]:.6g}), of length {norm:.6g}. Give q0 as one angle per joint ({model.nv} values "
+                    "[rad]) instead"
+                )
+            q[joint.idx_q : joint.idx_q + 2] = pair / norm
+    return q
 
 
 def _inside_limits(model: pin.Model, q: np.ndarray) -> np.ndarray:
