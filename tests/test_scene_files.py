@@ -409,3 +409,58 @@ def test_arrows_cameras_and_meshes_of_the_animation(tmp_path: Path, book: cd.Sce
     assert angles.max() < 75.0 / 2 * 4 / 3 and angles.max() > 15.0  # in view, and not a speck
     geom = visual_model(book)  # the book's slider URDF has visual geometry only: it is drawn, not left out
     assert {g.name.split("/")[0] for g in geom.geometryObjects} >= {"tip1", "tip2"}
+
+
+def test_arms_of_two_robots_are_placed_by_inverse_kinematics_from_a_scene_file(tmp_path: Path) -> None:
+    """[[arms]] tool_pose: a UR5 and a Panda start with their tool frames at the given world
+    poses (to 1e-8 m and rad) on two faces of a box; an unreachable pose and q0 with tool_pose
+    are refused with the arm's line."""
+    text = """
+[[arms]]
+name = "left"
+robot = "ur5"
+tip_frame = "tool0"
+base = { translation = [0.0, -0.5, 0.0], rpy = [0.0, 0.0, 1.5707963267948966] }
+tool_pose = { translation = [0.0, -0.1, 0.7], rpy = [-1.5707963267948966, 0.0, 0.0] }
+
+[[arms]]
+name = "right"
+robot = "panda"
+base = { translation = [0.0, 0.6, 0.0], rpy = [0.0, 0.0, -1.5707963267948966] }
+tool_pose = { translation = [0.0, 0.1, 0.7], rotation = [[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]] }
+
+[object]
+type = "box"
+mass = 1.0
+size = [0.2, 0.2, 0.2]
+pose = [0.0, 0.0, 0.7]
+
+[[interconnections]]
+arm = "left"
+stiffness = [1e4, 1e4, 1e4, 100.0, 100.0, 100.0]
+
+[[interconnections]]
+arm = "right"
+stiffness = [1e4, 1e4, 1e4, 100.0, 100.0, 100.0]
+
+[simulation]
+duration = 0.01
+"""
+    path = tmp_path / "ik.toml"
+    path.write_text(text)
+    scene = load(path).scene
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    targets = {
+        "left": pin.SE3(pin.rpy.rpyToMatrix(-np.pi / 2, 0.0, 0.0), np.array([0.0, -0.1, 0.7])),
+        "right": pin.SE3(np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]), np.array([0.0, 0.1, 0.7])),
+    }
+    for lk in scene.links:
+        assert np.max(np.abs(pin.log6(data.oMf[lk.tip_frame].actInv(targets[lk.name])).vector)) < 1e-8
+    path.write_text(text.replace("translation = [0.0, 0.1, 0.7]", "translation = [0.0, -2.0, 0.7]"))
+    said = r"line 13: \[\[arms\]\] #2 tool_pose: inverse kinematics of arm 'right' did not reach"
+    with pytest.raises(SceneFileError, match=said):
+        load(path)
+    path.write_text(text.replace('robot = "panda"', 'robot = "panda"\nq0 = [0.0, 0.0, 0.0, -1.5, 0.0, 1.5, 0.8]'))
+    with pytest.raises(SceneFileError, match=r"give q0 or tool_pose .*, not both"):
+        load(path)

@@ -35,6 +35,7 @@ from ..errors import SceneError, did_you_mean
 from .arm import Arm, _robot_name, load_arm
 from .elements import ELEMENTS, Section, lookup
 from .fields import Field, numbers, pose_data
+from .ik import solve_ik
 from .interconnection import Interconnection
 from .object_types import description_types
 from .objects import SceneObject
@@ -69,6 +70,10 @@ ARM: dict[str, Field] = {
     "tip_frame": Field("string", "the tool frame the interconnection attaches to (known robots have a default)"),
     "base": Field("pose", "pose of the arm's root in the world [m]"),
     "q0": Field("vector", "initial configuration of the unlocked joints [rad or m]; default: the reference posture"),
+    "tool_pose": Field(
+        "pose",
+        "world pose the tool frame starts at [m], reached by inverse kinematics within the joint limits (instead of q0)",
+    ),
     "locked_joints": Field("names", "joints removed from the model and held at a value; default: the robot's (Panda: fingers)"),
     "joint_damping": Field("joint_damping", "viscous joint friction [N·m·s/rad or N·s/m]; default 0"),
     "mass_overrides": Field("masses", "joint name = total mass [kg] of the body the joint carries"),
@@ -401,11 +406,20 @@ def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:
         kwargs["robot"] = str((folder / robot).resolve()) if not Path(robot).is_absolute() else robot
     if "package_dirs" in kwargs:
         kwargs["package_dirs"] = [str((folder / p).resolve()) for p in kwargs["package_dirs"]]
+    tool_pose = kwargs.pop("tool_pose", None)
+    if tool_pose is not None and "q0" in kwargs:
+        raise DescriptionError("give q0 or tool_pose (placed by inverse kinematics), not both", where._replace(key="tool_pose"))
     arm = Arm(**kwargs)
     try:
         load_arm(arm)  # checked here, where a message can say which entry (URDFs are parsed once)
     except SceneError as exc:
         raise DescriptionError(str(exc), where) from None
+    if tool_pose is not None:
+        try:
+            arm = arm.replace(q0=solve_ik(arm, _validate.se3(tool_pose, "tool_pose")))
+        except SceneError as exc:
+            hint = f"{exc} (check the pose, the base and the tip_frame)"
+            raise DescriptionError(hint, where._replace(key="tool_pose")) from None
     return arm
 
 
