@@ -19,11 +19,14 @@ SQUEEZE = 15.0  # commanded internal force per grasp [N]
 OUT = "out/cooperative_lift.png"
 
 
-def main(t_final: float = T_FINAL, n_arms: int = N_ARMS, out: str = OUT) -> np.ndarray:
+def main(
+    t_final: float = T_FINAL, n_arms: int = N_ARMS, out: str = OUT, dt: float = DT, integrator: str = "implicit_euler"
+) -> np.ndarray:
     """Simulate, print tracking error and squeeze, plot; return the final squeeze forces [N]."""
     scene = cd.scenes.facing_arms("panda", n_arms=n_arms, stiffness=STIFFNESS, damping=0.002)
     task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
-    res = cd.simulate(scene, t_final, controller=ObjectImpedance(scene, task), integrator="implicit_euler", dt=DT, save_every=10)
+    controller = ObjectImpedance(scene, task)
+    res = cd.simulate(scene, t_final, controller=controller, integrator=integrator, dt=dt, save_every=max(1, round(1e-2 / dt)))
     squeeze = res.squeeze()[-1]
     error = res.tracking_error(task).max()
     print(f"{n_arms} arms: tracking error max {error * 1e3:.2f} mm; squeeze at the end {squeeze.round(3)} N")

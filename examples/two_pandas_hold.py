@@ -16,10 +16,10 @@ DAMPING = 0.005  # interconnection damping / stiffness [s]
 KP, KD = 200.0, 20.0  # joint PD gains [N·m/rad], [N·m·s/rad]
 
 
-def main(t_final: float = T_FINAL) -> np.ndarray:
+def main(t_final: float = T_FINAL, dt: float = DT) -> np.ndarray:
     """Simulate and print the interconnection forces on the box; return them (2, 3) [N]."""
     scene = cd.scenes.facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
-    res = cd.simulate(scene, t_final, controller=GravityCompensationPD(scene, KP, KD), dt=DT, save_every=100)
+    res = cd.simulate(scene, t_final, controller=GravityCompensationPD(scene, KP, KD), dt=dt, save_every=max(1, round(0.05 / dt)))
     forces = np.array([res.wrench(i)[-1, :3] for i in range(2)])
     for arm, f in zip(scene.arms, forces, strict=True):
         print(f"{arm.name:>5}: force on the box = {np.array2string(f, precision=6)} N")
