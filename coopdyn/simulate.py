@@ -14,6 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from . import _progress, _signals, _validate, accuracy, compiled
 from .budget import check_budget, step_count
@@ -30,6 +31,7 @@ from .errors import (
     KernelError,
     LogMapWarning,
     SceneError,
+    SceneWarning,
     SimulationError,
     SimulationInterrupted,
     StepBudgetError,
@@ -40,6 +42,7 @@ from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
 from .stability import ADVISED, advise
+from .statics import equilibrium
 
 
 def simulate(
@@ -162,6 +165,8 @@ def simulate(
 
     system = System(Dynamics(scene, backend), controller, object_wrench, control_dt)
     system.max_speed = max_speed
+    if accuracy_check != "off" and not has_constraints(scene):
+        _warn_if_soft(scene, q, system.dynamics.backend)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
     run.start = (q, v)
@@ -309,6 +314,36 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         message += accuracy.growth_text(system, q, v, t_final)
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
+
+
+#: the fraction of the object's size beyond which its sag on its grasps under gravity warns
+SAG_LIMIT = 0.25
+
+
+def _warn_if_soft(scene: Scene, q: np.ndarray, backend: str) -> None:
+    """Warn (SceneWarning) when the object, its grasps held still at q, would rest farther from
+    its pose at q than :data:`SAG_LIMIT` of its size (twice its grasps' largest distance from the
+    object frame, at least 5 cm): interconnections far too soft for its weight — e.g. a stiffness
+    thought in N/mm. Nothing is said when the rest pose cannot be found (a free direction)."""
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, q)
+    start = data.oMf[scene.object_frame].translation.copy()
+    reach = [np.linalg.norm(data.oMf[lk.grasp_frame].translation - start) for lk in scene.links]
+    size = max(0.05, 2.0 * max(reach, default=0.0))
+    try:
+        rest = equilibrium(scene, q, tol=1e-6, max_iter=50, backend=backend).q
+    except (CoopdynError, ArithmeticError, ValueError, np.linalg.LinAlgError):
+        return
+    pin.framesForwardKinematics(scene.model, data, rest)
+    sag = float(np.linalg.norm(data.oMf[scene.object_frame].translation - start))
+    if sag > SAG_LIMIT * size:
+        warnings.warn(
+            f"with its grasps held still, the object would come to rest {sag * 1e3:.4g} mm from where it starts, "
+            f"{sag / size:.0%} of its size ({size * 1e3:.4g} mm): its interconnections are far too soft for its weight. "
+            "Stiffnesses are in N/m and N·m/rad (not N/mm); coopdyn.statics.equilibrium(scene) gives the rest pose",
+            SceneWarning,
+            stacklevel=3,
+        )
 
 
 def _checked_duration(t_final: Any) -> float:

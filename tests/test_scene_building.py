@@ -209,3 +209,18 @@ def test_an_arm_with_continuous_joints_takes_its_angles_or_rounded_pairs() -> No
         load_arm(cd.Arm("k", "kinova", q0=np.ones(9)))
     with pytest.raises(cd.SceneError, match=r"q0 must have 9 values \(the configuration\) or 6 \(one per joint"):
         load_arm(cd.Arm("k", "kinova", q0=np.ones(4)))
+
+
+def test_grasps_far_too_soft_for_the_object_warn_with_the_sag() -> None:
+    """A stiffness thought in N/mm (10 for 10 N/mm): the 2 kg box would hang about 1 m below its
+    start on its grasps — the run warns with that figure; at 1e4 N/m (2 mm of sag) it does not,
+    nor on the book's sliders, the held strip or the planar arms' beam."""
+    import warnings
+
+    soft = cd.scenes.facing_arms("panda", stiffness=10.0)
+    with pytest.warns(cd.SceneWarning, match=r"would come to rest 9\d\d mm from where it starts, \d+% of its size \(200 mm\)"):
+        cd.simulate(soft, 0.01, dt=1e-3)
+    for scene in (cd.scenes.facing_arms("panda", stiffness=1e4), cd.scenes.linear_book(), cd.scenes.held_beam(n_elements=2)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", cd.SceneWarning)
+            cd.simulate(scene, 0.01, dt=1e-3, integrator="trapezoid")
