@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _validate
-from .closed_loop import Controller
+from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .dynamics.derivatives import motion_cross
 from .errors import SceneError
@@ -117,43 +117,41 @@ def linearize(
     t = _validate.number(t, "t", "s")
     if controller is not None and not callable(controller):
         raise SceneError(f"linearize: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}")
-    if tau is None and controller is not None:
-        tau = _controller_torque(scene, controller, t, q, v)
+    dynamics = Dynamics(scene, backend)
+    system = None if controller is None else System(dynamics, controller)  # (its checked torque)
+    if tau is None and system is not None:
+        tau = system.torque(t, q, v)
     tau = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
     wrench = None if object_wrench is None else _validate.finite_array(object_wrench, "object_wrench [N, N·m]", (6,))
     omega = _omega(scene.model, v)
-    d = Dynamics(scene, backend).derivatives(q, v, tau, wrench)
+    d = dynamics.derivatives(q, v, tau, wrench)
     A = np.zeros((2 * nv, 2 * nv))
     A[:nv, :nv], A[:nv, nv:] = omega, np.eye(nv)
     A[nv:, :nv], A[nv:, nv:] = d.da_dq, d.da_dv
     B = np.zeros((2 * nv, scene.n_actuated))
     B[nv:] = d.da_dtau
     dW = np.concatenate([d.dwrench_dq, d.dwrench_dv], axis=2)
-    gain = None if controller is None else controller_gain(scene, controller, t, q, v)
+    gain = None if system is None else controller_gain(system, t, q, v)
     if gain is not None:
         A += B @ gain
     exact = d.exact and gain is None
     return Linearization(A, B, d.acceleration, d.wrench, dW, exact, gain, q, v, np.array(tau, dtype=float), t)
 
 
-def _controller_torque(scene: Scene, controller: Controller, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    out = controller(t, q, v)
-    return _validate.finite_array(out, "the controller's torque [N·m or N]", (scene.n_actuated,))
-
-
-def controller_gain(scene: Scene, controller: Controller, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """∂τ/∂x (n_actuated, 2nv) of ``controller`` at (t, q, v) in the tangent coordinates of
-    :func:`linearize`, by central differences (steps 1e-6 in δq [m or rad], 1e-6·max(1, |v|) in v)."""
+def controller_gain(system: System, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """∂τ/∂x (n_actuated, 2nv) of the closed loop's controller at (t, q, v) in the tangent
+    coordinates of :func:`linearize`, by central differences of its checked torque
+    (:meth:`System.torque`; steps 1e-6 in δq [m or rad], 1e-6·max(1, |v|) in v)."""
+    scene = system.dynamics.scene
     nv, model = scene.nv, scene.model
     out = np.empty((scene.n_actuated, 2 * nv))
     h_q, h_v = 1e-6, 1e-6 * max(1.0, float(np.max(np.abs(v), initial=0.0)))
     for k in range(nv):
         e = np.zeros(nv)
         e[k] = h_q
-        plus = _controller_torque(scene, controller, t, pin.integrate(model, q, e), v)
-        minus = _controller_torque(scene, controller, t, pin.integrate(model, q, -e), v)
+        plus, minus = system.torque(t, pin.integrate(model, q, e), v), system.torque(t, pin.integrate(model, q, -e), v)
         out[:, k] = (plus - minus) / (2.0 * h_q)
         e[k] = h_v
-        plus, minus = _controller_torque(scene, controller, t, q, v + e), _controller_torque(scene, controller, t, q, v - e)
+        plus, minus = system.torque(t, q, v + e), system.torque(t, q, v - e)
         out[:, nv + k] = (plus - minus) / (2.0 * h_v)
     return out
