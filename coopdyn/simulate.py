@@ -42,7 +42,7 @@ from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
 from .stability import ADVISED, advise
-from .statics import equilibrium
+from .statics import rest_pose
 
 
 def simulate(
@@ -166,7 +166,7 @@ def simulate(
     system = System(Dynamics(scene, backend), controller, object_wrench, control_dt)
     system.max_speed = max_speed
     if accuracy_check != "off" and not has_constraints(scene):
-        _warn_if_soft(scene, q, system.dynamics.backend)
+        _warn_if_soft(system.dynamics, q)
     run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
     run.budget = budget
     run.start = (q, v)
@@ -320,21 +320,24 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
 SAG_LIMIT = 0.25
 
 
-def _warn_if_soft(scene: Scene, q: np.ndarray, backend: str) -> None:
+def _warn_if_soft(dynamics: Dynamics, q: np.ndarray) -> None:
     """Warn (SceneWarning) when the object, its grasps held still at q, would rest farther from
     its pose at q than :data:`SAG_LIMIT` of its size (twice its grasps' largest distance from the
     object frame, at least 5 cm): interconnections far too soft for its weight — e.g. a stiffness
-    thought in N/mm. Nothing is said when the rest pose cannot be found (a free direction)."""
-    data = scene.model.createData()
-    pin.framesForwardKinematics(scene.model, data, q)
+    thought in N/mm. Nothing is said when the rest pose cannot be found (a free direction). Runs
+    on the run's own dynamics and its scratch data."""
+    scene, model, data = dynamics.scene, dynamics.model, dynamics.data
+    pin.framesForwardKinematics(model, data, q)
     start = data.oMf[scene.object_frame].translation.copy()
     reach = [np.linalg.norm(data.oMf[lk.grasp_frame].translation - start) for lk in scene.links]
     size = max(0.05, 2.0 * max(reach, default=0.0))
     try:
-        rest = equilibrium(scene, q, tol=1e-6, max_iter=50, backend=backend).q
+        rest = rest_pose(dynamics, q, 1e-6, 50).q
     except (CoopdynError, ArithmeticError, ValueError, np.linalg.LinAlgError):
         return
-    pin.framesForwardKinematics(scene.model, data, rest)
+    finally:
+        dynamics.clear_rotation_alarm()  # (a Newton step's rotation is not the run's)
+    pin.framesForwardKinematics(model, data, rest)
     sag = float(np.linalg.norm(data.oMf[scene.object_frame].translation - start))
     if sag > SAG_LIMIT * size:
         warnings.warn(

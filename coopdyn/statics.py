@@ -57,8 +57,15 @@ def equilibrium(
     max_iter = _validate.count(max_iter, "max_iter", SimulationError)
     if max_iter > MAX_ITER:
         raise SimulationError(f"max_iter must be at most {MAX_ITER} (Newton converges in a handful of steps or not at all)")
-    q, v = scene.check_state(scene.q0 if q is None else q, np.zeros(scene.nv))
-    dynamics = Dynamics(scene, backend)
+    q, _ = scene.check_state(scene.q0 if q is None else q, np.zeros(scene.nv))
+    return rest_pose(Dynamics(scene, backend), q, tol, max_iter)
+
+
+def rest_pose(dynamics: Dynamics, q: np.ndarray, tol: float, max_iter: int) -> Equilibrium:
+    """:func:`equilibrium`'s Newton iteration on a Dynamics already built (its arguments checked):
+    ``simulate``'s sag check runs it on the run's own dynamics."""
+    scene = dynamics.scene
+    v = np.zeros(scene.nv)
     obj, tau = scene.object_v, np.zeros(scene.n_actuated)
     for it in range(max_iter + 1):
         f, _, K, _ = dynamics.implicit_terms(q, v, tau)
@@ -83,4 +90,4 @@ def equilibrium(
     raise SimulationError(f"no equilibrium within {max_iter} Newton steps: the force left on the object is {residual:.3g}")
 
 
-__all__ = ["Equilibrium", "equilibrium"]
+__all__ = ["Equilibrium", "equilibrium", "rest_pose"]
