@@ -251,6 +251,15 @@ def _warn_if_away(reference: Callable[[float], ObjectReference], oMo: pin.SE3, K
     )
 
 
+class _Tips(NamedTuple):
+    """The tools' reading at one state (ObjectImpedance with ``measure="tips"``)."""
+
+    estimates: list[pin.SE3]  #: each tool's estimate of the object frame's pose
+    mean: np.ndarray  #: their mean rotation (3, 3)
+    origins: list[np.ndarray]  #: each tool frame's origin, world [m]
+    twists: list[pin.Motion]  #: each tool frame's twist, world axes at its origin [m/s, rad/s]
+
+
 def _mean_rotation(rotations: list[np.ndarray]) -> np.ndarray:
     """The mean of rotations in the tangent space of the first: ``R₀ exp(mean log(R₀ᵀ Rᵢ))``."""
     R0 = rotations[0]
@@ -386,44 +395,44 @@ class ObjectImpedance:
         # estimates the object frame's (measure="tips")
         self._o_M_T = [oMo.actInv(data.oMf[t_id]) for _, t_id, _ in self._links]
 
-    def object_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def object_state(self, tips: _Tips | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The object frame's world position [m], rotation, linear velocity of its origin [m/s] and
         angular velocity [rad/s] (world axes) as the law reads them (``measure``), at the
-        kinematics of the last ``forwardKinematics(q, v)`` on its data."""
+        kinematics of the last ``forwardKinematics(q, v)`` on its data (``tips``: the tools'
+        reading there, when already taken)."""
         model, data, scene = self.scene.model, self._data, self.scene
         if self.measure == "object":
             oMo = data.oMf[scene.object_frame]
             V = pin.getFrameVelocity(model, data, scene.object_frame, LWA)
             return oMo.translation, oMo.rotation, V.linear, V.angular
-        poses = self._tip_estimates()
-        p = np.mean([P.translation for P in poses], axis=0)
-        R = _mean_rotation([P.rotation for P in poses])
-        linear, angular = np.zeros(3), np.zeros(3)
-        for _, t_id, _ in self._links:  # the velocity of the point p on each tool, averaged
-            V = pin.getFrameVelocity(model, data, t_id, LWA)
-            linear += V.linear + _cross(V.angular, p - data.oMf[t_id].translation)
-            angular += V.angular
-        n = len(self._links)
-        return p, R, linear / n, angular / n
+        tips = self._tips() if tips is None else tips
+        p = np.mean([P.translation for P in tips.estimates], axis=0)
+        linear = np.mean([V.linear + _cross(V.angular, p - o) for V, o in zip(tips.twists, tips.origins, strict=True)], axis=0)
+        return p, tips.mean, linear, np.mean([V.angular for V in tips.twists], axis=0)
 
-    def _tip_estimates(self) -> list[pin.SE3]:
-        """Each tool frame's estimate of the object frame's pose (its pose times its offset at the start)."""
-        data = self._data
-        return [data.oMf[t_id] * o_M_T.inverse() for (_, t_id, _), o_M_T in zip(self._links, self._o_M_T, strict=True)]
+    def _tips(self) -> _Tips:
+        """The tools' reading: each tool's estimate of the object frame's pose (its pose times its
+        offset at the start), their mean rotation, each tool's origin and twist (world axes)."""
+        model, data = self.scene.model, self._data
+        estimates = [data.oMf[t_id] * o_M_T.inverse() for (_, t_id, _), o_M_T in zip(self._links, self._o_M_T, strict=True)]
+        origins = [data.oMf[t_id].translation for _, t_id, _ in self._links]
+        twists = [pin.getFrameVelocity(model, data, t_id, LWA) for _, t_id, _ in self._links]
+        return _Tips(estimates, _mean_rotation([P.rotation for P in estimates]), origins, twists)
 
-    def internal_moments(self) -> np.ndarray:
+    def internal_moments(self, tips: _Tips | None = None) -> np.ndarray:
         """(N, 3) [N·m], world axes: with ``measure="tips"``, the moments that hold each tool's
         estimate of the object's orientation to their mean, ``−Ki ⊙ e_i − Di ⊙ (ω_i − ω̄)`` with
         ``e_i = R̄ log3(R̄ᵀ R_i)``; zero otherwise."""
         n = len(self._links)
         if self.measure != "tips" or not (np.any(self.Ki) or np.any(self.Di)):
             return np.zeros((n, 3))
-        model, data = self.scene.model, self._data
-        rotations = [P.rotation for P in self._tip_estimates()]
-        mean = _mean_rotation(rotations)
-        omega = np.array([pin.getFrameVelocity(model, data, t_id, LWA).angular for _, t_id, _ in self._links])
+        tips = self._tips() if tips is None else tips
+        mean = tips.mean
+        omega = np.array([V.angular for V in tips.twists])
         spin = omega - omega.mean(axis=0)
-        return np.array([-self.Ki * (mean @ pin.log3(mean.T @ R)) - self.Di * w for R, w in zip(rotations, spin, strict=True)])
+        return np.array(
+            [-self.Ki * (mean @ pin.log3(mean.T @ P.rotation)) - self.Di * w for P, w in zip(tips.estimates, spin, strict=True)]
+        )
 
     def object_wrench(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ObjectReference]:
         """The wrench the grasps must apply to the object (6,) [N, N·m] (world axes, object origin)."""
@@ -445,7 +454,8 @@ class ObjectImpedance:
         model, data = self.scene.model, self._data
         pin.forwardKinematics(model, data, q, v)
         pin.updateFramePlacements(model, data)
-        state = self.object_state()
+        tips = self._tips() if self.measure == "tips" else None
+        state = self.object_state(tips)
         F, ref = self._wrench(t, state)
         at = 1 if self.measure == "tips" else 0  # the tool frames or the grasp frames
         points = np.array([data.oMf[frames[at]].translation for frames in self._links])
@@ -461,7 +471,7 @@ class ObjectImpedance:
             inward[:, :3] = ref.squeeze * squeeze_directions(points)
             resultant = np.concatenate([inward[:, :3].sum(axis=0), _cross_rows(r, inward[:, :3]).sum(axis=0)])
             f += inward - _distribute(r, A_inv, resultant)  # keep only its internal (null-space) part
-        f[:, 3:] += self.internal_moments()
+        f[:, 3:] += self.internal_moments(tips)
         return f
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
