@@ -120,7 +120,7 @@ def _parts(n: int) -> None:
         budget = check_budget(scene, t_final, sim.dt, sim.save_every, sim.max_steps, sim.max_memory)
         _check_samples(t_final, sim.control_dt, budget)
         system.restart()
-        run = _Run(scene, system, method, sim.dt, sim.save_every, t_final, sim.max_speed)
+        run = _Run(scene, system, method, sim.dt, sim.save_every, t_final, sim.max_speed, (q, v))
         t0 = lap("checks, the controller's gains", t0)
         config, _ = compiled.plan(
             scene, system, method, q0=q, v0=v, dt=sim.dt, t_final=t_final, n_steps=run.n_steps,

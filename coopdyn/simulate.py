@@ -167,9 +167,8 @@ def simulate(
     system.max_speed = max_speed
     if accuracy_check != "off" and not has_constraints(scene):
         _warn_if_soft(system.dynamics, q)
-    run = _Run(scene, system, method, dt, save_every, t_final, max_speed)
+    run = _Run(scene, system, method, dt, save_every, t_final, max_speed, (q, v))
     run.budget = budget
-    run.start = (q, v)
     if stream_to is not None:
         n_samples = 1 + len(range(save_every, run.n_steps, save_every)) + (run.n_steps > 0)
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
@@ -432,9 +431,18 @@ class _Run:
     """Bookkeeping of one simulation: the output grid and what has been saved."""
 
     def __init__(
-        self, scene: Scene, system: System, method: Integrator, dt: float, save_every: int, t_final: float, max_speed: float
+        self,
+        scene: Scene,
+        system: System,
+        method: Integrator,
+        dt: float,
+        save_every: int,
+        t_final: float,
+        max_speed: float,
+        start: tuple[np.ndarray, np.ndarray],
     ) -> None:
         self.scene, self.system, self.method, self.dt, self.t_final = scene, system, method, dt, t_final
+        self.start = start  #: (q, v) at t = 0 (a streamed run drops its samples as it goes)
         self.max_speed = max_speed
         self._max_speed_sq = max_speed * max_speed
         self.n_steps = step_count(t_final, dt)
@@ -451,7 +459,6 @@ class _Run:
         self.loop = "python"
         self.budget: int | None = None  # an adaptive method's limit on attempted steps
         self.stream: SampleFiles | None = None  # samples go to files instead of these lists
-        self.start: tuple[np.ndarray, np.ndarray] | None = None  # (q, v) at t = 0 (a stream drops its samples)
 
     def flush(self, keep_last: bool = True) -> None:
         """Move the saved samples (all but the last, whose torque may be pending) to the stream."""
@@ -514,8 +521,7 @@ class _Run:
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
-        start = self.start if self.start is not None else (self.q[0], self.v[0])
-        mode = accuracy.unstable_mode(self.system, start[0], start[1], t)
+        mode = accuracy.unstable_mode(self.system, self.start[0], self.start[1], t)
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
         partial = self.result("diverged")

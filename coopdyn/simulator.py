@@ -102,9 +102,8 @@ class Simulator:
         budget = check_budget(scene, t_final, self.dt, self.save_every, self.max_steps, self.max_memory)
         _check_samples(t_final, self.control_dt, budget)
         system.restart()
-        run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed)
+        run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed, (q, v))
         run.budget = budget
-        run.start = (q, v)
         config, _ = compiled.plan(
             scene,
             system,
