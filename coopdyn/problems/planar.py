@@ -17,6 +17,7 @@ from ..model.elements import Section
 from ..model.interconnection import Interconnection, diagonal
 from ..model.scene import Scene
 from ..resources import urdf_path
+from .facing_arms import aluminium_strip
 
 if TYPE_CHECKING:
     from ..result import Result
@@ -82,7 +83,7 @@ def planar_arms_beam(
     """
     from ..model.beam import Beam
 
-    section = Section.rectangle(0.03, 0.003, E=70e9, rho=2700.0) if section is None else section
+    section = aluminium_strip() if section is None else section
     length = _validate.positive(length, "length", "m")
     height = _validate.number(height, "height", "m")
     reach = _validate.positive(reach, "reach", "m")
