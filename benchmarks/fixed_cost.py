@@ -9,12 +9,16 @@ of ``--calls`` calls each), BLAS on one thread:
 * ``simulate`` with ``accuracy_check="off"`` and ``energy_check="off"``;
 * ``Simulator.run`` (set up once, then one run per call);
 * MuJoCo with the same law and controller as compiled callbacks (``coopdyn.mujoco``): reset,
-  set the state, one ``mj_step``, read the state back — what a MuJoCo user's run costs.
+  set the state, one ``mj_step``, read the state back — what a MuJoCo user's run costs;
+* ``Simulator.run`` and MuJoCo over 21 steps: a step's own cost is the difference / 20, and
+  the fixed cost of a run is the one-step run less one step (the two simulators' steps differ:
+  MuJoCo's implicitfast is not coopdyn's trapezoid).
 
-Prints wall time per call [µs] for rk4 and the trapezoid (whose fixed cost includes its first
-factorisation), with the load average. ``--parts`` also times the pieces of a ``Simulator.run``
-(rk4) one by one: its checks, the plan of the compiled loop's settings, the kernel's loop object,
-the step, the samples and the ``Result``.
+Prints wall time per call [µs] for rk4 and the trapezoid (MuJoCo's RK4 and implicitfast; the
+trapezoid factorises its step matrix at every step), with the load average. ``--parts`` also
+times the pieces of a ``Simulator.run`` (rk4) one by one: its checks, the controller's settings
+compared with those of the loop the last run left (``Loop.restart`` then runs it again from the
+new state), the step with its samples, and the ``Result``.
 
     .venv/bin/python benchmarks/fixed_cost.py [--calls 200] [--rounds 7] [--parts]
 """
@@ -36,11 +40,13 @@ def _variants(method: str) -> dict[str, Callable[[], object]]:
     scene = cd.scenes.facing_arms("panda", stiffness=1e4)
     pd = GravityCompensationPD(scene)
     sim = cd.Simulator(scene, pd, method, 1e-3)
+    sim21 = cd.Simulator(scene, pd, method, 1e-3)
     off = dict(accuracy_check="off", energy_check="off")
     variants: dict[str, Callable[[], object]] = {
         "simulate": lambda: cd.simulate(scene, 1e-3, controller=pd, integrator=method, dt=1e-3),
         "simulate, checks off": lambda: cd.simulate(scene, 1e-3, controller=pd, integrator=method, dt=1e-3, **off),  # type: ignore[arg-type]
         "Simulator.run": lambda: sim.run(1e-3),
+        "Simulator.run, 21 steps": lambda: sim21.run(21e-3),
     }
     try:
         import mujoco
@@ -52,13 +58,14 @@ def _variants(method: str) -> dict[str, Callable[[], object]]:
     data = mujoco.MjData(model)
     callbacks = Callbacks(scene, model, pd)
 
-    def mujoco_run() -> object:
+    def mujoco_run(n_steps: int) -> object:
         mujoco.mj_resetData(model, data)
         callbacks.set_state(data, scene.q0, scene.v0)
-        mujoco.mj_step(model, data)
+        mujoco.mj_step(model, data, n_steps)
         return callbacks.state(data)
 
-    variants["MuJoCo (compiled callbacks)"] = mujoco_run
+    variants["MuJoCo (compiled callbacks)"] = lambda: mujoco_run(1)
+    variants["MuJoCo, 21 steps"] = lambda: mujoco_run(21)
     variants["_callbacks"] = callbacks.__enter__  # (installed for the whole measurement)
     return variants
 
@@ -87,8 +94,16 @@ def main() -> None:
                     times[name].append((time.perf_counter() - t0) / args.calls)
             if enter is not None:
                 enter.__self__.__exit__(None, None, None)  # type: ignore[attr-defined]
-            cells = "  ".join(f"{name}: {statistics.median(t) * 1e6:7.1f}" for name, t in times.items())
-            print(f"{method:10s} {cells}")
+            median = {name: statistics.median(t) * 1e6 for name, t in times.items()}
+            print(f"{method}: " + "  ".join(f"{name} {t:.1f}" for name, t in median.items()))
+            # a step's own cost from the 21-step run, and what is left of a one-step run: the fixed cost
+            for name, one, many in (
+                ("Simulator.run", "Simulator.run", "Simulator.run, 21 steps"),
+                ("MuJoCo", "MuJoCo (compiled callbacks)", "MuJoCo, 21 steps"),
+            ):
+                if many in median:
+                    step = (median[many] - median[one]) / 20
+                    print(f"    {name:14s} per step {step:5.1f}, fixed cost (one-step run less a step) {median[one] - step:5.1f}")
     if args.parts:
         _parts(args.calls * args.rounds)
     print(f"load average {os.getloadavg()[0]:.2f}")
@@ -96,14 +111,16 @@ def main() -> None:
 
 def _parts(n: int) -> None:
     """Simulator.run's pieces, each timed over n one-step rk4 runs (medians would hide nothing
-    here: each piece is one call), as its code runs them."""
+    here: each piece is one call), as its code runs them after its first run: the loop that run
+    built is restarted."""
     from coopdyn import compiled
     from coopdyn.budget import check_budget
-    from coopdyn.simulate import _check_samples, _checked_duration, _Run
+    from coopdyn.simulate import _check_samples, _checked_duration, _compiled_loop, _Run
 
     scene = cd.scenes.facing_arms("panda", stiffness=1e4)
     sim = cd.Simulator(scene, GravityCompensationPD(scene), "rk4", 1e-3)
-    system, method = sim.system, sim.method
+    sim.run(1e-3)  # (builds the loop the runs below restart)
+    system, method, native = sim.system, sim.method, sim._loop
     spent: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:
@@ -122,19 +139,13 @@ def _parts(n: int) -> None:
         system.restart()
         run = _Run(scene, system, method, sim.dt, sim.save_every, t_final, sim.max_speed, (q, v))
         t0 = lap("checks, the controller's gains", t0)
-        config, _ = compiled.plan(
-            scene, system, method, q0=q, v0=v, dt=sim.dt, t_final=t_final, n_steps=run.n_steps,
-            save_every=sim.save_every, max_speed=sim.max_speed, energy_check="off",
-        )  # fmt: skip
-        t0 = lap("the plan (settings from the typed specs)", t0)
-        native = system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
-        t0 = lap("the kernel's loop object", t0)
-        native.advance(compiled.FIRST_CHUNK)
-        native.take_events()
-        t0 = lap("the step", t0)
-        samples = compiled.samples(native, scene)
-        run.t, run.q, run.v, run.tau = samples.t.tolist(), list(samples.q), list(samples.v), list(samples.tau)
-        t0 = lap("the samples", t0)
+        key = sim._key(t_final, compiled.controller_settings(scene, system))
+        assert compiled.same(key, sim._loop_key)
+        t0 = lap("the controller's settings, compared", t0)
+        native.restart(q, v)
+        t0 = lap("Loop.restart", t0)
+        _compiled_loop(run, sim._loop_config, None, native)
+        t0 = lap("the step, the samples", t0)
         run.result()
         lap("the Result", t0)
     print(f"Simulator.run's pieces, rk4, one step, mean of {n} runs [µs]:")

@@ -27,11 +27,22 @@ class CompiledSpec:
 def _fields(spec: Any) -> dict[str, Any]:
     """A spec's fields by name (nested specs as tables; ``None`` fields left out)."""
     out = {}
-    for f in dataclasses.fields(spec):
-        value = getattr(spec, f.name)
+    for name in _field_names(type(spec)):
+        value = getattr(spec, name)
         if value is not None:
-            out[f.name] = _fields(value) if dataclasses.is_dataclass(value) else value
+            out[name] = _fields(value) if hasattr(type(value), "__dataclass_fields__") else value
     return out
+
+
+_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
+
+
+def _field_names(cls: type) -> tuple[str, ...]:
+    """A spec class's field names (read once: a run's plan reads them at every run)."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        names = _FIELD_NAMES[cls] = tuple(f.name for f in dataclasses.fields(cls))
+    return names
 
 
 # -- integrator families (src/native/methods/) ----------------------------------------------------

@@ -12,7 +12,6 @@ the progress bar, issues the warnings the chunk reported, and can be interrupted
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -95,8 +94,10 @@ def plan(
     save_every: int,
     max_speed: float,
     energy_check: str,
+    controller: dict[str, Any] | None = None,
 ) -> Plan:
-    """The compiled loop's configuration for this run, or None and why it cannot run compiled."""
+    """The compiled loop's configuration for this run, or None and why it cannot run compiled
+    (``controller``: :func:`controller_settings`, when the caller has them already)."""
     if system.dynamics.backend != "native":
         return Plan(None, "the dynamics run on the Python backend")
     if system.has_object_wrench:
@@ -104,12 +105,8 @@ def plan(
     spec = _own_spec(method, error=SimulationError)
     if spec is None:
         return Plan(None, f"the integrator {method!r} has no compiled version")
-    # a controller without a compiled version for this run (Python code, a Python reference or
-    # drive, or built for another scene) is called back from the compiled loop
-    controller_spec = NoControllerSpec() if system.controller is None else _own_spec(system.controller, scene)
-    if controller_spec is None:
-        controller_spec = PythonControllerSpec(callback=PythonCallback(system))
-    controller = controller_spec.fields()
+    if controller is None:
+        controller = controller_settings(scene, system)
     if isinstance(spec, ExponentialSpec):  # discretised here, once per step size the run takes
         ws = method.workspace(system)
         last = {k for k in (0, n_steps - 2, n_steps - 1) if 0 <= k < n_steps}
@@ -140,14 +137,42 @@ def plan(
     return Plan(config, "")
 
 
+def same(a: Any, b: Any) -> bool:
+    """Whether two settings are equal to the bit — numbers, strings, arrays (by their bytes: a
+    few µs less than ``np.array_equal``), and dicts, lists and tuples of them; any other object
+    only to itself (a Python controller's callback). coopdyn.Simulator restarts its last loop
+    when the settings of a run are the same as that loop's."""
+    kind = type(a)
+    if kind is not type(b):
+        return False
+    if kind is float or kind is int or kind is str or kind is bool:
+        return a == b
+    if kind is np.ndarray:
+        return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    if kind is dict:
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if kind is list or kind is tuple:
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    return a is b
+
+
+def controller_settings(scene: Scene, system: System) -> dict[str, Any]:
+    """The controller's part of the configuration: its compiled twin's settings, or a callback
+    (a controller without a compiled version for this run — Python code, a Python reference or
+    drive, or one built for another scene — is called back from the compiled loop)."""
+    spec = NoControllerSpec() if system.controller is None else _own_spec(system.controller, scene)
+    if spec is None:
+        spec = PythonControllerSpec(callback=PythonCallback(system))
+    return spec.fields()
+
+
 def next_chunk(steps: int, seconds: float) -> int:
     """The size of the next chunk after one of ``steps`` steps took ``seconds`` of wall time."""
     per_step = seconds / max(steps, 1)
     return int(min(max(CHUNK_SECONDS / max(per_step, 1e-9), 16), 1 << 20))
 
 
-@dataclass(frozen=True)
-class Samples:
+class Samples(NamedTuple):
     """What a compiled run saved, with its work counters."""
 
     t: np.ndarray  #: (n,) [s]
@@ -187,13 +212,14 @@ def take_samples(loop: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.nd
 def _rows(t: Any, Q: Any, V: Any, TAU: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The kernel's sample arrays as (n,), (n, nq), (n, nv), (n, n_actuated) floats (eigenpy
     returns one-row or one-column matrices as vectors)."""
-    n = len(np.atleast_1d(t))
+    t = np.asarray(t, dtype=float).reshape(-1)
+    n = t.shape[0]
     return (
-        np.asarray(t, dtype=float).reshape(n),
+        t,
         np.asarray(Q, dtype=float).reshape(n, scene.nq),
         np.asarray(V, dtype=float).reshape(n, scene.nv),
         np.asarray(TAU, dtype=float).reshape(n, scene.n_actuated),
     )
 
 
-__all__ = ["Plan", "Samples", "next_chunk", "plan", "samples", "take_samples"]
+__all__ = ["Plan", "Samples", "controller_settings", "next_chunk", "plan", "same", "samples", "take_samples"]

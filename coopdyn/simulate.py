@@ -639,9 +639,11 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
         bar.update(run.t_final - bar.n)
 
 
-def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any) -> None:
-    """The whole run in the compiled loop, chunk by chunk (see :mod:`coopdyn.compiled`)."""
-    native: Any = run.system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
+def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any, native: Any = None) -> None:
+    """The whole run in the compiled loop, chunk by chunk (see :mod:`coopdyn.compiled`), in
+    ``native`` (a loop built from ``config``, at its start) or a new one."""
+    if native is None:
+        native = run.system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
     status, chunk = compiled.RUNNING, compiled.FIRST_CHUNK
     try:
         while status == compiled.RUNNING:

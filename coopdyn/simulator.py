@@ -42,8 +42,10 @@ class Simulator:
     (tests/test_simulator.py). What ``simulate`` does before every run — checking the
     arguments, building the dynamics (the compiled kernel) and the closed loop — is done here
     once; a run checks its state, reads the controller's gains and compiled twin (a controller
-    retuned between runs is run as it is now), builds the compiled loop and collects its
-    samples. ``benchmarks/fixed_cost.py`` measures both.
+    retuned between runs is run as it is now), restarts the compiled loop the last run built
+    when nothing but the start state changed (a new one otherwise: other gains, another
+    ``t_final``, a Python controller) and collects its samples. ``benchmarks/fixed_cost.py``
+    measures both.
 
     What it leaves out, as the price of that: the accuracy judgement (``accuracy_check``: judge
     one representative run with :func:`coopdyn.simulate` first), progress bars and
@@ -91,6 +93,11 @@ class Simulator:
         self.system = System(Dynamics(scene, backend), controller, None, self.control_dt)
         self.system.max_speed = self.max_speed
         self._energy = "off" if self.method.exact_discretisation else energy_check
+        # the last run's compiled loop and its configuration: the next run with the same settings
+        # (other q0, v0) restarts it instead of building one (benchmarks/fixed_cost.py)
+        self._loop: Any = None
+        self._loop_config: dict[str, Any] = {}
+        self._loop_key: tuple[Any, ...] = ()
 
     def run(self, t_final: float, q0: Any = None, v0: Any = None) -> Result:
         """Simulate from (q0 (nq,), v0 (nv,)) (default: the scene's) over ``t_final`` [s]; the result as
@@ -104,6 +111,12 @@ class Simulator:
         system.restart()
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed, (q, v))
         run.budget = budget
+        native, self._loop = self._loop, None  # (not kept while it runs: a run that raises leaves none)
+        if native is not None:  # the last run's loop, restarted when only the start state differs
+            key = self._key(t_final, compiled.controller_settings(scene, system))
+            if compiled.same(key, self._loop_key):
+                native.restart(q, v)
+                return self._compiled(run, native, self._loop_config, key)
         config, _ = compiled.plan(
             scene,
             system,
@@ -135,11 +148,23 @@ class Simulator:
                 accuracy_check="off",
                 control_dt=self.control_dt,
             )
+        native = system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
+        return self._compiled(run, native, config, self._key(t_final, config["controller"]))
+
+    def _key(self, t_final: float, controller: dict[str, Any]) -> tuple[Any, ...]:
+        """What a run's compiled loop depends on besides the Simulator's own settings and the
+        start state: the duration, the integrator's settings (a user may change its rtol), the
+        controller's compiled settings and its gains (retuned between runs)."""
+        return (t_final, dict(vars(self.method)), controller, *self.system.matrix_gains)
+
+    def _compiled(self, run: _Run, native: Any, config: dict[str, Any], key: tuple[Any, ...]) -> Result:
+        """The run in ``native`` (at its start); the loop kept for the next run."""
         run.loop = "compiled"
         cpu0 = time.process_time()
         with np.errstate(over="ignore", invalid="ignore"):
-            _compiled_loop(run, config, None)
+            _compiled_loop(run, config, None, native)
         run.cpu_time = time.process_time() - cpu0
+        self._loop, self._loop_config, self._loop_key = native, config, key
         return run.result()
 
     def __repr__(self) -> str:

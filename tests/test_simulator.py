@@ -3,13 +3,15 @@ the last bit, with its own counters, and simulate's errors."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
 import coopdyn as cd
 from coopdyn.control import GravityCompensationPD
 from coopdyn.errors import ControllerError, DivergenceError, SimulationError
-from coopdyn.integrators import DormandPrince
+from coopdyn.integrators import AdaptiveROS2, DormandPrince, LinearlyImplicitEuler
 
 
 def _same(a: cd.Result, b: cd.Result) -> None:
@@ -21,24 +23,85 @@ def _same(a: cd.Result, b: cd.Result) -> None:
 
 @pytest.mark.parametrize(
     ("integrator", "control_dt"),
-    [("rk4", None), ("trapezoid", None), (DormandPrince(rtol=1e-6), None), ("implicit_euler", 2e-3), ("rk4", 1e-3)],
+    [
+        ("rk4", None),
+        ("trapezoid", None),
+        (DormandPrince(rtol=1e-6), None),
+        ("implicit_euler", 2e-3),
+        ("rk4", 1e-3),
+        (LinearlyImplicitEuler(jacobian_every=4), None),
+        ("generalized_alpha", None),
+        (AdaptiveROS2(rtol=1e-4), None),
+        ("exponential", None),
+    ],
     ids=str,
 )
 def test_every_run_is_simulates_run(pandas: cd.Scene, integrator: object, control_dt: float | None) -> None:
-    """Three runs of one Simulator from three states, one after the other: each equals simulate's
-    with the same settings bit for bit (counters included: nothing carries over)."""
+    """Runs of one Simulator from different states, one after the other (the later ones restart
+    the first's compiled loop), with the energy monitor on: each equals simulate's with the same
+    settings bit for bit — counters, a kept step matrix, the monitor's warnings: nothing carries
+    over."""
     pd = GravityCompensationPD(pandas)
-    sim = cd.Simulator(pandas, pd, integrator, 5e-4, save_every=2, control_dt=control_dt)
+    scene = pandas
+    if integrator == "exponential":  # (a linear scene: the book system)
+        scene, pd = cd.problems.linear_book(), None  # type: ignore[assignment]
+    sim = cd.Simulator(scene, pd, integrator, 5e-4, save_every=2, control_dt=control_dt, energy_check="warn")
     rng = np.random.default_rng(7)
-    for _ in range(3):
-        v0 = rng.normal(size=pandas.nv) * 0.3
-        mine = sim.run(0.03, v0=v0)
-        theirs = cd.simulate(
-            pandas, 0.03, controller=pd, integrator=integrator, dt=5e-4, save_every=2, v0=v0, control_dt=control_dt,
-            accuracy_check="off", energy_check="off",
-        )  # fmt: skip
+    for kick in (0.3, 3.0, 0.0, 0.3):  # (3 rad/s: an unresolved run the monitor warns about)
+        v0 = rng.normal(size=scene.nv) * kick
+        with warnings.catch_warnings(record=True) as mine_warned:
+            warnings.simplefilter("always")
+            mine = sim.run(0.03, v0=v0)
+        with warnings.catch_warnings(record=True) as their_warned:
+            warnings.simplefilter("always")
+            theirs = cd.simulate(
+                scene, 0.03, controller=pd, integrator=integrator, dt=5e-4, save_every=2, v0=v0, control_dt=control_dt,
+                accuracy_check="off", energy_check="warn",
+            )  # fmt: skip
         assert mine.loop == "compiled"
         _same(mine, theirs)
+        assert [str(w.message) for w in mine_warned] == [str(w.message) for w in their_warned]
+
+
+def test_the_energy_monitor_starts_again() -> None:
+    """The monitor of a restarted loop judges its own run: stiff grasps (k = 1e6 N/m) kicked, at
+    rest, kicked again, under the trapezoid at 2.5 ms (unresolved: the kicked runs break the
+    energy balance) — the same warnings as simulate's, and none for the run at rest."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e6)
+    pd = GravityCompensationPD(scene)
+    sim = cd.Simulator(scene, pd, "trapezoid", 2.5e-3, energy_check="warn")
+    rng = np.random.default_rng(7)
+    messages = []
+    for kick in (0.3, 0.0, 0.3):
+        v0 = rng.normal(size=scene.nv) * kick
+        with warnings.catch_warnings(record=True) as mine_warned:
+            warnings.simplefilter("always")
+            mine = sim.run(0.1, v0=v0)
+        with warnings.catch_warnings(record=True) as their_warned:
+            warnings.simplefilter("always")
+            theirs = cd.simulate(
+                scene, 0.1, controller=pd, integrator="trapezoid", dt=2.5e-3, v0=v0, accuracy_check="off", energy_check="warn"
+            )
+        _same(mine, theirs)
+        messages.append([str(w.message) for w in mine_warned])
+        assert messages[-1] == [str(w.message) for w in their_warned]
+    assert [len(m) for m in messages] == [1, 0, 1] and "energy balance broken" in messages[2][0]
+
+
+def test_a_run_after_a_failed_one_and_after_a_retuning(pandas: cd.Scene) -> None:
+    """The loop a diverged run leaves behind is not reused half-way; a controller retuned between
+    runs, or another duration, gets a loop of its own: each run equals simulate's."""
+    pd = GravityCompensationPD(pandas)
+    sim = cd.Simulator(pandas, pd, "rk4", 1e-3, max_speed=5.0)
+    with pytest.raises(DivergenceError):
+        sim.run(0.2, v0=np.full(pandas.nv, 4.9))
+    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"))
+    pd.kp = pd.kp * 2.0
+    for t_final in (0.02, 0.013):
+        _same(
+            sim.run(t_final),
+            cd.simulate(pandas, t_final, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"),
+        )
 
 
 def test_a_python_controller_and_the_python_backend(pandas: cd.Scene) -> None:

@@ -169,6 +169,7 @@ BOOST_PYTHON_MODULE(_native) {
   bp::class_<Loop, std::shared_ptr<Loop>, boost::noncopyable>(
     "Loop", "A compiled simulation run (see coopdyn.compiled).", bp::no_init)
     .def("advance", &Loop::advance, bp::args("self", "budget"))
+    .def("restart", &Loop::restart, bp::args("self", "q0", "v0"))
     .def("samples", &Loop::samples, bp::args("self"))
     .def("take_samples", &Loop::take_samples, bp::args("self"))
     .def("take_events", &Loop::take_events, bp::args("self"))

@@ -110,6 +110,49 @@ public:
     monitor_.raise = energy_mode == 2;
     monitor_.every = static_cast<int>(std::max<long>(1, energy_every));
     monitor_.rtol = energy_rtol;
+    start();
+  }
+
+  // Start again from (q0, v0) with the same settings, as a new Loop built from them would (the
+  // method's carried state, the records, samples, events, counters and the energy monitor
+  // forgotten; the buffers' memory kept): coopdyn.Simulator's runs after its first.
+  void restart(const VectorXd & q0, const VectorXd & v0) {
+    if (q0.size() != model_.nq || v0.size() != model_.nv)
+      throw std::invalid_argument("Loop.restart: q0 must have nq entries and v0 nv entries");
+    q_ = q0;
+    v_ = v0;
+    method_->new_run();
+    start();
+  }
+
+  // (the per-run state at (q_, v_), t = 0)
+  void start() {
+    j_out_ = 0;
+    status_ = RUNNING;
+    t_ = 0.0;
+    h_ = first_h_;
+    k_step_ = 0;
+    n_rhs_ = n_jac_ = n_accepted_ = n_rejected_ = 0;
+    n_factor_ = n_factor0_;
+    have_first_ = pending_ = false;
+    first_p_ = last_p_ = fsal_p_ = fsal_p_start_ = 0.0;
+    T_.clear();
+    Q_.clear();
+    V_.clear();
+    TAU_.clear();
+    events_.clear();
+    warned_.clear();
+    message_.clear();
+    fail_t_ = fail_h_ = 0.0;
+    next_sample_ = 0;
+    holding_ = false;
+    sampled_at_ = std::numeric_limits<double>::quiet_NaN();
+    const Monitor settings = monitor_;
+    monitor_ = Monitor();
+    monitor_.on = settings.on;
+    monitor_.raise = settings.raise;
+    monitor_.every = settings.every;
+    monitor_.rtol = settings.rtol;
     if (monitor_.on) {
       double motion;
       monitor_.E0 = k_.total_energy(q_, v_, &motion);
@@ -569,7 +612,8 @@ private:
   std::size_t j_out_ = 0;
   // state
   int status_ = RUNNING;
-  double t_ = 0.0, h_ = 0.0;
+  double t_ = 0.0, h_ = 0.0, first_h_ = 0.0;
+  long n_factor0_ = 0;  // (set_factorisations: the discretisations made before the run)
   long k_step_ = 0;
   VectorXd q_, v_, q_new_, v_new_;
   long n_rhs_ = 0, n_jac_ = 0, n_factor_ = 0, n_accepted_ = 0, n_rejected_ = 0;
@@ -595,9 +639,9 @@ private:
   VectorXd tau_hold_, jump_;  // the held τ, and how the last sample changed it
 
 public:
-  void set_first_step(double h) { h_ = h; }
+  void set_first_step(double h) { h_ = first_h_ = h; }
   void set_control_period(double control_dt) { control_dt_ = control_dt; }
-  void set_factorisations(long n) { n_factor_ = n; }
+  void set_factorisations(long n) { n_factor_ = n_factor0_ = n; }
 };
 
 }  // namespace coopdyn_native

@@ -43,6 +43,12 @@ public:
     return std::make_unique<ImplicitEuler>(every);
   }
 
+  void new_run() override {
+    ready_ = false;
+    count_ = 0;
+    h_ = 0.0;
+  }
+
 private:
   int jacobian_every_;
   bool ready_ = false;  // a step matrix is factored, for steps of size h_, used count_ times

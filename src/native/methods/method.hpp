@@ -31,6 +31,9 @@ public:
   // The closed loop changed at this step's start (a new controller sample under a control_dt
   // hold): a derivative carried from the last step's end no longer holds.
   virtual void restart() {}
+  // A new run from another state (Loop::restart): nothing carried from the last run survives
+  // (a kept step matrix too), as in a method built afresh.
+  virtual void new_run() { restart(); }
 };
 
 // A family's constructor from the run's settings (its compiled_spec() merged into the loop's).
