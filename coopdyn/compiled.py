@@ -192,7 +192,7 @@ def samples(loop: Any, scene: Scene) -> Samples:
     t, Q, V, TAU, pending = loop.samples()
     n_rhs, n_jac, n_factor, n_accepted, n_rejected = (int(c) for c in loop.counters())
     return Samples(
-        *_rows(t, Q, V, TAU, scene),
+        *rows(t, Q, V, TAU, scene),
         bool(pending),
         n_rhs,
         n_jac,
@@ -206,10 +206,10 @@ def take_samples(loop: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.nd
     """(t, Q, V, TAU) of the samples a compiled run finished since the last take, all but the
     last (whose torque may be pending); the loop forgets them."""
     t, Q, V, TAU = loop.take_samples()
-    return _rows(t, Q, V, TAU, scene)
+    return rows(t, Q, V, TAU, scene)
 
 
-def _rows(t: Any, Q: Any, V: Any, TAU: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def rows(t: Any, Q: Any, V: Any, TAU: Any, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The kernel's sample arrays as (n,), (n, nq), (n, nv), (n, n_actuated) floats (eigenpy
     returns one-row or one-column matrices as vectors)."""
     t = np.asarray(t, dtype=float).reshape(-1)
@@ -222,4 +222,4 @@ def _rows(t: Any, Q: Any, V: Any, TAU: Any, scene: Scene) -> tuple[np.ndarray, n
     )
 
 
-__all__ = ["Plan", "Samples", "controller_settings", "next_chunk", "plan", "same", "samples", "take_samples"]
+__all__ = ["Plan", "Samples", "controller_settings", "next_chunk", "plan", "rows", "same", "samples", "take_samples"]

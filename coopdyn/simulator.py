@@ -44,8 +44,8 @@ class Simulator:
     once; a run checks its state, reads the controller's gains and compiled twin (a controller
     retuned between runs is run as it is now), restarts the compiled loop the last run built
     when nothing but the start state changed (a new one otherwise: other gains, another
-    ``t_final``, a Python controller) and collects its samples. ``benchmarks/fixed_cost.py``
-    measures both.
+    ``t_final``, a Python controller) and collects its samples (a short run that completes
+    without a warning straight into its Result). ``benchmarks/fixed_cost.py`` measures both.
 
     What it leaves out, as the price of that: the accuracy judgement (``accuracy_check``: judge
     one representative run with :func:`coopdyn.simulate` first), progress bars and
@@ -161,11 +161,39 @@ class Simulator:
         """The run in ``native`` (at its start); the loop kept for the next run."""
         run.loop = "compiled"
         cpu0 = time.process_time()
-        with np.errstate(over="ignore", invalid="ignore"):
-            _compiled_loop(run, config, None, native)
-        run.cpu_time = time.process_time() - cpu0
+        result = self._short(run, native, cpu0)
+        if result is None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                _compiled_loop(run, config, None, native)
+            run.cpu_time = time.process_time() - cpu0
+            result = run.result()
         self._loop, self._loop_config, self._loop_key = native, config, key
-        return run.result()
+        return result
+
+    def _short(self, run: _Run, native: Any, cpu0: float) -> Result | None:
+        """A fixed-step run that fits in the compiled loop's first chunk, and completes without a
+        warning: its Result straight from the loop's samples (the general path's bookkeeping,
+        14 µs, is most of a one-step run's fixed cost: benchmarks/fixed_cost.py). None after
+        anything else — a warning, a failure, a torque left pending —, the loop restarted for
+        the general path to run it again and report it."""
+        if run.method.adaptive or run.n_steps >= compiled.FIRST_CHUNK:
+            return None
+        status = native.advance(compiled.FIRST_CHUNK)
+        if status == compiled.DONE and not native.take_events():
+            t, Q, V, TAU, pending = native.samples()
+            if not pending:
+                cpu_time = time.process_time() - cpu0
+                n_rhs, n_jac, n_factor, n_steps, n_rejected = native.counters()
+                s = self.system
+                s.n_rhs, s.n_jac, s.n_factor = n_rhs, n_jac, n_factor
+                t, Q, V, TAU = compiled.rows(t, Q, V, TAU, self.scene)
+                return Result(
+                    scene=self.scene, t=t, q=Q, v=V, tau=TAU, integrator=run.method.name, dt=self.dt, n_rhs=n_rhs,
+                    cpu_time=cpu_time, n_jac=n_jac, n_factor=n_factor, n_steps=n_steps, n_rejected=n_rejected,
+                    status="completed", backend=s.dynamics.backend, loop="compiled",
+                )  # fmt: skip
+        native.restart(*run.start)
+        return None
 
     def __repr__(self) -> str:
         return f"Simulator({self.scene!r}, {type(self.controller).__name__}, {self.method!r}, dt={self.dt:g})"
