@@ -180,7 +180,8 @@ class System:
         if self.controller is None:
             return self._zero
         q_seen, v_seen = q.view(), v.view()  # read-only: a controller cannot change the state it is shown
-        q_seen.flags.writeable = v_seen.flags.writeable = False
+        q_seen.setflags(write=False)
+        v_seen.setflags(write=False)
         try:
             out = self.controller(t, q_seen, v_seen)
         except (CoopdynError, KeyboardInterrupt):
@@ -203,7 +204,7 @@ class System:
                 f"the controller returned shape {tau.shape} at t = {t:.6g} s; it must return one torque/force per "
                 f"arm joint, shape ({self.n_actuated},), in scene order"
             )
-        if not math.isfinite(float(tau @ tau)):  # one dot product; NaN, ±inf (and overflow) fail it
+        if not math.isfinite(float(np.dot(tau, tau))):  # one dot product; NaN, ±inf (and overflow) fail it
             bad = np.flatnonzero(~np.isfinite(tau)).tolist()
             if bad and self._sane(q, v):
                 raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {bad})")

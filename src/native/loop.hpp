@@ -161,13 +161,18 @@ public:
     if (adaptive_) save(0.0, q_, v_, true);
   }
 
-  // Run up to `budget` steps (attempts, for adaptive methods) with the GIL released; the status.
+  // Run up to `budget` steps (attempts, for adaptive methods) with the GIL released — kept when
+  // the controller is Python code, which takes it at every call (a hand-over each time would
+  // cost more than the other threads gain) —; the status.
   int advance(long budget) {
     if (status_ != RUNNING) return status_;
     struct Released {  // the GIL, given back on every way out
-      PyThreadState * state = PyEval_SaveThread();
-      ~Released() { PyEval_RestoreThread(state); }
-    } released;
+      PyThreadState * state;
+      explicit Released(bool release) : state(release ? PyEval_SaveThread() : nullptr) {}
+      ~Released() {
+        if (state) PyEval_RestoreThread(state);
+      }
+    } released(!ctrl_->calls_python());
     try {
       if (adaptive_)
         run_adaptive(budget);

@@ -29,6 +29,8 @@ struct Controller {
   virtual void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) = 0;
   // Whether torque() reads the kernel's kinematics at (q, v) (Kernel::kinematics first).
   virtual bool reads_kernel() const { return false; }
+  // Whether torque() calls Python (and takes the GIL for it): the loop then keeps the GIL.
+  virtual bool calls_python() const { return false; }
 };
 
 struct NoTorque : Controller {

@@ -1,8 +1,8 @@
 // A Python controller called from the compiled loop: a user's own callable (no compiled twin)
 // no longer sends the run to the Python loop. The loop calls `callback(t, q, v)` — coopdyn's
 // checked wrapper around the controller (coopdyn/compiled.py: PythonCallback, which calls
-// System.torque: read-only q and v, shape and finiteness checks, the same messages) — taking
-// the GIL for the call (the loop runs without it). The wrapper returns None after recording
+// System.torque: read-only q and v, shape and finiteness checks, the same messages) — with the
+// GIL (the loop keeps it while it runs a Python controller). The wrapper returns None after recording
 // what the controller raised; the loop then stops and Python re-raises it.
 #pragma once
 
@@ -16,8 +16,10 @@ class PythonController : public Controller {
 public:
   PythonController(bp::object callback, Eigen::Index n_actuated) : callback_(std::move(callback)), na_(n_actuated) {}
 
+  bool calls_python() const override { return true; }
+
   void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    const struct Gil {  // taken for the call, given back on every way out
+    const struct Gil {  // taken for the call (held already in the compiled loop), given back on every way out
       PyGILState_STATE state = PyGILState_Ensure();
       ~Gil() { PyGILState_Release(state); }
     } gil;
