@@ -448,7 +448,9 @@ duration = 0.01
 """
     path = tmp_path / "ik.toml"
     path.write_text(text)
-    scene = load(path).scene
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", cd.SceneWarning)  # placed on the box: no warning
+        scene = load(path).scene
     data = scene.model.createData()
     pin.framesForwardKinematics(scene.model, data, scene.q0)
     targets = {
@@ -457,6 +459,15 @@ duration = 0.01
     }
     for lk in scene.links:
         assert np.max(np.abs(pin.log6(data.oMf[lk.tip_frame].actInv(targets[lk.name])).vector)) < 1e-8
+    # without tool_pose the arms start in their reference postures, away from the box: each grasp,
+    # at its arm's tool frame, is named with its distance
+    unplaced = "\n".join(line for line in text.splitlines() if not line.startswith("tool_pose"))
+    path.write_text(unplaced)
+    with pytest.warns(cd.SceneWarning) as warned:
+        load(path)
+    far = [str(w.message) for w in warned if "grasps the object" in str(w.message)]
+    assert len(far) == 2 and all("more than its size (200 mm)" in m and "tool_pose" in m for m in far), far
+    assert "'left'" in far[0] and "'right'" in far[1]
     path.write_text(text.replace("translation = [0.0, 0.1, 0.7]", "translation = [0.0, -2.0, 0.7]"))
     said = r"line 13: \[\[arms\]\] #2 tool_pose: inverse kinematics of arm 'right' did not reach"
     with pytest.raises(SceneFileError, match=said):

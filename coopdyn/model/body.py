@@ -174,6 +174,10 @@ class RigidObject(SceneObject):
         model.addBodyFrame(self.name, joint, pin.SE3.Identity(), 0)
         return Placement(joint, (joint,), q_obj)
 
+    def bounds(self, model: pin.Model) -> list[Shape] | None:
+        """Its box, when it has a size (without one, the box drawn is a stand-in)."""
+        return None if self.size is None else self.shapes(model)
+
     def shapes(self, model: pin.Model) -> list[Shape]:
         size = tuple(float(x) for x in (self.size if self.size is not None else DEFAULT_SIZE))
         frame = model.getFrameId(self.name)

@@ -110,6 +110,12 @@ class SceneObject(ABC):
     def shapes(self, model: pin.Model) -> list[Shape]:
         """The boxes the viewer draws for it."""
 
+    def bounds(self, model: pin.Model) -> list[Shape] | None:
+        """The boxes it fills, for the check that each grasp is on it (a SceneWarning names a
+        grasp farther from them than the object's size); None when it does not say its size
+        (:meth:`shapes` then draws a stand-in). Default: its shapes."""
+        return self.shapes(model)
+
     def lowest_frequency(self) -> float | None:
         """Its own lowest elastic mode when free [Hz]; None for a rigid object (no elastic model of its own)."""
         return None

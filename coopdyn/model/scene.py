@@ -7,6 +7,8 @@ around explicitly and Pinocchio ``Data`` lives in :class:`coopdyn.dynamics.Dynam
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -15,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from .. import _validate
-from ..errors import SceneError, did_you_mean
+from ..errors import SceneError, SceneWarning, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
 from .elements import Element
 from .interconnection import Interconnection
@@ -200,6 +202,7 @@ class Scene:
         world_M_object = pin.SE3(data.oMf[o_frame])
 
         links = []
+        grasp_points: list[tuple[str, str | None, np.ndarray]] = []  # (name, arm, world position at the start)
         for k, ic in enumerate(interconnections):
             if not isinstance(ic, Interconnection):
                 raise SceneError(f"interconnections[{k}] must be a coopdyn.Interconnection, got {type(ic).__name__}")
@@ -235,7 +238,9 @@ class Scene:
                 tip = model.addFrame(pin.Frame(f"world/fixture{k}", 0, w_M_T, pin.FrameType.OP_FRAME))
             g_joint, o_M_G = obj.grasp_joint(placed, o_M_G)
             g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", g_joint, o_M_G, pin.FrameType.OP_FRAME))
+            grasp_points.append((name, ic.arm, (data.oMi[g_joint] * o_M_G).translation))
             links.append(Link(name, i_arm, int(tip), int(g_id), law, element_type.native))
+        _warn_far_grasps(obj, model, data, grasp_points)
         link_names = [lk.name for lk in links]
         if len(set(link_names)) != len(link_names):  # an arm with several links: number them
             links = [dataclasses.replace(lk, name=f"{lk.name}{k}") for k, lk in enumerate(links)]
@@ -364,6 +369,37 @@ class Scene:
         arms = ", ".join(a.name for a in self.arms)
         obj = f"{self.object.name!r} ({self.object.joint_label})"
         return f"Scene(arms=[{arms}], object={obj}, links={len(self.links)}, nq={self.nq}, nv={self.nv})"
+
+
+def _warn_far_grasps(
+    obj: SceneObject, model: pin.Model, data: pin.Data, grasps: list[tuple[str, str | None, np.ndarray]]
+) -> None:
+    """Warn (SceneWarning) about each grasp point farther from the object's bounds than the
+    object's size (the largest edge of their bounding box), at the start: a grasp defaults to
+    the arm's tool frame, so an arm placed away from the object holds it through a long lever
+    without a word (a UR5 and a Kinova 0.60 and 0.93 m from a 0.15 m box ran silently)."""
+    shapes = obj.bounds(model)
+    if not shapes or all(model.joints[s.joint].shortname() in _PRISMATIC for s in shapes):
+        return  # (no size said; or an object that only translates: where a force acts does not matter)
+    boxes = [(data.oMi[s.joint] * s.placement, np.asarray(s.size, dtype=float) / 2) for s in shapes]
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+    corners = np.concatenate([signs * half @ M.rotation.T + M.translation for M, half in boxes])
+    size = float(np.ptp(corners, axis=0).max())
+    for name, arm, p in grasps:
+        gap = min(float(np.linalg.norm(np.maximum(np.abs(M.actInv(p)) - half, 0.0))) for M, half in boxes)
+        if gap > size:
+            fix = (
+                f"arm {arm!r}'s tool frame starts there and the grasp defaults to it: place the arm at the object "
+                "(its q0, or tool_pose in a scene file) or give the grasp"
+                if arm is not None
+                else "give the grasp on the object"
+            )
+            warnings.warn(
+                f"interconnection {name!r} grasps the object {gap * 1e3:.0f} mm from it, more than its size "
+                f"({size * 1e3:.0f} mm): {fix}",
+                SceneWarning,
+                stacklevel=3,
+            )
 
 
 _REVOLUTE = ([("", "rad")], [("", "rad/s")])
