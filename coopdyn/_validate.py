@@ -6,13 +6,14 @@ import decimal
 import numbers
 import os
 import reprlib
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from .errors import CoopdynError, SceneError
+from .errors import CoopdynError, SceneError, SceneWarning
 
 ArrayLike = Any
 
@@ -89,6 +90,19 @@ def gain(
     if not signed and np.any(arr < 0.0):
         raise error(f"{name} must be >= 0 [{unit}], got {_short(arr.tolist())}")
     return np.broadcast_to(arr.reshape(-1) if arr.shape == (1,) else arr, (n,)).copy()
+
+
+def warn_if_degrees(angles: Any, name: str, stacklevel: int = 3) -> None:
+    """Warn (SceneWarning) about each angle [rad] beyond ±2π: degrees given for radians (90 for a
+    right angle turns 90 rad, 14.3 turns plus 2.0 rad, without an error)."""
+    for a in np.ravel(np.asarray(angles, dtype=float)):
+        if abs(a) > 2 * np.pi:
+            warnings.warn(
+                f"{name} has {a:g} rad ({np.degrees(a):.0f}°): angles are in radians; if {a:g} is in degrees, "
+                f"give {np.radians(a):.6g}",
+                SceneWarning,
+                stacklevel=stacklevel,
+            )
 
 
 def integral(value: Any) -> bool:

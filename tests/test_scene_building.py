@@ -211,6 +211,31 @@ def test_an_arm_with_continuous_joints_takes_its_angles_or_rounded_pairs() -> No
         load_arm(cd.Arm("k", "kinova", q0=np.ones(4)))
 
 
+def test_angles_that_look_like_degrees_are_named() -> None:
+    """Angles are in radians. A Panda's q0 in degrees is outside its limits: the error says so
+    and gives the radians; a continuous joint (no limits) or an rpy in a pose beyond ±2π warns
+    with the figure; angles within ±2π pass silently."""
+    import warnings
+
+    from coopdyn.model.arm import load_arm
+    from coopdyn.model.description import build, describe
+
+    degrees = [0.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0]
+    with pytest.raises(cd.SceneError, match=r"'panda_joint2' is -45, .*\(in degrees\? -45° is -0.785398 rad"):
+        load_arm(cd.Arm("a", "panda", q0=degrees))
+    with pytest.warns(cd.SceneWarning, match=r"continuous joint 'j2s6s200_joint_6' has 90 rad \(5157°\).*give 1.5708"):
+        load_arm(cd.Arm("k", "kinova", q0=[0.1, 2.9, 1.0, 0.4, 1.5, 90.0]))
+    doc = describe(cd.scenes.facing_arms("panda"))
+    doc["arms"][0]["base"] = {"translation": [0.0, -0.6, 0.0], "rpy": [0.0, 0.0, 90.0]}
+    with pytest.warns(cd.SceneWarning, match=r"arms\[0\].base.rpy has 90 rad \(5157°\)"):
+        build(doc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", cd.SceneWarning)
+        load_arm(cd.Arm("k", "kinova", q0=[0.1, 2.9, 1.0, 0.4, 1.5, -6.2]))
+        doc["arms"][0]["base"]["rpy"] = [0.0, 0.0, np.pi / 2]
+        build(doc)
+
+
 def test_grasps_far_too_soft_for_the_object_warn_with_the_sag() -> None:
     """A stiffness thought in N/mm (10 for 10 N/mm): the 2 kg box would hang about 1 m below its
     start on its grasps — the run warns with that figure; at 1e4 N/m (2 mm of sag) it does not,

@@ -357,6 +357,10 @@ def _configuration(model: pin.Model, value: Any, what: str) -> np.ndarray:
         )
         raise SceneError(f"{what}, q0 must have {per}, got shape {q.shape}")
     if model.nq != model.nv and q.shape == (model.nv,):
+        for j in range(1, model.njoints):  # a continuous joint's angle has no limits to catch degrees
+            joint = model.joints[j]
+            if joint.nq == 2 and joint.nv == 1:
+                _validate.warn_if_degrees(q[joint.idx_v], f"{what}, q0 of the continuous joint {model.names[j]!r}", 4)
         return pin.integrate(model, pin.neutral(model), q)
     q = q.copy()
     for j in range(1, model.njoints):
@@ -404,9 +408,22 @@ def _check_limits(model: pin.Model, q: np.ndarray, what: str) -> None:
             continue
         i = j.idx_q
         if lo[i] < hi[i] and not (lo[i] - 1e-9 <= q[i] <= hi[i] + 1e-9):
-            raise SceneError(
-                f"{what}: q0 of joint {model.names[jid]!r} is {q[i]:.6g}, outside its limits [{lo[i]:.6g}, {hi[i]:.6g}]"
+            degrees = np.radians(q[i])
+            hint = (
+                f" (in degrees? {q[i]:.6g}° is {degrees:.6g} rad, within them: q0 is in rad)"
+                if abs(q[i]) > 2 * np.pi and lo[i] <= degrees <= hi[i] and _revolute(j)
+                else ""
             )
+            raise SceneError(
+                f"{what}: q0 of joint {model.names[jid]!r} is {q[i]:.6g}, outside its limits [{lo[i]:.6g}, {hi[i]:.6g}]{hint}"
+            )
+        if not lo[i] < hi[i] and _revolute(j):  # a revolute joint without limits: nothing caught degrees
+            _validate.warn_if_degrees(q[i], f"{what}, q0 of joint {model.names[jid]!r}", 4)
+
+
+def _revolute(joint: pin.JointModel) -> bool:
+    """Whether a 1-DOF joint turns (its q an angle [rad]) rather than slides."""
+    return joint.shortname().startswith("JointModelR")
 
 
 def _damping(arm: Arm, model: pin.Model, what: str) -> np.ndarray:

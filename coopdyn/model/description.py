@@ -359,7 +359,9 @@ def _pose(value: Any, name: str) -> pin.SE3:
     p = _validate.finite_array(value.get("translation", [0.0, 0.0, 0.0]), f"{name}.translation", (3,))
     R = np.eye(3)
     if given == ["rpy"]:
-        R = pin.rpy.rpyToMatrix(*_validate.finite_array(value["rpy"], f"{name}.rpy [rad]", (3,)))
+        rpy = _validate.finite_array(value["rpy"], f"{name}.rpy [rad]", (3,))
+        _validate.warn_if_degrees(rpy, f"{name}.rpy")
+        R = pin.rpy.rpyToMatrix(*rpy)
     elif given == ["quaternion"]:
         x = _validate.finite_array(value["quaternion"], f"{name}.quaternion (x, y, z, w)", (4,))
         if not abs(np.linalg.norm(x) - 1.0) < 1e-6:
