@@ -163,8 +163,9 @@ def _sweep(args: argparse.Namespace) -> int:
         png = spec.folder / "heatmap.png"
         h = spec.heatmap
         sweep_heatmap(
-            table, h["x"], h["y"], h["values"], png, title=spec.path.name, xlabel=h.get("xlabel"), ylabel=h.get("ylabel")
-        )
+            table, h["x"], h["y"], h["values"], png, title=spec.path.name, xlabel=h.get("xlabel"), ylabel=h.get("ylabel"),
+            limits=h.get("limits"),
+        )  # fmt: skip
         print(f"  wrote {png}")
     print(f"  `coopdyn sweep --rerun {spec.folder / TABLE_NAME} RUN` runs a row again and compares it bit for bit")
     return 0

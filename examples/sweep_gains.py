@@ -24,6 +24,9 @@ from coopdyn.viz.plotting import sweep_heatmap
 STIFFNESS = [3e3, 1e4, 3e4, 1e5]  #: interconnection stiffness [N/m] (rotational: 0.01 of it [N·m/rad])
 GAIN = [500.0, 1000.0, 2000.0, 4000.0, 8000.0]  #: object impedance stiffness [N/m] (rotational: 1/20 of it [N·m/rad])
 OUT = "out/sweep_gains"
+#: sanity bounds: a run beyond either completed but is no grip (the task squeezes with 20 N and
+#: moves the box ±3 cm), hatched in the heat map like a run that warned
+LIMITS = {"tracking_error_max_m": 0.05, "peak_internal_force_N": 200.0}
 
 
 def make_case(stiffness: float, gain: float) -> cd.Case:
@@ -59,6 +62,7 @@ def main(out: str = OUT, duration: float = 5.0, executor: str | None = None, sti
         title=f"Two Pandas, grip / lift / oscillate / hold, {duration:g} s",
         xlabel="interconnection stiffness [N/m]",
         ylabel="object impedance stiffness [N/m]",
+        limits=LIMITS,
     )
     print(f"wrote {out}/heatmap.png")
     return table

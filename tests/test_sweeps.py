@@ -310,6 +310,7 @@ folder = "out"
 x = "scene.stiffness"
 y = "controller.stiffness"
 values = ["tracking_error_max_m", "peak_internal_force_N"]
+limits = { tracking_error_max_m = 0.05 }
 """
 
 
@@ -388,6 +389,11 @@ def test_random_draws_per_seed(tmp_path: Path) -> None:
         ),
         (lambda s: s.split("[sweep]")[0], "no \\[sweep\\] table"),
         (
+            lambda s: s.replace("tracking_error_max_m = 0.05", 'tracking_error_max_m = "5 cm"'),
+            r"limits must be a table metric = largest sensible value .*got \{'tracking_error_max_m': '5 cm'\}",
+        ),
+        (lambda s: s.replace("tracking_error_max_m = 0.05", "tracking_error = 0.05"), r"limits must be a table metric"),
+        (
             lambda s: s.replace("[sweep.grid]", "[sweep.random]").replace(
                 "[[1000.0, 50.0], [2000.0, 100.0]]", "{gauss = [1, 2]}"
             ),
@@ -460,6 +466,34 @@ def test_heatmap_labels_and_cells(tmp_path: Path) -> None:
     assert (tmp_path / "h.png").stat().st_size > 5_000
     with pytest.raises(ValueError, match="no column 'x'"):
         sweep_heatmap(table, "x", "g", "err_m")
+
+
+def test_heatmap_marks_completed_runs_that_warned_or_pass_a_bound(tmp_path: Path) -> None:
+    """A completed run that warned (its warnings column) or whose metric passes a sanity bound is
+    not an ordinary cell: it is hatched and says how many runs did; a clean cell is not."""
+    from coopdyn.viz.plotting import sweep_heatmap
+
+    table = pd.DataFrame(
+        {
+            "k": [1.0, 1.0, 2.0, 2.0, 2.0],
+            "g": [1, 2, 1, 2, 2],
+            "status": ["completed"] * 5,
+            "warnings": ["", "AccuracyWarning: implicit_euler ...", "", "", "EnergyBalanceWarning: ..."],
+            "tracking_error_max_m": [0.002, 0.679, 0.003, 0.004, 0.005],
+        }
+    )
+    fig = sweep_heatmap(table, "k", "g", "tracking_error_max_m", tmp_path / "h.png", limits={"tracking_error_max_m": 0.05})
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == ["2", "3", "679\nwarned\nbeyond bound", "4.5\n1/2 warned"]
+    assert len(fig.axes[0].patches) == 2  # the two doubtful cells hatched
+    assert fig.get_supxlabel() == (
+        "hatched: completed runs that warned (the table's warnings column) or exceed tracking error max [mm] > 50"
+    )
+    clean = sweep_heatmap(table.assign(warnings=""), "k", "g", "tracking_error_max_m")
+    assert not clean.axes[0].patches and not clean.get_supxlabel()
+    for bad in ({"nope": 1.0}, {"tracking_error_max_m": float("nan")}, {"tracking_error_max_m": "1"}):
+        with pytest.raises(cd.SweepError, match=r"no column 'nope'|limits\['tracking_error_max_m'\] must be a finite number"):
+            sweep_heatmap(table, "k", "g", "tracking_error_max_m", limits=bad)  # type: ignore[arg-type]
 
 
 def test_sweep_example(tmp_path: Path) -> None:

@@ -96,7 +96,14 @@ SWEEP: dict[str, Any] = {
         "trajectories": {"type": "boolean"},
         "heatmap": {
             "type": "object",
-            "properties": {"x": _NAME, "y": _NAME, "values": {"type": "array", "items": _NAME}, "xlabel": _NAME, "ylabel": _NAME},
+            "properties": {
+                "x": _NAME,
+                "y": _NAME,
+                "values": {"type": "array", "items": _NAME},
+                "xlabel": _NAME,
+                "ylabel": _NAME,
+                "limits": {"type": "object", "additionalProperties": {"type": "number"}},
+            },
             "required": ["x", "y", "values"],
             "additionalProperties": False,
         },

@@ -13,12 +13,15 @@ which of its values change from run to run:
 * ``folder``: where the table goes (default ``out/<file name>-sweep`` beside the file);
   ``trajectories = true`` also saves each run's trajectory there;
 * ``[sweep.heatmap]``: ``x``, ``y`` (two parameters), ``values`` (metric columns) and optionally
-  ``xlabel``, ``ylabel`` (axis names): a heat map per value, ``heatmap.png`` in the folder.
+  ``xlabel``, ``ylabel`` (axis names) and ``limits`` (metric = largest sensible value, in the
+  column's units): a heat map per value, ``heatmap.png`` in the folder; cells whose completed
+  runs warned or pass a limit are hatched.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -185,7 +188,7 @@ def load_spec(path: str | Path) -> Spec:
         names = list(items[0].params)
         if (
             not isinstance(heatmap, dict)
-            or not {"x", "y", "values"} <= set(heatmap) <= {"x", "y", "values", "xlabel", "ylabel"}
+            or not {"x", "y", "values"} <= set(heatmap) <= {"x", "y", "values", "xlabel", "ylabel", "limits"}
             or heatmap["x"] not in names
             or heatmap["y"] not in names
             or not isinstance(heatmap["values"], list)
@@ -193,13 +196,24 @@ def load_spec(path: str | Path) -> Spec:
         ):
             raise f.error(
                 f"give x and y (two of the swept values {names}), values (a list of metric columns) and optionally "
-                "xlabel, ylabel (axis names with units)",
+                "xlabel, ylabel (axis names with units) and limits (a table metric = largest sensible value)",
                 "sweep.heatmap",
             )
         numeric = (*METRICS, *COUNTERS, "cpu_s", "wall_s")  # the numeric columns (TIMING also has the worker)
         unknown = [v for v in heatmap["values"] if v not in numeric]
         if unknown:
             raise f.error(f"values {unknown}: a spec's runs have the columns {list(numeric)}", "sweep.heatmap", "values")
+        limits = heatmap.get("limits", {})
+        if not isinstance(limits, dict) or not all(
+            k in numeric and not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+            for k, v in limits.items()
+        ):
+            raise f.error(
+                f"limits must be a table metric = largest sensible value (a finite number, in the column's units), the metrics "
+                f"among {list(numeric)}; got {limits!r}",
+                "sweep.heatmap",
+                "limits",
+            )
     try:
         out = _validate.path(folder, "a folder", SweepError)
     except SweepError as exc:

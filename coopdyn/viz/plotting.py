@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -198,12 +198,16 @@ def sweep_heatmap(
     title: str | None = None,
     xlabel: str | None = None,
     ylabel: str | None = None,
+    limits: Mapping[str, float] | None = None,
 ) -> Any:
     """One heat map per metric of a sweep table over two of its parameters (``x``, ``y``): each
     cell the mean over the cell's completed runs (several with seeds), written in the cell; a
-    cell with no completed run is grey and names what happened (diverged, failed, …). Values
-    spanning more than a factor 20 get a logarithmic colour scale. ``xlabel``/``ylabel`` name the
-    axes (default: the column names)."""
+    cell with no completed run is grey and names what happened (diverged, failed, …). A cell
+    whose completed runs include one that warned (the table's ``warnings`` column: an accuracy,
+    energy or scene warning), or whose metric passes its sanity bound in ``limits`` (metric →
+    largest sensible value, in the column's units), is hatched and says how many runs did: a
+    completed run is not a trustworthy one. Values spanning more than a factor 20 get a
+    logarithmic colour scale. ``xlabel``/``ylabel`` name the axes (default: the column names)."""
     from matplotlib.colors import LogNorm
 
     plt = _pyplot()
@@ -212,9 +216,13 @@ def sweep_heatmap(
     values = [values] if isinstance(values, str) else list(values) if isinstance(values, Iterable) else []
     if not values:
         raise SweepError("sweep_heatmap needs the name of at least one metric column in values")
-    for name in (x, y, *values):
+    limits = dict(limits or {})
+    for name in (x, y, *values, *limits):
         if name not in table.columns:
             raise SweepError(f"the table has no column {name!r}; columns: {list(table.columns)}")
+    for name, bound in limits.items():
+        if isinstance(bound, bool) or not isinstance(bound, int | float) or not np.isfinite(bound):
+            raise SweepError(f"limits[{name!r}] must be a finite number (the largest sensible value), got {bound!r}")
     if not len(table):
         raise SweepError("the sweep table has no rows to draw")
     tx, ty = table[x].map(_tick), table[y].map(_tick)  # the cells, once for every metric
@@ -225,10 +233,11 @@ def sweep_heatmap(
     # per cell: its rows, the completed ones, and the other statuses (the same for every metric)
     cell_rows = [[cells.get((xv, yv), np.empty(0, dtype=int)) for xv in xs] for yv in ys]
     notes = [[", ".join(sorted(set(statuses[rows]) - {"completed"})) for rows in row] for row in cell_rows]
+    warned = table["warnings"].fillna("").astype(str).str.len().to_numpy() > 0 if "warnings" in table.columns else None
     fig, axes = plt.subplots(
         1,
         len(values),
-        figsize=(1.2 + 0.9 * len(xs) * len(values) + 1.6 * len(values), 1.6 + 0.55 * len(ys)),
+        figsize=(1.2 + 1.1 * len(xs) * len(values) + 1.6 * len(values), 1.8 + 0.75 * len(ys)),
         constrained_layout=True,
         squeeze=False,
     )
@@ -240,11 +249,13 @@ def sweep_heatmap(
             column = table[name].to_numpy(dtype=float, na_value=np.nan)
         except (TypeError, ValueError) as exc:
             raise SweepError(f"column {name!r} is not numeric: a heat map draws numbers") from exc
+        doubts = [["" for _ in xs] for _ in ys]  # per cell: its completed runs that warned or pass a bound
         for i, row in enumerate(cell_rows):
             for j, rows in enumerate(row):
                 ok = rows[completed[rows]]
                 if len(ok):
                     grid[i, j] = float(np.mean(column[ok])) * scale
+                    doubts[i][j] = _doubts(table, ok, warned, limits)
         finite = grid[np.isfinite(grid)]
         log = finite.size > 1 and finite.min() > 0 and finite.max() > 20 * finite.min()
         norm = LogNorm(finite.min(), finite.max()) if log else None
@@ -255,6 +266,9 @@ def sweep_heatmap(
                 text = f"{grid[i, j]:.3g}" if np.isfinite(grid[i, j]) else ""
                 if notes[i][j]:
                     text = f"{text}\n({notes[i][j]})" if text else notes[i][j]
+                if doubts[i][j]:
+                    text = f"{text}\n{doubts[i][j]}"
+                    ax.add_patch(_hatch(j, i))
                 light = np.isfinite(grid[i, j]) and image.norm(grid[i, j]) < 0.5
                 ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white" if light else "black")
         ax.set_xticks(range(len(xs)), xs, rotation=30 if max(map(len, xs)) > 6 else 0)
@@ -263,8 +277,35 @@ def sweep_heatmap(
         ax.set_ylabel(y_label)
         ax.set_title(label, fontsize=10)
         fig.colorbar(image, ax=ax, label=label, shrink=0.9)
+    if _doubts(table, np.flatnonzero(completed), warned, limits):  # (a key to the hatching)
+        bounds = ", ".join(f"{column_label(k)[0]} > {v * column_label(k)[1]:g}" for k, v in limits.items())
+        fig.supxlabel(
+            "hatched: completed runs that warned (the table's warnings column)" + (f" or exceed {bounds}" if bounds else ""),
+            fontsize=8,
+        )
     if title:
         fig.suptitle(title)
     if path is not None:
         save_figure(fig, path)
     return fig
+
+
+def _doubts(table: Any, rows: np.ndarray, warned: np.ndarray | None, limits: Mapping[str, float]) -> str:
+    """What makes completed runs ``rows`` doubtful: how many warned, how many pass each bound."""
+    n_warned = int(np.count_nonzero(warned[rows])) if warned is not None and len(rows) else 0
+    beyond = np.zeros(len(rows), dtype=bool)
+    for name, bound in limits.items():
+        beyond |= np.abs(table[name].to_numpy(dtype=float, na_value=np.nan)[rows]) > bound
+    n_beyond = int(np.count_nonzero(beyond))
+    of = f"/{len(rows)} " if len(rows) > 1 else ""
+    return "\n".join(
+        [*([f"{n_warned if of else ''}{of}warned".strip()] if n_warned else []),
+         *([f"{n_beyond if of else ''}{of}beyond bound".strip()] if n_beyond else [])]
+    )  # fmt: skip
+
+
+def _hatch(j: int, i: int) -> Any:
+    """A hatched frame over cell (j, i) of an imshow grid."""
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((j - 0.5, i - 0.5), 1.0, 1.0, fill=False, hatch="///", edgecolor="#d62728", linewidth=1.5)
