@@ -130,3 +130,14 @@ def test_the_hold_and_lift_examples_tell_the_resolved_runs_story(tmp_path: Path)
     mine = lift.main(t_final=2.0, out=str(tmp_path / "a.png"))
     fine = lift.main(t_final=2.0, out=str(tmp_path / "b.png"), dt=1e-4, integrator="trapezoid")
     np.testing.assert_allclose(mine, fine, rtol=0.0, atol=0.01)
+
+
+def test_frames_example_draws_what_the_outputs_say(tmp_path: Path) -> None:
+    """The frames figure's numbers: each grasp pushes the box inward (compression: positive
+    squeeze, the y components equal and opposite), and the forces carry the weight."""
+    out = _load("frames").main(out=str(tmp_path / "frames.png"))
+    f = out["wrench"][:, :3]
+    assert np.all(out["squeeze"] > 15.0)
+    assert f[0, 1] > 15.0 and f[1, 1] == pytest.approx(-f[0, 1], abs=1e-9)  # left grasp at −y pushes towards +y
+    assert 19.62 < f[:, 2].sum() < 21.0  # weight 19.62 N, and the lift accelerates it up
+    assert (tmp_path / "frames.png").stat().st_size > 20_000
