@@ -114,7 +114,11 @@ _HTML = """<!DOCTYPE html>
 <head><meta charset="utf-8"><title>coopdyn</title>
 <style>body { margin: 0; } #meshcat-pane { width: 100vw; height: 100vh; overflow: hidden; }
 #legend { position: absolute; left: 12px; bottom: 12px; font: 13px sans-serif; color: #222;
-  background: rgba(255, 255, 255, 0.8); padding: 4px 8px; border-radius: 4px; pointer-events: none; }</style></head>
+  background: rgba(255, 255, 255, 0.8); padding: 4px 8px; border-radius: 4px; pointer-events: none; }
+#clock { position: absolute; left: 12px; top: 12px; font: 14px sans-serif; color: #222;
+  background: rgba(255, 255, 255, 0.85); padding: 6px 10px; border-radius: 4px; }
+#clock button { font: 13px sans-serif; width: 4.5em; } #clock input { width: 22em; vertical-align: middle; }
+#time { display: inline-block; width: 7.5em; text-align: right; font-variant-numeric: tabular-nums; }</style></head>
 <body>
 <div id="meshcat-pane"></div>
 <div id="legend">{legend}</div>
@@ -242,7 +246,9 @@ class _Animator:
         self.arrows = [f"{root}/forces/link{i}" for i in range(len(scene.links))]
         g = meshcat.geometry
         for name in self.arrows:
-            red = g.MeshLambertMaterial(color=0xD62728)
+            # drawn over everything (after the opaque pass, no depth test): an arrow along an arm's
+            # approach lies inside its hand, and the push on a box starts inside the fingers
+            red = g.MeshLambertMaterial(color=0xD62728, transparent=True, depthTest=False)
             viewer[f"{name}/shaft"].set_object(g.Cylinder(1.0, SHAFT_RADIUS), red)
             viewer[f"{name}/head"].set_object(g.Cylinder(HEAD_LENGTH, radiusTop=0.0, radiusBottom=HEAD_RADIUS), red)
         self.arrow_nodes = {f"{a}{part}" for a in self.arrows for part in ("", "/shaft", "/head")}
@@ -358,8 +364,10 @@ def _frames(result: Result, fps: float) -> np.ndarray:
 def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30.0, meshes: str = "collision") -> Path:
     """Write a self-contained HTML animation of ``result`` (plays offline in a browser),
     atomically; ``meshes`` as in :func:`visual_model`. The camera frames the arms and the object
-    over the whole run; red arrows show the interconnection forces on the object, the largest
-    :data:`ARROW_LENGTH` long (the scale is in the page's corner)."""
+    over the whole run; red arrows, drawn over everything else and ending at the grasp they push
+    on, show the interconnection forces on the object, the largest :data:`ARROW_LENGTH` long (the
+    scale is in the page's corner); a bar at the top has play / pause (also the space bar), the
+    simulated time and a slider to seek."""
     meshcat = _meshcat()
     from meshcat.animation import Animation
 
@@ -385,13 +393,88 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     vis["/Cameras/default/rotated/<object>"].set_property("position", _yup(eye))
     x, y, z = _yup(target)  # meshcat has no command for the orbit target: set it in the page
     look = f"viewer.controls.target.set({x:.6g}, {y:.6g}, {z:.6g}); viewer.controls.update(); viewer.set_dirty();"
-    legend = (
-        f"red arrows: interconnection forces on the object, 1 cm = {0.01 / scale:.3g} N (peak {peak:.3g} N)"
-        if peak > 0
-        else "no interconnection force in this run"
-    )
-    page = window.get_scene(look, f"{legend} · {result.integrator}, {result.t[-1]:g} s")
+    legend = _legend(scale, peak)
+    page = window.get_scene(look + _clock(float(result.t[-1])), f"{legend} · {result.integrator}, {result.t[-1]:g} s")
     return write_atomically(path, "the HTML animation", lambda tmp: tmp.write_text(page, encoding="utf-8"), {".html", ".htm"})
+
+
+def _legend(scale: float, peak: float) -> str:
+    """What the red arrows mean, at ``scale`` [m/N] for a run whose largest force is ``peak`` [N]."""
+    if peak <= 0:
+        return "no interconnection force in this run"
+    return f"red arrows: interconnection forces on the object, 1 cm = {0.01 / scale:.3g} N (peak {peak:.3g} N)"
+
+
+def frame_live(vis: Any, lo: np.ndarray, hi: np.ndarray, legend: str) -> None:
+    """Frame a live viewer on the world box (lo, hi) [m] as :func:`export_html` frames its page,
+    and show ``legend`` on a card above it. meshcat's commands cannot move the camera's orbit
+    target (the world origin), so the scene — the coopdyn root, meshcat's grid and axes — is
+    moved by −target instead, and the camera put at eye − target."""
+    meshcat = _meshcat()
+    g = meshcat.geometry
+    eye, target = camera(lo, hi)
+    shift = np.eye(4)
+    shift[:3, 3] = -target
+    for node in ("coopdyn", "/Grid", "/Axes"):
+        vis[node].set_transform(shift)
+    vis["/Cameras/default/rotated/<object>"].set_property("position", _yup(eye - target))
+    u = (eye - target) / np.linalg.norm(eye - target)  # towards the eye
+    right = np.cross(-u, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -u)
+    width = 0.9 * float(np.max(np.abs((np.array(hi) - np.array(lo)) @ right)))
+    png, aspect = _text_png(legend)
+    card = np.eye(4)
+    card[:3, :3] = np.column_stack([right, up, u])  # the card's face (+z) towards the eye, its text upright
+    card[:3, 3] = up * (0.5 * float(np.abs((np.array(hi) - np.array(lo)) @ up)) + 0.6 * width / aspect)
+    texture = g.ImageTexture(image=g.PngImage(png))
+    vis["legend"].set_object(g.Box([width, width / aspect, 1e-4]), g.MeshBasicMaterial(map=texture))
+    vis["legend"].set_transform(card)
+
+
+def _text_png(text: str) -> tuple[bytes, float]:
+    """``text`` on a white card as PNG bytes, and the card's width / height."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    width, height = max(0.085 * len(text), 2.0), 0.26  # [in]
+    fig = Figure(figsize=(width, height), dpi=200)
+    fig.patch.set_facecolor("white")
+    fig.text(0.5, 0.5, text, ha="center", va="center", fontsize=11, color="#222222")
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", facecolor="white")
+    return buffer.getvalue(), width / height
+
+
+def _clock(duration: float) -> str:
+    """The page's clock: a play/pause button, the simulated time and a slider to seek (meshcat's
+    own are in its controls' Animations folder). The animation's time is the simulated time: its
+    frames are the result's samples at 1/fps apart."""
+    return (
+        """
+  const bar = document.createElement("div");
+  bar.id = "clock";
+  bar.innerHTML = '<button id="play" title="play / pause (space)">pause</button> '
+    + '<input id="seek" type="range" min="0" max="DURATION" step="0.001" value="0"> '
+    + '<span id="time">t = 0.000 s</span> / DURATION s';
+  document.body.appendChild(bar);
+  const anim = viewer.animator, play = document.getElementById("play"),
+    seek = document.getElementById("seek"), shown = document.getElementById("time");
+  function toggle() {
+    if (anim.playing) { anim.pause(); } else { anim.play(); }
+  }
+  play.onclick = toggle;
+  document.addEventListener("keydown", e => { if (e.code === "Space") { e.preventDefault(); toggle(); } });
+  seek.oninput = () => { anim.pause(); anim.seek(Number(seek.value)); anim.display_progress(Number(seek.value));
+    viewer.set_dirty(); };
+  setInterval(() => {
+    play.textContent = anim.playing ? "pause" : "play";
+    shown.textContent = "t = " + anim.time.toFixed(3) + " s";
+    if (anim.playing) { seek.value = anim.time; }
+  }, 50);
+"""
+    ).replace("DURATION", f"{duration:.6g}")
 
 
 def view(
@@ -404,7 +487,8 @@ def view(
     host: str = LOOPBACK,
 ) -> str:
     """Play ``result`` in a live meshcat viewer and return the viewer's URL. Plays ``loops`` times
-    (``None``: until Ctrl-C or SIGTERM).
+    (``None``: until Ctrl-C or SIGTERM). The camera frames the arms and the object over the run,
+    and a card above them says what the red force arrows mean (:func:`frame_live`).
 
     Unless ``zmq_url`` names a running meshcat server, it starts one serving on ``host`` (default
     127.0.0.1: this machine only; any other address warns, since anyone who can reach it sees the
@@ -427,9 +511,12 @@ def view(
             zmq_url = server.zmq_url
         with sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
-            animator = _Animator(result.scene, vis, meshes, scale=force_scale(result)[0])
+            scale, peak = force_scale(result)
+            animator = _Animator(result.scene, vis, meshes, scale=scale)
             idx = _frames(result, fps)
             wrenches = result.wrenches()
+            sampled = idx[:: max(1, len(idx) // 20)]
+            frame_live(vis, *animator.box(result.q[sampled], wrenches[sampled]), _legend(scale, peak))
             url = server.web_url if server is not None else vis.url()
             _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
             n = 0
@@ -437,8 +524,8 @@ def view(
                 while loops is None or n < loops:
                     for k in idx:
                         t0 = time.perf_counter()
-                        for name, T, scale in animator.poses(result.q[k], wrenches[k]):
-                            vis[name].set_transform(_scaled(T, scale))
+                        for name, T, stretch in animator.poses(result.q[k], wrenches[k]):
+                            vis[name].set_transform(_scaled(T, stretch))
                         time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
                     n += 1
             except KeyboardInterrupt:
