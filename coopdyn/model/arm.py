@@ -77,6 +77,16 @@ class Arm:
         """A copy with some fields changed."""
         return dataclasses.replace(self, **changes)
 
+    def reaching(self, tool_pose: Any) -> Arm:
+        """A copy whose ``q0`` starts its tool frame at ``tool_pose`` (world; ``pin.SE3``, 4x4 or
+        translation [m]), found by inverse kinematics within the joint limits near the reference
+        posture — how arms of different robots are placed around an object (a scene file's
+        ``tool_pose``). Raises SceneError with the target's distance and the arm's reach when it
+        is out of reach."""
+        from .ik import solve_ik
+
+        return self.replace(q0=solve_ik(self.replace(q0=None), _validate.se3(tool_pose, f"arm {self.name!r}: tool_pose")))
+
 
 @dataclass(frozen=True, eq=False)
 class LoadedArm:

@@ -80,7 +80,21 @@ def solve_ik(
             dq *= max_step / step
         q = pin.integrate(model, q, dq)
         q[q_of_v[bounded]] = np.clip(q[q_of_v[bounded]], lo_v[bounded], hi_v[bounded])
+    distance = float(np.linalg.norm(base_target.translation))
     raise SceneError(
         f"inverse kinematics of arm {arm.name!r} did not reach the target within the joint limits "
-        f"(remaining error {err:.3g} after {max_iter} iterations): the pose is unreachable or far from q_init"
+        f"(remaining error {err:.3g} after {max_iter} iterations): the target is {distance:.3g} m from the arm's base, "
+        f"which reaches at most {reach(model, frame):.3g} m (its links' lengths added); the pose is unreachable, or far "
+        "from q_init"
     )
+
+
+def reach(model: pin.Model, frame: int) -> float:
+    """An upper bound of how far ``frame`` gets from the model's root [m]: the lengths of the
+    joint placements from the root to it, and its own offset, added."""
+    total = float(np.linalg.norm(model.frames[frame].placement.translation))
+    joint = model.frames[frame].parentJoint
+    while joint > 0:
+        total += float(np.linalg.norm(model.jointPlacements[joint].translation))
+        joint = model.parents[joint]
+    return total
