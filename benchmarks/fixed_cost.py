@@ -145,7 +145,7 @@ def _parts(n: int) -> None:
         t0 = lap("the controller's settings, compared", t0)
         native.restart(q, v)
         t0 = lap("Loop.restart", t0)
-        assert sim._short(run, native, t0) is not None
+        assert sim._short(run, native, time.process_time(), sim._first_chunk(run, native)) is not None
         t0 = lap("the step, the samples and the Result", t0)
         native.restart(q, v)
         t0 = time.perf_counter()

@@ -35,6 +35,7 @@ from .model import (
     Section,
     axial,
     diagonal,
+    place_arm,
     quasi_static,
     rigid_limit,
 )
@@ -88,6 +89,7 @@ __all__ = [
     "integrators",
     "linearize",
     "measure_stable_dt",
+    "place_arm",
     "quasi_static",
     "reference",
     "rigid_limit",

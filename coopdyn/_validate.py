@@ -94,7 +94,7 @@ def gain(
 
 def warn_if_degrees(angles: Any, name: str, stacklevel: int = 3) -> None:
     """Warn (SceneWarning) about each angle [rad] beyond ±2π: degrees given for radians (90 for a
-    right angle turns 90 rad, 14.3 turns plus 2.0 rad, without an error)."""
+    right angle turns 90 rad, 14 turns and 2.0 rad, without an error)."""
     for a in np.ravel(np.asarray(angles, dtype=float)):
         if abs(a) > 2 * np.pi:
             warnings.warn(

@@ -639,9 +639,12 @@ def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor 
         bar.update(run.t_final - bar.n)
 
 
-def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any, native: Any = None) -> None:
+def _compiled_loop(
+    run: _Run, config: dict[str, Any], bar: Any, native: Any = None, first: tuple[int, list[Any]] | None = None
+) -> None:
     """The whole run in the compiled loop, chunk by chunk (see :mod:`coopdyn.compiled`), in
-    ``native`` (a loop built from ``config``, at its start) or a new one."""
+    ``native`` (a loop built from ``config``, at its start) or a new one; ``first``: the status
+    and events of its first chunk when the caller has advanced it already."""
     if native is None:
         native = run.system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
     status, chunk = compiled.RUNNING, compiled.FIRST_CHUNK
@@ -650,9 +653,13 @@ def _compiled_loop(run: _Run, config: dict[str, Any], bar: Any, native: Any = No
             wall = time.perf_counter()
             if run.budget is not None and run.method.adaptive:  # no chunk past the step budget
                 chunk = max(1, min(chunk, run.budget - run.n_accepted - run.n_rejected))
-            status = native.advance(chunk)
+            if first is not None:
+                (status, events), first = first, None
+            else:
+                status = native.advance(chunk)
+                events = native.take_events()
             chunk = compiled.next_chunk(chunk, time.perf_counter() - wall)
-            for kind, a, b, c, d, e in native.take_events():
+            for kind, a, b, c, d, e in events:
                 if kind == compiled.ROTATION_ALARM:  # (link, θ, t)
                     run.warn_rotation(int(a), b, c, stacklevel=4)
                 else:  # energy balance: (t, growth, work, excess, scale)

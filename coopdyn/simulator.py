@@ -112,8 +112,10 @@ class Simulator:
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed, (q, v))
         run.budget = budget
         native, self._loop = self._loop, None  # (not kept while it runs: a run that raises leaves none)
+        settings = None
         if native is not None:  # the last run's loop, restarted when only the start state differs
-            key = self._key(t_final, compiled.controller_settings(scene, system))
+            settings = compiled.controller_settings(scene, system)
+            key = self._key(t_final, settings)
             if compiled.same(key, self._loop_key):
                 native.restart(q, v)
                 return self._compiled(run, native, self._loop_config, key)
@@ -129,6 +131,7 @@ class Simulator:
             save_every=self.save_every,
             max_speed=self.max_speed,
             energy_check=self._energy,
+            controller=settings,
         )
         if config is None:  # the Python loop: an ordinary simulate call
             return simulate(
@@ -161,39 +164,46 @@ class Simulator:
         """The run in ``native`` (at its start); the loop kept for the next run."""
         run.loop = "compiled"
         cpu0 = time.process_time()
-        result = self._short(run, native, cpu0)
+        with np.errstate(over="ignore", invalid="ignore"):
+            first = self._first_chunk(run, native)
+            result = self._short(run, native, cpu0, first)
+            if result is None:
+                _compiled_loop(run, config, None, native, first)
         if result is None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                _compiled_loop(run, config, None, native)
             run.cpu_time = time.process_time() - cpu0
             result = run.result()
         self._loop, self._loop_config, self._loop_key = native, config, key
         return result
 
-    def _short(self, run: _Run, native: Any, cpu0: float) -> Result | None:
-        """A fixed-step run that fits in the compiled loop's first chunk, and completes without a
-        warning: its Result straight from the loop's samples (the general path's bookkeeping,
-        14 µs, is most of a one-step run's fixed cost: benchmarks/fixed_cost.py). None after
-        anything else — a warning, a failure, a torque left pending —, the loop restarted for
-        the general path to run it again and report it."""
+    @staticmethod
+    def _first_chunk(run: _Run, native: Any) -> tuple[int, list[Any]] | None:
+        """(status, events) of a fixed-step run that fits in the loop's first chunk, run whole
+        here; None for any other run (the general path advances it)."""
         if run.method.adaptive or run.n_steps >= compiled.FIRST_CHUNK:
             return None
         status = native.advance(compiled.FIRST_CHUNK)
-        if status == compiled.DONE and not native.take_events():
-            t, Q, V, TAU, pending = native.samples()
-            if not pending:
-                cpu_time = time.process_time() - cpu0
-                n_rhs, n_jac, n_factor, n_steps, n_rejected = native.counters()
-                s = self.system
-                s.n_rhs, s.n_jac, s.n_factor = n_rhs, n_jac, n_factor
-                t, Q, V, TAU = compiled.rows(t, Q, V, TAU, self.scene)
-                return Result(
-                    scene=self.scene, t=t, q=Q, v=V, tau=TAU, integrator=run.method.name, dt=self.dt, n_rhs=n_rhs,
-                    cpu_time=cpu_time, n_jac=n_jac, n_factor=n_factor, n_steps=n_steps, n_rejected=n_rejected,
-                    status="completed", backend=s.dynamics.backend, loop="compiled",
-                )  # fmt: skip
-        native.restart(*run.start)
-        return None
+        return status, native.take_events()
+
+    def _short(self, run: _Run, native: Any, cpu0: float, first: tuple[int, list[Any]] | None) -> Result | None:
+        """The Result of a run done in its first chunk without a warning, straight from the loop's
+        samples (the general path's bookkeeping, 14 µs, is most of a one-step run's fixed cost:
+        benchmarks/fixed_cost.py); None when anything is to report — a warning, a failure, a
+        torque left pending: the general path takes over from that chunk, nothing run twice."""
+        if first is None or first != (compiled.DONE, []):
+            return None
+        t, Q, V, TAU, pending = native.samples()
+        if pending:
+            return None
+        cpu_time = time.process_time() - cpu0
+        n_rhs, n_jac, n_factor, n_steps, n_rejected = native.counters()
+        s = self.system
+        s.n_rhs, s.n_jac, s.n_factor = n_rhs, n_jac, n_factor
+        t, Q, V, TAU = compiled.rows(t, Q, V, TAU, self.scene)
+        return Result(
+            scene=self.scene, t=t, q=Q, v=V, tau=TAU, integrator=run.method.name, dt=self.dt, n_rhs=n_rhs,
+            cpu_time=cpu_time, n_jac=n_jac, n_factor=n_factor, n_steps=n_steps, n_rejected=n_rejected,
+            status="completed", backend=s.dynamics.backend, loop="compiled",
+        )  # fmt: skip
 
     def __repr__(self) -> str:
         return f"Simulator({self.scene!r}, {type(self.controller).__name__}, {self.method!r}, dt={self.dt:g})"

@@ -1,8 +1,10 @@
-"""The frames and sign conventions of coopdyn's outputs, drawn on the demo's scene: two Pandas
-squeeze a 2 kg box with 20 N and lift it; at t = 1 s the figure shows (side view, world y right,
-z up, x out of the page) the world, object, tool (T) and grasp (G) frames and the wrench each
-grasp puts on the object, as ``Result.wrench`` gives it: force [N] in world axes at the grasp
-point. Prints the figures it draws (``docs/physics.md``, "Frames and sign conventions").
+"""The frames and sign conventions of coopdyn's outputs, drawn on the demo's scene.
+
+Two Pandas squeeze a 2 kg box and lift it; at t = 1 s the figure shows (side view: world y
+right, z up, x out of the page; the world frame is described, 0.7 m below) the object frame,
+the tool (T) and grasp (G) frames, and the force each grasp puts on the object as
+``Result.wrench`` gives it: [N] in world axes at the grasp point. Prints the figures it draws
+(docs/physics.md, "Frames and sign conventions").
 
     python examples/frames.py [OUT.png]
 """
@@ -22,6 +24,9 @@ from coopdyn.viz.plotting import save_figure
 
 T_SHOWN = 1.0  # [s]: squeezed and lifted (squeeze from 0.5 s, lift from 1 s)
 DT = 1e-3  # [s]
+STIFFNESS = 1e4  # interconnection stiffness [N/m] (the demo's)
+DAMPING = 0.002  # interconnection damping / stiffness [s]
+SQUEEZE = 20.0  # commanded internal force [N]
 OUT = "out/frames.png"
 AXIS = 0.04  # drawn length of a frame axis [m]
 NEWTON = 0.004  # drawn length of 1 N [m]
@@ -32,8 +37,8 @@ def main(out: str = OUT, t_shown: float = T_SHOWN, dt: float = DT) -> dict[str, 
     {"wrench": (2, 6) [N, N·m], "squeeze": (2,) [N], "grasp": (2, 3) [m]}."""
     import matplotlib.pyplot as plt
 
-    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
-    task = GripLiftOscillate(start=object_start(scene), squeeze=20.0)
+    scene = cd.scenes.facing_arms("panda", stiffness=STIFFNESS, damping=DAMPING)
+    task = GripLiftOscillate(start=object_start(scene), squeeze=SQUEEZE)
     res = cd.simulate(scene, t_shown, controller=ObjectImpedance(scene, task), integrator="trapezoid", dt=dt)
     k = len(res.t) - 1
     model, data = scene.model, scene.model.createData()
@@ -71,7 +76,8 @@ def main(out: str = OUT, t_shown: float = T_SHOWN, dt: float = DT) -> dict[str, 
     frame(box, "object frame", "#444444", 0.0, -0.045)
     for i, lk in enumerate(scene.links):
         sign = -1.0 if grasp[i, 1] < box.translation[1] else 1.0  # left of the box or right
-        frame(data.oMf[lk.tip_frame], f"T and G ({lk.name})", "#1f77b4", 0.0, -0.075)
+        apart = np.linalg.norm(data.oMf[lk.grasp_frame].translation - data.oMf[lk.tip_frame].translation)
+        frame(data.oMf[lk.tip_frame], f"T ({lk.name} tool)\nG {apart * 1e3:.1f} mm from it", "#1f77b4", sign * 0.12, -0.06)
         head = data.oMf[lk.grasp_frame].translation[side]
         f = wrench[i, [1, 2]]
         ax.annotate("", head, head - NEWTON * f, arrowprops={"arrowstyle": "-|>", "color": "#d62728", "lw": 2.2})
@@ -89,7 +95,7 @@ def main(out: str = OUT, t_shown: float = T_SHOWN, dt: float = DT) -> dict[str, 
     ax.set_xlabel("world y [m]")
     ax.set_ylabel("world z [m]")
     ax.set_title(
-        f"Frames and signs at t = {res.t[k]:g} s (20 N of squeeze commanded, lifting). Result.wrench: the force on the object in "
+        f"Frames and signs at t = {res.t[k]:g} s ({SQUEEZE:g} N of squeeze commanded). Result.wrench: the force on the object in "
         "world axes at the grasp point,\nmoments about it. Arrows end at the grasp they act on "
         f"({NEWTON * 1e3:g} mm per N). The box's q: position and quaternion in the world; v: in its body axes.",
         fontsize=8,

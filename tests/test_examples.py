@@ -137,6 +137,7 @@ def test_frames_example_draws_what_the_outputs_say(tmp_path: Path) -> None:
     squeeze, the y components equal and opposite), and the forces carry the weight."""
     out = _load("frames").main(out=str(tmp_path / "frames.png"))
     f = out["wrench"][:, :3]
+    assert out["grasp"][0, 1] < out["grasp"][1, 1]  # link 0 grasps the box's −y face
     assert np.all(out["squeeze"] > 15.0)
     assert f[0, 1] > 15.0 and f[1, 1] == pytest.approx(-f[0, 1], abs=1e-9)  # left grasp at −y pushes towards +y
     assert 19.62 < f[:, 2].sum() < 21.0  # weight 19.62 N, and the lift accelerates it up

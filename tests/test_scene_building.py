@@ -212,7 +212,7 @@ def test_an_arm_with_continuous_joints_takes_its_angles_or_rounded_pairs() -> No
 
 
 def test_arms_of_different_robots_are_placed_around_a_box_in_python() -> None:
-    """Arm.reaching: a UR5 and a Kinova, each started with its tool frame on a face of a 0.15 m box
+    """cd.place_arm: a UR5 and a Kinova, each started with its tool frame on a face of a 0.15 m box
     (to 1e-8 m and rad), hold it without a far-grasp warning; left in their reference postures
     they warn with the distance; a target out of reach is refused with its distance and the
     arm's reach."""
@@ -230,7 +230,7 @@ def test_arms_of_different_robots_are_placed_around_a_box_in_python() -> None:
     links = [cd.Interconnection(name, stiffness=1e4) for name in targets]
     with pytest.warns(cd.SceneWarning, match="grasps the object"):
         cd.Scene([ur5, kinova], box, links)
-    placed = [arm.reaching(targets[arm.name]) for arm in (ur5, kinova)]
+    placed = [cd.place_arm(arm, targets[arm.name]) for arm in (ur5, kinova)]
     with warnings.catch_warnings():
         warnings.simplefilter("error", cd.SceneWarning)
         scene = cd.Scene(placed, box, links)
@@ -239,7 +239,7 @@ def test_arms_of_different_robots_are_placed_around_a_box_in_python() -> None:
     for lk in scene.links:
         assert np.max(np.abs(pin.log6(data.oMf[lk.tip_frame].actInv(targets[lk.name])).vector)) < 1e-8
     with pytest.raises(cd.SceneError, match=r"the target is 1.66 m from the arm's base, which reaches at most [0-9.]+ m"):
-        ur5.reaching([0.0, -2.0, 0.7])
+        cd.place_arm(ur5, [0.0, -2.0, 0.7])
 
 
 def test_angles_that_look_like_degrees_are_named() -> None:

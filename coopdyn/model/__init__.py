@@ -4,6 +4,7 @@ from .arm import Arm
 from .beam import Beam
 from .body import RigidObject
 from .elements import BeamSegment, Section
+from .ik import place_arm
 from .interconnection import Interconnection, axial, diagonal
 from .limits import quasi_static, rigid_limit
 from .scene import Scene
@@ -18,6 +19,7 @@ __all__ = [
     "Section",
     "axial",
     "diagonal",
+    "place_arm",
     "quasi_static",
     "rigid_limit",
 ]

@@ -77,16 +77,6 @@ class Arm:
         """A copy with some fields changed."""
         return dataclasses.replace(self, **changes)
 
-    def reaching(self, tool_pose: Any) -> Arm:
-        """A copy whose ``q0`` starts its tool frame at ``tool_pose`` (world; ``pin.SE3``, 4x4 or
-        translation [m]), found by inverse kinematics within the joint limits near the reference
-        posture — how arms of different robots are placed around an object (a scene file's
-        ``tool_pose``). Raises SceneError with the target's distance and the arm's reach when it
-        is out of reach."""
-        from .ik import solve_ik
-
-        return self.replace(q0=solve_ik(self.replace(q0=None), _validate.se3(tool_pose, f"arm {self.name!r}: tool_pose")))
-
 
 @dataclass(frozen=True, eq=False)
 class LoadedArm:
@@ -418,16 +408,16 @@ def _check_limits(model: pin.Model, q: np.ndarray, what: str) -> None:
             continue
         i = j.idx_q
         if lo[i] < hi[i] and not (lo[i] - 1e-9 <= q[i] <= hi[i] + 1e-9):
-            degrees = np.radians(q[i])
+            read_as_degrees = np.radians(q[i])  # [rad]
             hint = (
-                f" (in degrees? {q[i]:.6g}° is {degrees:.6g} rad, within them: q0 is in rad)"
-                if abs(q[i]) > 2 * np.pi and lo[i] <= degrees <= hi[i] and _revolute(j)
+                f" (in degrees? {q[i]:.6g}° is {read_as_degrees:.6g} rad, within them: q0 is in rad)"
+                if abs(q[i]) > 2 * np.pi and lo[i] <= read_as_degrees <= hi[i] and _revolute(j)
                 else ""
             )
             raise SceneError(
                 f"{what}: q0 of joint {model.names[jid]!r} is {q[i]:.6g}, outside its limits [{lo[i]:.6g}, {hi[i]:.6g}]{hint}"
             )
-        if not lo[i] < hi[i] and _revolute(j):  # a revolute joint without limits: nothing caught degrees
+        if _revolute(j) and not hi[i] - lo[i] <= 4 * np.pi:  # no limits (or ±1.8e308): nothing caught degrees
             _validate.warn_if_degrees(q[i], f"{what}, q0 of joint {model.names[jid]!r}", 4)
 
 

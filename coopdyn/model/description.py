@@ -35,7 +35,7 @@ from ..errors import SceneError, did_you_mean
 from .arm import Arm, _robot_name, load_arm
 from .elements import ELEMENTS, Section, lookup
 from .fields import Field, numbers, pose_data
-from .ik import solve_ik
+from .ik import place_arm
 from .interconnection import Interconnection
 from .object_types import description_types
 from .objects import SceneObject
@@ -418,7 +418,7 @@ def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:
         raise DescriptionError(str(exc), where) from None
     if tool_pose is not None:
         try:
-            arm = arm.replace(q0=solve_ik(arm, _validate.se3(tool_pose, "tool_pose")))
+            arm = place_arm(arm, tool_pose)
         except SceneError as exc:
             hint = f"{exc} (check the pose, the base and the tip_frame)"
             raise DescriptionError(hint, where._replace(key="tool_pose")) from None

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 
+from .. import _validate
 from ..errors import SceneError
 from .arm import Arm, load_arm
 
@@ -98,3 +101,11 @@ def reach(model: pin.Model, frame: int) -> float:
         total += float(np.linalg.norm(model.jointPlacements[joint].translation))
         joint = model.parents[joint]
     return total
+
+
+def place_arm(arm: Arm, tool_pose: Any) -> Arm:
+    """A copy of ``arm`` whose ``q0`` starts its tool frame at ``tool_pose`` (world; ``pin.SE3``,
+    4x4 or translation [m]), found by :func:`solve_ik` near the reference posture — how arms of
+    different robots are placed around one object (a scene file's ``tool_pose``). Raises
+    SceneError with the target's distance and the arm's reach when it is out of reach."""
+    return arm.replace(q0=solve_ik(arm.replace(q0=None), _validate.se3(tool_pose, f"arm {arm.name!r}: tool_pose")))

@@ -202,7 +202,8 @@ class Scene:
         world_M_object = pin.SE3(data.oMf[o_frame])
 
         links = []
-        grasp_points: list[tuple[str, str | None, np.ndarray]] = []  # (name, arm, world position at the start)
+        # (name, the arm whose tool frame placed the grasp — None when given —, its world position at the start)
+        grasp_points: list[tuple[str, str | None, np.ndarray]] = []
         for k, ic in enumerate(interconnections):
             if not isinstance(ic, Interconnection):
                 raise SceneError(f"interconnections[{k}] must be a coopdyn.Interconnection, got {type(ic).__name__}")
@@ -238,7 +239,7 @@ class Scene:
                 tip = model.addFrame(pin.Frame(f"world/fixture{k}", 0, w_M_T, pin.FrameType.OP_FRAME))
             g_joint, o_M_G = obj.grasp_joint(placed, o_M_G)
             g_id = model.addFrame(pin.Frame(f"{obj.name}/grasp{k}_{name}", g_joint, o_M_G, pin.FrameType.OP_FRAME))
-            grasp_points.append((name, ic.arm, (data.oMi[g_joint] * o_M_G).translation))
+            grasp_points.append((name, None if ic.grasp is not None else ic.arm, (data.oMi[g_joint] * o_M_G).translation))
             links.append(Link(name, i_arm, int(tip), int(g_id), law, element_type.native))
         _warn_far_grasps(obj, model, data, grasp_points)
         link_names = [lk.name for lk in links]
@@ -390,9 +391,9 @@ def _warn_far_grasps(
         if gap > size:
             fix = (
                 f"arm {arm!r}'s tool frame starts there and the grasp defaults to it: place the arm at the object "
-                "(its q0, or tool_pose in a scene file) or give the grasp"
+                "(its q0, cd.place_arm, or tool_pose in a scene file) or give the grasp"
                 if arm is not None
-                else "give the grasp on the object"
+                else "its grasp is given there: give a grasp on the object"
             )
             warnings.warn(
                 f"interconnection {name!r} grasps the object {gap * 1e3:.0f} mm from it, more than its size "

@@ -203,10 +203,11 @@ def sweep_heatmap(
     """One heat map per metric of a sweep table over two of its parameters (``x``, ``y``): each
     cell the mean over the cell's completed runs (several with seeds), written in the cell; a
     cell with no completed run is grey and names what happened (diverged, failed, …). A cell
-    whose completed runs include one that warned (the table's ``warnings`` column: an accuracy,
-    energy or scene warning), or whose metric passes its sanity bound in ``limits`` (metric →
-    largest sensible value, in the column's units), is hatched and says how many runs did: a
-    completed run is not a trustworthy one. Values spanning more than a factor 20 get a
+    whose completed runs include one that warned (a non-empty ``warnings`` column: an accuracy,
+    energy or scene warning, or a note such as a metric not computed), or one whose |value| of
+    any metric in ``limits`` (metric → largest sensible value, in the column's units) passes
+    its bound, is hatched in every panel and says how many runs did: a completed run is not
+    always a trustworthy one. Values spanning more than a factor 20 get a
     logarithmic colour scale. ``xlabel``/``ylabel`` name the axes (default: the column names)."""
     from matplotlib.colors import LogNorm
 
@@ -234,6 +235,8 @@ def sweep_heatmap(
     cell_rows = [[cells.get((xv, yv), np.empty(0, dtype=int)) for xv in xs] for yv in ys]
     notes = [[", ".join(sorted(set(statuses[rows]) - {"completed"})) for rows in row] for row in cell_rows]
     warned = table["warnings"].fillna("").astype(str).str.len().to_numpy() > 0 if "warnings" in table.columns else None
+    # per cell: its completed runs that warned or pass a bound (the same in every panel)
+    doubts = [[_doubts(table, rows[completed[rows]], warned, limits) for rows in row] for row in cell_rows]
     fig, axes = plt.subplots(
         1,
         len(values),
@@ -249,13 +252,11 @@ def sweep_heatmap(
             column = table[name].to_numpy(dtype=float, na_value=np.nan)
         except (TypeError, ValueError) as exc:
             raise SweepError(f"column {name!r} is not numeric: a heat map draws numbers") from exc
-        doubts = [["" for _ in xs] for _ in ys]  # per cell: its completed runs that warned or pass a bound
         for i, row in enumerate(cell_rows):
             for j, rows in enumerate(row):
                 ok = rows[completed[rows]]
                 if len(ok):
                     grid[i, j] = float(np.mean(column[ok])) * scale
-                    doubts[i][j] = _doubts(table, ok, warned, limits)
         finite = grid[np.isfinite(grid)]
         log = finite.size > 1 and finite.min() > 0 and finite.max() > 20 * finite.min()
         norm = LogNorm(finite.min(), finite.max()) if log else None
@@ -277,7 +278,7 @@ def sweep_heatmap(
         ax.set_ylabel(y_label)
         ax.set_title(label, fontsize=10)
         fig.colorbar(image, ax=ax, label=label, shrink=0.9)
-    if _doubts(table, np.flatnonzero(completed), warned, limits):  # (a key to the hatching)
+    if any(d for row in doubts for d in row):  # (a key to the hatching)
         bounds = ", ".join(f"{column_label(k)[0]} > {v * column_label(k)[1]:g}" for k, v in limits.items())
         fig.supxlabel(
             "hatched: completed runs that warned (the table's warnings column)" + (f" or exceed {bounds}" if bounds else ""),

@@ -357,8 +357,11 @@ def _fps(fps: Any) -> float:
 
 
 def _frames(result: Result, fps: float) -> np.ndarray:
+    """The sample shown at each frame, 1/fps apart in simulated time — a sample held over
+    several frames when they are sparser than that, so that an animation's time (the page's
+    clock, the live viewer's pace) is the simulated time."""
     times = np.arange(0.0, result.t[-1] + 1e-12, 1.0 / fps)
-    return np.unique(np.clip(np.searchsorted(result.t, times), 0, len(result.t) - 1))
+    return np.clip(np.searchsorted(result.t, times), 0, len(result.t) - 1)
 
 
 def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30.0, meshes: str = "collision") -> Path:
@@ -422,11 +425,12 @@ def frame_live(vis: Any, lo: np.ndarray, hi: np.ndarray, legend: str) -> None:
     right = np.cross(-u, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, -u)
-    width = 0.9 * float(np.max(np.abs((np.array(hi) - np.array(lo)) @ right)))
+    extent = np.abs(np.asarray(hi) - np.asarray(lo))  # (the box's extent across and up the view)
+    width = 0.9 * float(extent @ np.abs(right))
     png, aspect = _text_png(legend)
     card = np.eye(4)
     card[:3, :3] = np.column_stack([right, up, u])  # the card's face (+z) towards the eye, its text upright
-    card[:3, 3] = up * (0.5 * float(np.abs((np.array(hi) - np.array(lo)) @ up)) + 0.6 * width / aspect)
+    card[:3, 3] = up * (0.5 * float(extent @ np.abs(up)) + 0.6 * width / aspect)
     texture = g.ImageTexture(image=g.PngImage(png))
     vis["legend"].set_object(g.Box([width, width / aspect, 1e-4]), g.MeshBasicMaterial(map=texture))
     vis["legend"].set_transform(card)

@@ -122,6 +122,7 @@ public:
     q_ = q0;
     v_ = v0;
     method_->new_run();
+    k_.clear_rotation_alarm();  // (a step that diverged leaves it set: the next run starts clear)
     start();
   }
 
