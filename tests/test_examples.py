@@ -142,3 +142,41 @@ def test_frames_example_draws_what_the_outputs_say(tmp_path: Path) -> None:
     assert f[0, 1] > 15.0 and f[1, 1] == pytest.approx(-f[0, 1], abs=1e-9)  # left grasp at −y pushes towards +y
     assert 19.62 < f[:, 2].sum() < 21.0  # weight 19.62 N, and the lift accelerates it up
     assert (tmp_path / "frames.png").stat().st_size > 20_000
+
+
+@pytest.mark.parametrize("name", ["linear_book", "slider_and_fixture", "two_pandas", "two_ur5s"])
+def test_the_scene_file_examples_tell_the_resolved_runs_story(name: str) -> None:
+    """Each examples/scenes file's reported figures (the run's metrics: tracking error, squeeze,
+    peak forces) at its own method and step against the same method at a tenth of the step:
+    within 0.01 N and 0.01 mm (measured: ≤ 0.5 mN, 0.4 µm)."""
+    import warnings
+
+    import coopdyn as cd
+    from coopdyn.io.scenefile import load
+    from coopdyn.metrics import run_metrics
+
+    loaded = load(EXAMPLES / "scenes" / f"{name}.toml")
+    figures = []
+    for dt in (loaded.dt, loaded.dt / 10):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the resolved run's screen has nothing to add)
+            res = cd.simulate(
+                loaded.scene, loaded.duration, controller=loaded.controller, integrator=loaded.integrator, dt=dt,
+                save_every=max(1, round(loaded.dt * loaded.save_every / dt)), control_dt=loaded.control_dt,
+                accuracy_check="off",
+            )  # fmt: skip
+        figures.append(run_metrics(res, loaded.task)[0])
+    mine, resolved = figures
+    assert mine.keys() == resolved.keys() and len(mine) >= 3
+    for key, value in mine.items():
+        tolerance = 1e-5 if key.endswith("_m") else 0.01  # [m], [N]
+        assert value == pytest.approx(resolved[key], abs=tolerance), key
+
+
+def test_frames_example_tells_the_resolved_runs_story(tmp_path: Path) -> None:
+    """The frames figure's forces at its 1 ms against 0.1 ms: within 0.01 N."""
+    frames = _load("frames")
+    mine = frames.main(out=str(tmp_path / "a.png"))
+    resolved = frames.main(out=str(tmp_path / "b.png"), dt=1e-4)
+    np.testing.assert_allclose(mine["wrench"], resolved["wrench"], atol=0.01)
+    np.testing.assert_allclose(mine["squeeze"], resolved["squeeze"], atol=0.01)
