@@ -37,7 +37,7 @@ from .errors import (
     StepBudgetError,
     StepMatrixError,
 )
-from .integrators import AdaptiveIntegrator, Integrator, get_integrator
+from .integrators import AdaptiveIntegrator, DormandPrince, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
@@ -65,6 +65,7 @@ def simulate(
     stream_to: str | os.PathLike[str] | None = None,
     accuracy_check: str = "auto",
     control_dt: float | None = None,
+    accuracy: float | None = None,
 ) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_final``.
 
@@ -125,6 +126,15 @@ def simulate(
             of one per stage, whatever the method. Fixed-step methods need ``control_dt`` a
             whole multiple of ``dt``; adaptive ones land a step on every sample instant. A
             hold is part of the physics: the accuracy check's reference run holds too.
+        accuracy: the interconnection-force error [N] the run may have, or ``None``. Given, the
+            step is chosen for it: the method runs at ``dt``, dt/2, dt/4, … (at most
+            :data:`ACCURACY_HALVINGS` halvings, the saved grid kept) until its forces agree with
+            a reference run within ``accuracy`` — dopri5 at rtol 1e-9, run once on the same
+            grid (the controller is called again from t = 0 for each run) — and that run is
+            returned, its ``dt`` the step taken and ``force_error_estimate`` the error found.
+            For fixed-step methods (dopri5 controls its error with ``rtol``; ``exponential`` is
+            exact), not with ``stream_to``; ``progress`` prints each try. The reference's own
+            error (about 1e-6 of the forces) bounds what can be asked.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -142,6 +152,13 @@ def simulate(
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"scene must be a coopdyn.Scene, got {type(scene).__name__}")
+    if accuracy is not None:
+        return _to_accuracy(
+            accuracy, scene, t_final, controller=controller, integrator=integrator, dt=dt, save_every=save_every, q0=q0,
+            v0=v0, progress=progress, max_speed=max_speed, energy_check=energy_check, object_wrench=object_wrench,
+            backend=backend, loop=loop, max_steps=max_steps, max_memory=max_memory, stream_to=stream_to,
+            control_dt=control_dt,
+        )  # fmt: skip
     t_final = _checked_duration(t_final)
     dt, save_every, max_speed = _checked_steps(dt, save_every, max_speed)
     for name, value, valid in (
@@ -313,6 +330,62 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         message += accuracy.growth_text(system, q, v, t_final)
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
+
+
+#: how many times ``simulate(..., accuracy=)`` halves the step before it gives up
+ACCURACY_HALVINGS = 8
+#: the reference of ``simulate(..., accuracy=)``: dopri5's (rtol, atol)
+ACCURACY_REFERENCE = (1e-9, 1e-12)
+
+
+def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -> Result:
+    """:func:`simulate` with its step chosen for a force error of ``accuracy`` [N] (see its
+    ``accuracy``): the method at dt, dt/2, … against one dopri5 reference on the same grid."""
+    tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
+    method = get_integrator(settings.pop("integrator"))
+    if method.adaptive or method.exact_discretisation:
+        raise SimulationError(
+            f"accuracy= chooses a fixed-step method's step; {method.name} "
+            + ("controls its error itself (give its rtol)" if method.adaptive else "is exact: give its dt")
+        )
+    if settings["stream_to"] is not None:
+        raise SimulationError("accuracy= runs the scene several times: it cannot stream to files; drop stream_to")
+    dt, every, _ = _checked_steps(settings.pop("dt"), settings.pop("save_every"), settings["max_speed"])
+    progress = settings.pop("progress")
+    rtol, atol = ACCURACY_REFERENCE
+    quiet = dict(energy_check="off", accuracy_check="off")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = simulate(
+            scene, t_final, integrator=DormandPrince(rtol=rtol, atol=atol), dt=dt * every, **{**settings, **quiet}
+        )
+    forces = reference.wrenches()[..., :3]
+    error = math.inf
+    for _ in range(ACCURACY_HALVINGS + 1):
+        with warnings.catch_warnings(record=True) as said:  # (shown for the run returned only)
+            warnings.simplefilter("always")
+            try:
+                run = simulate(scene, t_final, integrator=method, dt=dt, save_every=every, accuracy_check="off", **settings)
+            except (DivergenceError, StepMatrixError):  # past the method's stability limit: a smaller step
+                run = None
+        if run is not None:
+            mine = run.wrenches()[..., :3]
+            if mine.shape != forces.shape or not np.allclose(run.t, reference.t, rtol=0.0, atol=1e-9):
+                raise SimulationError(f"accuracy=: the run's samples ({len(run.t)}) are not the reference's ({len(reference.t)})")
+            error = float(np.max(np.linalg.norm(mine - forces, axis=-1), initial=0.0))
+        if progress:
+            outcome = f"is off by {error:.3g} N" if run is not None else "diverges"
+            print(f"accuracy {tolerance:g} N: {method.name} at dt = {dt:g} s {outcome}", file=sys.stderr)
+        if run is not None and error <= tolerance:
+            for w in said:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            return dataclasses.replace(run, force_error_estimate=error)
+        dt, every = dt / 2, every * 2
+    found = f"off by {error:.3g} N against dopri5 at rtol {rtol:g}" if math.isfinite(error) else "every try diverged"
+    raise SimulationError(
+        f"{method.name} did not reach a force error of {tolerance:g} N down to dt = {2 * dt:g} s ({found}): give a smaller "
+        "dt to start from, another method, or a looser accuracy"
+    )
 
 
 #: the fraction of the object's size beyond which its sag on its grasps under gravity warns

@@ -168,7 +168,7 @@ dt = 1e-3
         (GOOD.replace("duration = 0.1\n", ""), r"\[simulation\]: missing required key 'duration' \[s\]"),
         (
             GOOD.replace("dt = 1e-3", "dt = 1e-3\nstep = 2"),
-            r"line 9: \[simulation\] step: unknown key; valid keys: \['control_dt', 'dt', 'duration'",
+            r"line 9: \[simulation\] step: unknown key; valid keys: \['accuracy', 'control_dt', 'dt', 'duration'",
         ),
         (GOOD + "\n[physics]\ng = 9.81\n", r"line 10: \[physics\]: unknown table; valid tables: \['scene', 'arms', 'object'"),
         (

@@ -14,6 +14,7 @@ JSON Schema is ``docs/scene-file.schema.json`` (:mod:`coopdyn.io.schema`); examp
 from __future__ import annotations
 
 import inspect
+import math
 import re
 import sys
 import time
@@ -54,7 +55,7 @@ CONTROLLERS: dict[str, Any] = {
 TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
 TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output", "sweep")
 DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe a scene without a builder
-SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int, "control_dt": float}
+SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int, "control_dt": float, "accuracy": float}
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
 
 
@@ -72,6 +73,7 @@ class Run:
     save_every: int
     output: dict[str, Any] = field(default_factory=dict)
     control_dt: float | None = None  #: the controller's sample period [s] (None: every evaluation)
+    accuracy: float | None = None  #: [N] the force error the run may have: dt is the step to start from (simulate's accuracy)
 
 
 class _File:
@@ -270,6 +272,16 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         except SimulationError as exc:
             raise f.error(str(exc), "simulation", "control_dt") from None
 
+    accuracy = None
+    if "accuracy" in sim:
+        accuracy = _check_type(f, "simulation", "accuracy", sim["accuracy"], float)
+        if not 0.0 < accuracy < math.inf:
+            raise f.error(f"the force error the run may have must be > 0 [N], got {accuracy:g}", "simulation", "accuracy")
+        if INTEGRATORS[integrator].adaptive or integrator == "exponential":
+            raise f.error(
+                f"chooses a fixed-step method's step; {integrator} does not take one (drop accuracy)", "simulation", "accuracy"
+            )
+
     task = _task(f, doc.get("task"), scene)
     controller = _controller(f, doc.get("controller", {"type": "none"}), scene, task, builder_name, kwargs)
 
@@ -284,7 +296,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     except SceneFileError as exc:
         raise f.error(str(exc), "output", "folder") from None
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
-    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt)
+    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy)
 
 
 def _scene(f: _File, doc: dict[str, Any]) -> tuple[Scene, str | None, dict[str, Any]]:
@@ -433,6 +445,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
             dt=loaded.dt,
             save_every=loaded.save_every,
             control_dt=loaded.control_dt,
+            accuracy=loaded.accuracy,
             progress=progress,
             max_steps=max_steps,
         )
@@ -464,7 +477,12 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     done = write_outputs(out, [("trajectory", trajectory)], optional)
     written = list(done.files)
     summary = [
-        f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {loaded.dt:g} s",
+        f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {res.dt:g} s"
+        + (
+            f" (chosen for a force error <= {loaded.accuracy:g} N: {res.force_error_estimate:.3g} N against dopri5)"
+            if loaded.accuracy is not None
+            else ""
+        ),
         f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS; "
         f"wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}",
     ]

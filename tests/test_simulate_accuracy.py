@@ -1,0 +1,81 @@
+"""simulate(..., accuracy=N): the step chosen for the force error a user asks, checked against a
+reference it did not use, and the requests it cannot serve refused with the reason."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import coopdyn as cd
+from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+from coopdyn.errors import SimulationError
+from coopdyn.integrators import DormandPrince
+from coopdyn.scenes import object_start
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
+
+
+@pytest.fixture(scope="module")
+def demo() -> tuple[cd.Scene, ObjectImpedance]:
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    return scene, ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), squeeze=20.0))
+
+
+def test_the_step_is_halved_until_the_forces_are_within_the_accuracy(
+    demo: tuple[cd.Scene, ObjectImpedance], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The demo's first second under the trapezoid from 5 ms: each request gets the largest step
+    of 5 ms / 2^k whose forces are within it of a dopri5 run at rtol 1e-11 (independent of the
+    rtol 1e-9 reference simulate used), and the error falls at the method's order (÷4 per halving)."""
+    scene, controller = demo
+    truth = cd.simulate(
+        scene, 1.0, controller=controller, integrator=DormandPrince(rtol=1e-11, atol=1e-14), dt=5e-3,
+        accuracy_check="off", energy_check="off",
+    )  # fmt: skip
+    chosen = {}
+    for tolerance in (1.0, 0.1, 0.01):
+        res = cd.simulate(scene, 1.0, controller=controller, integrator="trapezoid", dt=5e-3, accuracy=tolerance, progress=True)
+        error = float(np.max(np.linalg.norm(res.wrenches()[..., :3] - truth.wrenches()[..., :3], axis=-1)))
+        assert res.force_error_estimate is not None and res.force_error_estimate <= tolerance
+        assert error <= tolerance and error == pytest.approx(res.force_error_estimate, rel=1e-3)
+        assert len(res.t) == len(truth.t)  # (the saved grid kept while the step halves)
+        chosen[tolerance] = res.dt
+    assert chosen[1.0] > chosen[0.1] > chosen[0.01] and all(5e-3 / dt in (2, 4, 8, 16, 32) for dt in chosen.values())
+    tried = [float(line.split("off by ")[1].split()[0]) for line in capsys.readouterr().err.splitlines() if "off by" in line]
+    assert tried[-4] / tried[-3] == pytest.approx(4.0, rel=0.2) and tried[-2] / tried[-1] == pytest.approx(4.0, rel=0.2)
+
+
+def test_what_accuracy_cannot_serve_is_refused(demo: tuple[cd.Scene, ObjectImpedance], tmp_path: object) -> None:
+    scene, controller = demo
+    for bad in (0.0, -1.0, float("nan"), "0.1"):
+        with pytest.raises(SimulationError, match="accuracy"):
+            cd.simulate(scene, 0.1, controller=controller, accuracy=bad)  # type: ignore[arg-type]
+    with pytest.raises(SimulationError, match="dopri5 controls its error itself"):
+        cd.simulate(scene, 0.1, controller=controller, integrator="dopri5", accuracy=0.1)
+    with pytest.raises(SimulationError, match="cannot stream"):
+        cd.simulate(scene, 0.1, controller=controller, accuracy=0.1, stream_to=str(tmp_path))
+    with pytest.raises(SimulationError, match=r"rk4 did not reach a force error of 1e-09 N down to dt = 3\.90625e-05 s"):
+        cd.simulate(scene, 0.05, controller=controller, integrator="rk4", dt=1e-2, accuracy=1e-9)
+
+
+def test_a_scene_file_asks_for_its_accuracy(tmp_path: Path) -> None:
+    """[simulation] accuracy: coopdyn simulate halves the file's dt until the forces are within
+    it and says the step it took; with an adaptive method, or in a sweep, it is refused."""
+    from coopdyn.io.scenefile import SceneFileError, load, run
+    from coopdyn.sweeps.spec import load_spec
+
+    text = (EXAMPLES / "two_pandas.toml").read_text()
+    text = text.replace("duration = 5.0", "duration = 1.0").replace("dt = 1e-3", "dt = 5e-3\naccuracy = 0.1")
+    path = tmp_path / "accurate.toml"
+    path.write_text(text)
+    report = run(load(path), folder=tmp_path / "out", progress=False)
+    assert report.result.dt == 1.25e-3 and report.result.force_error_estimate <= 0.1
+    assert "trapezoid at dt = 0.00125 s (chosen for a force error <= 0.1 N:" in report.summary[0]
+    path.write_text(text.replace('integrator = "trapezoid"', 'integrator = "dopri5"'))
+    with pytest.raises(SceneFileError, match=r"\[simulation\] accuracy: chooses a fixed-step method's step; dopri5"):
+        load(path)
+    path.write_text(text + '\n[sweep]\nfolder = "out"\n[sweep.grid]\n"scene.stiffness" = [1e4, 2e4]\n')
+    with pytest.raises(cd.SweepError, match="accuracy is not taken by sweeps yet"):
+        load_spec(path)
