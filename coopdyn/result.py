@@ -91,8 +91,9 @@ class Result:
         n_steps, n_rejected: accepted and rejected steps.
         force_error_estimate: the largest error of the interconnection forces [N] found by
             comparing this run with a reference run (dopri5, or ros2_adaptive on stiff scenes)
-            of the same scene, controller and start, when
-            the accuracy screen could not clear the run (:mod:`coopdyn.accuracy`); ``None`` when
+            of the same scene, controller and start, when the accuracy screen could not clear
+            the run (:mod:`coopdyn.accuracy`), or when ``simulate(..., accuracy=)`` chose its
+            step (against dopri5 at rtol 1e-9); ``None`` when
             it was not needed (every mode passed the screen, or an error-controlled or exact
             method), not possible, or ``accuracy_check`` was not ``"auto"``.
     """

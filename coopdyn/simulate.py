@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from . import _progress, _signals, _validate, accuracy, compiled
+from . import _progress, _signals, _validate, compiled
+from . import accuracy as screening
 from .budget import check_budget, step_count
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
@@ -131,10 +132,13 @@ def simulate(
             :data:`ACCURACY_HALVINGS` halvings, the saved grid kept) until its forces agree with
             a reference run within ``accuracy`` — dopri5 at rtol 1e-9, run once on the same
             grid (the controller is called again from t = 0 for each run) — and that run is
-            returned, its ``dt`` the step taken and ``force_error_estimate`` the error found.
-            For fixed-step methods (dopri5 controls its error with ``rtol``; ``exponential`` is
-            exact), not with ``stream_to``; ``progress`` prints each try. The reference's own
-            error (about 1e-6 of the forces) bounds what can be asked.
+            returned, its ``dt`` the step taken, ``force_error_estimate`` the error found and
+            ``cpu_time`` the whole search's (reference and tries). For fixed-step methods
+            (dopri5 controls its error with ``rtol``; ``exponential`` is exact), not with
+            ``stream_to``; ``progress`` prints each try; a try that diverges or breaks the
+            energy balance counts as a miss, and none takes more than ``max_steps``. The
+            reference's own error (about 1e-10 of the peak force) bounds what can be asked:
+            below 1e-8 of it is refused.
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -157,7 +161,7 @@ def simulate(
             accuracy, scene, t_final, controller=controller, integrator=integrator, dt=dt, save_every=save_every, q0=q0,
             v0=v0, progress=progress, max_speed=max_speed, energy_check=energy_check, object_wrench=object_wrench,
             backend=backend, loop=loop, max_steps=max_steps, max_memory=max_memory, stream_to=stream_to,
-            control_dt=control_dt,
+            control_dt=control_dt, accuracy_check=accuracy_check,
         )  # fmt: skip
     t_final = _checked_duration(t_final)
     dt, save_every, max_speed = _checked_steps(dt, save_every, max_speed)
@@ -266,13 +270,13 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
     q, v = rerun["q0"], rerun["v0"]
     step = result.dt if not method.adaptive else t_final / max(result.n_steps, 1)  # adaptive: its mean step
     try:
-        judged = accuracy.screen(system, q, v, method, step, t_final)  # (system.dynamics: the run's counters stay)
+        judged = screening.screen(system, q, v, method, step, t_final)  # (system.dynamics: the run's counters stay)
     except (ArithmeticError, ValueError, NotImplementedError, np.linalg.LinAlgError):  # e.g. a destabilising gain
         return result
     if not judged.suspect:
         return result
-    reference, budget = accuracy.reference_for(judged, result.n_steps)
-    name = accuracy.described(reference)
+    reference, budget = screening.reference_for(judged, result.n_steps)
+    name = screening.described(reference)
     unchecked = "accuracy_check='screen'" if mode == "screen" else "a streamed run is not run twice" if streamed else ""
     checked = None
     stopped: tuple[str, float, bool] | None = None  # (why, when [s], diverged) a reference stopped early
@@ -307,7 +311,7 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         except CoopdynError as exc:
             unchecked = f"{name} stopped: {str(exc).splitlines()[0][:200]}"
     if checked is None:
-        message = accuracy.screen_message(judged, unchecked)
+        message = screening.screen_message(judged, unchecked)
     else:
         n = min(len(checked.t), len(result.t))  # (a reference that stopped early: its part of the run)
         mine = result.wrenches()[:n][..., :3]
@@ -321,21 +325,26 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         own_peak = float(np.max(np.linalg.norm(mine, axis=-1), initial=0.0))
         size = np.linalg.norm(theirs, axis=-1).reshape(len(theirs), -1).max(axis=1)  # the reference's force over time
         third = max(len(size) // 3, 1)
-        growth = float(size[-third:].max() / max(size[:third].max(), accuracy.FORCE_FLOOR)) if len(size) >= 3 else 1.0
+        growth = float(size[-third:].max() / max(size[:third].max(), screening.FORCE_FLOOR)) if len(size) >= 3 else 1.0
         readouts = result.readouts
         result = dataclasses.replace(result, force_error_estimate=error)
         result.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
-        message = accuracy.checked_message(judged, error, peak, reference, stopped=stopped, own_peak=own_peak, growth=growth)
+        message = screening.checked_message(judged, error, peak, reference, stopped=stopped, own_peak=own_peak, growth=growth)
     if message is not None:
-        message += accuracy.growth_text(system, q, v, t_final)
+        message += screening.growth_text(system, q, v, t_final)
         warnings.warn(message, AccuracyWarning, stacklevel=3)
     return result
 
 
 #: how many times ``simulate(..., accuracy=)`` halves the step before it gives up
 ACCURACY_HALVINGS = 8
-#: the reference of ``simulate(..., accuracy=)``: dopri5's (rtol, atol)
+#: the reference of ``simulate(..., accuracy=)``: dopri5's (rtol, atol), and its step budget
 ACCURACY_REFERENCE = (1e-9, 1e-12)
+ACCURACY_REFERENCE_STEPS = 2 * 10**6
+#: the smallest accuracy asked, relative to the reference's peak force: its own error is ~1e-10 of it
+ACCURACY_FLOOR = 1e-8
+#: a reference whose forces grow this many times (last third of the run over its first) hints at instability
+ACCURACY_GROWTH = 100.0
 
 
 def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -> Result:
@@ -343,6 +352,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     ``accuracy``): the method at dt, dt/2, … against one dopri5 reference on the same grid."""
     tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
     method = get_integrator(settings.pop("integrator"))
+    check_integrator(scene, method)
+    _checked_choice("accuracy_check", settings.pop("accuracy_check"), ACCURACY_CHECKS)  # (not used: the search checks)
     if method.adaptive or method.exact_discretisation:
         raise SimulationError(
             f"accuracy= chooses a fixed-step method's step; {method.name} "
@@ -350,42 +361,84 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         )
     if settings["stream_to"] is not None:
         raise SimulationError("accuracy= runs the scene several times: it cannot stream to files; drop stream_to")
+    t_final = _checked_duration(t_final)
     dt, every, _ = _checked_steps(settings.pop("dt"), settings.pop("save_every"), settings["max_speed"])
-    progress = settings.pop("progress")
+    progress, max_steps = settings.pop("progress"), settings.pop("max_steps")
+    q, _ = scene.check_state(scene.q0 if settings["q0"] is None else settings["q0"], scene.v0)
+    if not has_constraints(scene):
+        _warn_if_soft(Dynamics(scene, settings["backend"]), q)  # (the tries run without the checks)
     rtol, atol = ACCURACY_REFERENCE
-    quiet = dict(energy_check="off", accuracy_check="off")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        reference = simulate(
-            scene, t_final, integrator=DormandPrince(rtol=rtol, atol=atol), dt=dt * every, **{**settings, **quiet}
-        )
+    cpu0 = time.process_time()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            reference = simulate(
+                scene, t_final, integrator=DormandPrince(rtol=rtol, atol=atol), dt=dt * every,
+                max_steps=ACCURACY_REFERENCE_STEPS, accuracy_check="off", **{**settings, "energy_check": "off"},
+            )  # fmt: skip
+    except SimulationInterrupted:
+        raise SimulationInterrupted("interrupted while running the reference of accuracy=") from None
+    except DivergenceError as exc:
+        when = f" at t = {exc.result.t[-1]:.6g} s" if isinstance(exc.result, Result) and len(exc.result.t) else ""
+        raise SimulationError(
+            f"the reference of accuracy= (dopri5 at rtol {rtol:g}) diverged{when}: the closed loop itself is unstable "
+            "(coopdyn.linearize with the controller shows its modes); no step fixes that"
+        ) from None
+    except StepBudgetError:
+        raise SimulationError(
+            f"the reference of accuracy= (dopri5 at rtol {rtol:g}) needed more than {ACCURACY_REFERENCE_STEPS} steps: the "
+            "scene is too stiff for it; choose the step yourself (coopdyn.advise) or use an implicit method at a small dt"
+        ) from None
     forces = reference.wrenches()[..., :3]
-    error = math.inf
+    peak = float(np.max(np.linalg.norm(forces, axis=-1), initial=0.0))
+    if tolerance < ACCURACY_FLOOR * peak:
+        raise SimulationError(
+            f"accuracy = {tolerance:g} N is below what the reference resolves: about {ACCURACY_FLOOR:g} of the peak force "
+            f"({peak:.3g} N), {ACCURACY_FLOOR * peak:.2g} N"
+        )
+    error, why = math.inf, "every try diverged"
     for _ in range(ACCURACY_HALVINGS + 1):
+        if max_steps is not None and step_count(t_final, dt) > max_steps:
+            why = f"a smaller step would take more than max_steps = {max_steps} steps"
+            break
         with warnings.catch_warnings(record=True) as said:  # (shown for the run returned only)
             warnings.simplefilter("always")
             try:
-                run = simulate(scene, t_final, integrator=method, dt=dt, save_every=every, accuracy_check="off", **settings)
-            except (DivergenceError, StepMatrixError):  # past the method's stability limit: a smaller step
+                run = simulate(
+                    scene, t_final, integrator=method, dt=dt, save_every=every, accuracy_check="off", max_steps=max_steps,
+                    **settings,
+                )  # fmt: skip
+            except SimulationInterrupted:
+                raise SimulationInterrupted(f"interrupted while trying dt = {dt:g} s for accuracy=") from None
+            except (DivergenceError, StepMatrixError, EnergyBalanceError):  # past the method's stability limit
                 run = None
         if run is not None:
             mine = run.wrenches()[..., :3]
             if mine.shape != forces.shape or not np.allclose(run.t, reference.t, rtol=0.0, atol=1e-9):
                 raise SimulationError(f"accuracy=: the run's samples ({len(run.t)}) are not the reference's ({len(reference.t)})")
             error = float(np.max(np.linalg.norm(mine - forces, axis=-1), initial=0.0))
+            why = f"off by {error:.3g} N against dopri5 at rtol {rtol:g}"
         if progress:
             outcome = f"is off by {error:.3g} N" if run is not None else "diverges"
             print(f"accuracy {tolerance:g} N: {method.name} at dt = {dt:g} s {outcome}", file=sys.stderr)
         if run is not None and error <= tolerance:
             for w in said:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-            return dataclasses.replace(run, force_error_estimate=error)
+                warnings.warn(w.message, w.category, stacklevel=3)
+            readouts = run.readouts
+            run = dataclasses.replace(run, force_error_estimate=error, cpu_time=time.process_time() - cpu0)
+            run.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
+            return run
         dt, every = dt / 2, every * 2
-    found = f"off by {error:.3g} N against dopri5 at rtol {rtol:g}" if math.isfinite(error) else "every try diverged"
-    raise SimulationError(
-        f"{method.name} did not reach a force error of {tolerance:g} N down to dt = {2 * dt:g} s ({found}): give a smaller "
-        "dt to start from, another method, or a looser accuracy"
+    size = np.linalg.norm(forces, axis=-1).reshape(len(forces), -1).max(axis=1)  # the reference's force over time
+    third = max(len(size) // 3, 1)
+    growth = float(size[-third:].max() / max(size[:third].max(), screening.FORCE_FLOOR))
+    hint = (
+        f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
+        "(coopdyn.linearize with the controller shows its modes)"
+        if growth > ACCURACY_GROWTH
+        else ": give a smaller dt to start from, another method, or a looser accuracy"
     )
+    raise SimulationError(f"{method.name} did not reach a force error of {tolerance:g} N down to dt = {2 * dt:g} s ({why}){hint}")
 
 
 #: the fraction of the object's size beyond which its sag on its grasps under gravity warns
@@ -594,7 +647,7 @@ class _Run:
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
-        mode = accuracy.unstable_mode(self.system, self.start[0], self.start[1], t)
+        mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t)
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
         partial = self.result("diverged")

@@ -40,24 +40,86 @@ def test_the_step_is_halved_until_the_forces_are_within_the_accuracy(
         error = float(np.max(np.linalg.norm(res.wrenches()[..., :3] - truth.wrenches()[..., :3], axis=-1)))
         assert res.force_error_estimate is not None and res.force_error_estimate <= tolerance
         assert error <= tolerance and error == pytest.approx(res.force_error_estimate, rel=1e-3)
+        assert res.cpu_time > 0.0  # (the whole search's)
         assert len(res.t) == len(truth.t)  # (the saved grid kept while the step halves)
         chosen[tolerance] = res.dt
     assert chosen[1.0] > chosen[0.1] > chosen[0.01] and all(5e-3 / dt in (2, 4, 8, 16, 32) for dt in chosen.values())
+    # the largest such step: the one before it misses (second order: 4× the error)
+    coarser = cd.simulate(
+        scene, 1.0, controller=controller, integrator="trapezoid", dt=2 * chosen[0.1], save_every=round(5e-3 / (2 * chosen[0.1])),
+        accuracy_check="off", energy_check="off",
+    )  # fmt: skip
+    assert np.max(np.linalg.norm(coarser.wrenches()[..., :3] - truth.wrenches()[..., :3], axis=-1)) > 0.1
     tried = [float(line.split("off by ")[1].split()[0]) for line in capsys.readouterr().err.splitlines() if "off by" in line]
     assert tried[-4] / tried[-3] == pytest.approx(4.0, rel=0.2) and tried[-2] / tried[-1] == pytest.approx(4.0, rel=0.2)
 
 
-def test_what_accuracy_cannot_serve_is_refused(demo: tuple[cd.Scene, ObjectImpedance], tmp_path: object) -> None:
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "0.1"])
+def test_an_accuracy_that_is_not_a_positive_force_is_refused(demo: tuple[cd.Scene, ObjectImpedance], bad: object) -> None:
     scene, controller = demo
-    for bad in (0.0, -1.0, float("nan"), "0.1"):
-        with pytest.raises(SimulationError, match="accuracy"):
-            cd.simulate(scene, 0.1, controller=controller, accuracy=bad)  # type: ignore[arg-type]
+    with pytest.raises(SimulationError, match=r"accuracy \(the force error the run may have\) must be"):
+        cd.simulate(scene, 0.1, controller=controller, accuracy=bad)  # type: ignore[arg-type]
+
+
+def test_what_accuracy_cannot_serve_is_refused_with_the_reason(demo: tuple[cd.Scene, ObjectImpedance], tmp_path: Path) -> None:
+    """Adaptive and exact methods, streaming, an accuracy below what the reference resolves, and
+    one that the halvings do not reach (first-order implicit Euler) are refused, each saying why."""
+    scene, controller = demo
     with pytest.raises(SimulationError, match="dopri5 controls its error itself"):
         cd.simulate(scene, 0.1, controller=controller, integrator="dopri5", accuracy=0.1)
+    with pytest.raises(SimulationError, match="exponential is exact"):
+        cd.simulate(cd.scenes.linear_book(), 0.1, integrator="exponential", accuracy=0.1)
     with pytest.raises(SimulationError, match="cannot stream"):
         cd.simulate(scene, 0.1, controller=controller, accuracy=0.1, stream_to=str(tmp_path))
-    with pytest.raises(SimulationError, match=r"rk4 did not reach a force error of 1e-09 N down to dt = 3\.90625e-05 s"):
-        cd.simulate(scene, 0.05, controller=controller, integrator="rk4", dt=1e-2, accuracy=1e-9)
+    with pytest.raises(SimulationError, match=r"accuracy = 1e-09 N is below what the reference resolves"):
+        cd.simulate(scene, 0.05, controller=controller, accuracy=1e-9)
+    with pytest.raises(
+        SimulationError, match=r"implicit_euler did not reach a force error of 1e-05 N down to dt = 3\.90625e-05 s \(off by"
+    ):
+        cd.simulate(scene, 0.05, controller=controller, integrator="implicit_euler", dt=1e-2, accuracy=1e-5)
+    with pytest.raises(SimulationError, match=r"more than max_steps = 40 steps"):
+        cd.simulate(scene, 0.05, controller=controller, integrator="rk4", dt=1e-2, accuracy=1e-5, max_steps=40)
+
+
+def test_an_unstable_closed_loop_is_named_not_blamed_on_the_step() -> None:
+    """Undamped grasps under ObjectImpedance: a 28 Hz mode grows ×e every 44 ms, to ~1e4 N in
+    2 s. No step reaches 0.1 N of a reference that grows so; the refusal says the loop is
+    unstable instead of asking for a smaller step."""
+    scene = cd.scenes.facing_arms("panda")
+    controller = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), squeeze=20.0))
+    with pytest.raises(
+        SimulationError, match=r"the reference's forces grow [0-9.e+]+× over the run: the closed loop itself may be unstable"
+    ):
+        cd.simulate(scene, 2.0, controller=controller, integrator="trapezoid", dt=5e-3, accuracy=0.1)
+
+
+def test_a_try_past_the_stability_limit_is_a_miss_and_its_warnings_stay_unsaid(
+    demo: tuple[cd.Scene, ObjectImpedance], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """rk4 from 10 ms diverges (its limit here is ~1.7 ms): those tries count as misses, their
+    energy warnings are not shown, and the step found is the first that resolves the forces;
+    the step before it does not (the largest step of the sequence is returned)."""
+    import warnings
+
+    scene, controller = demo
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = cd.simulate(scene, 0.3, controller=controller, integrator="rk4", dt=1e-2, accuracy=0.05, progress=True)
+    printed = capsys.readouterr().err
+    assert "rk4 at dt = 0.01 s diverges" in printed
+    assert res.dt < 2e-3 and res.force_error_estimate is not None and res.force_error_estimate <= 0.05
+    truth = cd.simulate(
+        scene, 0.3, controller=controller, integrator=DormandPrince(rtol=1e-11, atol=1e-14), dt=1e-2,
+        accuracy_check="off", energy_check="off",
+    )  # fmt: skip
+    try:  # (the step before: it diverges, or misses)
+        coarser = cd.simulate(
+            scene, 0.3, controller=controller, integrator="rk4", dt=2 * res.dt, save_every=round(5e-3 / res.dt),
+            accuracy_check="off", energy_check="off",
+        )  # fmt: skip
+        assert np.max(np.linalg.norm(coarser.wrenches()[..., :3] - truth.wrenches()[..., :3], axis=-1)) > 0.05
+    except cd.DivergenceError:
+        pass
 
 
 def test_a_scene_file_asks_for_its_accuracy(tmp_path: Path) -> None:

@@ -277,9 +277,13 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         accuracy = _check_type(f, "simulation", "accuracy", sim["accuracy"], float)
         if not 0.0 < accuracy < math.inf:
             raise f.error(f"the force error the run may have must be > 0 [N], got {accuracy:g}", "simulation", "accuracy")
-        if INTEGRATORS[integrator].adaptive or integrator == "exponential":
+        chosen = INTEGRATORS[integrator]
+        if chosen.adaptive or chosen.exact_discretisation:
+            what = "controls its own error (give its rtol in Python)" if chosen.adaptive else "is exact at any dt"
             raise f.error(
-                f"chooses a fixed-step method's step; {integrator} does not take one (drop accuracy)", "simulation", "accuracy"
+                f"chooses a fixed-step method's step; {integrator} {what}: use a fixed-step method or drop accuracy",
+                "simulation",
+                "accuracy",
             )
 
     task = _task(f, doc.get("task"), scene)
