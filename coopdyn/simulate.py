@@ -323,16 +323,29 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
         error = float(np.max(np.linalg.norm(mine - theirs, axis=-1), initial=0.0))
         peak = float(np.max(np.linalg.norm(theirs, axis=-1), initial=0.0))
         own_peak = float(np.max(np.linalg.norm(mine, axis=-1), initial=0.0))
-        size = np.linalg.norm(theirs, axis=-1).reshape(len(theirs), -1).max(axis=1)  # the reference's force over time
-        third = max(len(size) // 3, 1)
-        growth = float(size[-third:].max() / max(size[:third].max(), screening.FORCE_FLOOR)) if len(size) >= 3 else 1.0
-        readouts = result.readouts
-        result = dataclasses.replace(result, force_error_estimate=error)
-        result.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
+        growth = _growth(theirs) if len(theirs) >= 3 else 1.0
+        result = _estimated(result, error)
         message = screening.checked_message(judged, error, peak, reference, stopped=stopped, own_peak=own_peak, growth=growth)
     if message is not None:
         message += screening.growth_text(system, q, v, t_final)
         warnings.warn(message, AccuracyWarning, stacklevel=3)
+    return result
+
+
+def _growth(forces: np.ndarray) -> float:
+    """How many times a reference's largest grasp force (n, links, 3) [N] grows over its run: its
+    last third's peak over its first third's."""
+    size = np.linalg.norm(forces, axis=-1).reshape(len(forces), -1).max(axis=1)
+    third = max(len(size) // 3, 1)
+    return float(size[-third:].max() / max(size[:third].max(), screening.FORCE_FLOOR))
+
+
+def _estimated(result: Result, error: float, **changes: Any) -> Result:
+    """``result`` with its ``force_error_estimate`` (and ``changes``), its readouts kept (the
+    forces were just computed)."""
+    readouts = result.readouts
+    result = dataclasses.replace(result, force_error_estimate=error, **changes)
+    result.__dict__["readouts"] = readouts
     return result
 
 
@@ -424,14 +437,9 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         if run is not None and error <= tolerance:
             for w in said:
                 warnings.warn(w.message, w.category, stacklevel=3)
-            readouts = run.readouts
-            run = dataclasses.replace(run, force_error_estimate=error, cpu_time=time.process_time() - cpu0)
-            run.__dict__["readouts"] = readouts  # (cached: the forces were just computed)
-            return run
+            return _estimated(run, error, cpu_time=time.process_time() - cpu0)
         dt, every = dt / 2, every * 2
-    size = np.linalg.norm(forces, axis=-1).reshape(len(forces), -1).max(axis=1)  # the reference's force over time
-    third = max(len(size) // 3, 1)
-    growth = float(size[-third:].max() / max(size[:third].max(), screening.FORCE_FLOOR))
+    growth = _growth(forces)
     hint = (
         f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
         "(coopdyn.linearize with the controller shows its modes)"

@@ -37,6 +37,21 @@ def _chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 
 
+def _headless(page: Path, profile: Path, *, budget_ms: int, screenshot: Path | None = None) -> str:
+    """Open ``page`` in headless Chromium (software WebGL) for ``budget_ms`` of virtual time:
+    write an 800 × 600 ``screenshot``, or return the page's DOM then."""
+    output = [f"--screenshot={screenshot}"] if screenshot is not None else ["--dump-dom"]
+    return subprocess.run(
+        [
+            str(_chromium()), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            f"--user-data-dir={profile}", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+            "--window-size=800,600", f"--virtual-time-budget={budget_ms}", *output, page.resolve().as_uri(),
+        ],
+        check=True, timeout=120, capture_output=True, text=True,
+    ).stdout  # fmt: skip
+
+
 @pytest.mark.skipif(_chromium() is None, reason="needs Chromium (Debian package 'chromium'; .ci/run installs it)")
 def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd.Scene) -> None:
     """Headless Chromium renders the exported file: the arms (light grey), the box (orange) and
@@ -49,15 +64,7 @@ def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd
     assert np.all(np.linalg.norm(res.wrenches()[:, :, :3], axis=2) > 5.0)
     html = export_html(res, tmp_path / "anim.html")
     shot = tmp_path / "shot.png"
-    subprocess.run(
-        [
-            str(_chromium()), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-            "--disable-background-networking", "--disable-component-update", "--disable-sync",
-            f"--user-data-dir={tmp_path / 'profile'}", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
-            "--window-size=800,600", "--virtual-time-budget=8000", f"--screenshot={shot}", html.resolve().as_uri(),
-        ],
-        check=True, timeout=120, capture_output=True,
-    )  # fmt: skip
+    _headless(html, tmp_path / "profile", budget_ms=8000, screenshot=shot)
     img = matplotlib.image.imread(shot)[..., :3]
     r, g, b = img[..., 0], img[..., 1], img[..., 2]
     orange = (r > 0.6) & (g > 0.3) & (g < 0.7) & (b < 0.35)
@@ -80,13 +87,7 @@ def test_html_animation_shows_the_robots_in_a_browser(tmp_path: Path, pandas: cd
             "}, 200); }, 1500);</script></body>",
         )
     )
-    dom = subprocess.run(
-        [
-            str(_chromium()), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-            f"--user-data-dir={tmp_path / 'profile2'}", "--virtual-time-budget=4000", "--dump-dom", probe.resolve().as_uri(),
-        ],
-        check=True, timeout=120, capture_output=True, text=True,
-    ).stdout  # fmt: skip
+    dom = _headless(probe, tmp_path / "profile2", budget_ms=4000)
     assert 'data-after="false 0.1"' in dom and 'data-toggled="true"' in dom, "seeking pauses at 0.1 s, the button plays"
     assert 'data-shown="t = 0.100 s"' in dom and f"/ {res.t[-1]:g} s" in dom, "the clock shows the simulated time"
 
@@ -111,14 +112,7 @@ def test_the_live_viewer_is_framed_with_its_legend(tmp_path: Path, pandas: cd.Sc
     page = tmp_path / "live.html"
     page.write_text(window.get_scene())
     shot = tmp_path / "live.png"
-    subprocess.run(
-        [
-            str(_chromium()), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-            f"--user-data-dir={tmp_path / 'profile'}", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
-            "--window-size=800,600", "--virtual-time-budget=6000", f"--screenshot={shot}", page.resolve().as_uri(),
-        ],
-        check=True, timeout=120, capture_output=True,
-    )  # fmt: skip
+    _headless(page, tmp_path / "profile", budget_ms=6000, screenshot=shot)
     img = matplotlib.image.imread(shot)[..., :3]
     r, g, b = img[..., 0], img[..., 1], img[..., 2]
     rows, cols = np.nonzero((r > 0.6) & (g > 0.3) & (g < 0.7) & (b < 0.35))  # the orange box

@@ -4,6 +4,7 @@ the last bit, with its own counters, and simulate's errors."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -12,6 +13,14 @@ import coopdyn as cd
 from coopdyn.control import GravityCompensationPD
 from coopdyn.errors import ControllerError, DivergenceError, SimulationError
 from coopdyn.integrators import AdaptiveROS2, DormandPrince, LinearlyImplicitEuler
+
+
+def _warned(run: Callable[[], cd.Result]) -> tuple[cd.Result, list[str]]:
+    """``run()``'s result and the messages of the warnings it gave, every one."""
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        result = run()
+    return result, [str(w.message) for w in said]
 
 
 def _same(a: cd.Result, b: cd.Result) -> None:
@@ -49,18 +58,16 @@ def test_every_run_is_simulates_run(pandas: cd.Scene, integrator: object, contro
     rng = np.random.default_rng(7)
     for kick in (0.3, 3.0, 0.0, 0.3):  # (3 rad/s: an unresolved run the monitor warns about)
         v0 = rng.normal(size=scene.nv) * kick
-        with warnings.catch_warnings(record=True) as mine_warned:
-            warnings.simplefilter("always")
-            mine = sim.run(0.03, v0=v0)
-        with warnings.catch_warnings(record=True) as their_warned:
-            warnings.simplefilter("always")
-            theirs = cd.simulate(
-                scene, 0.03, controller=pd, integrator=integrator, dt=5e-4, save_every=2, v0=v0, control_dt=control_dt,
-                accuracy_check="off", energy_check="warn",
-            )  # fmt: skip
+        mine, mine_said = _warned(lambda: sim.run(0.03, v0=v0))
+        theirs, their_said = _warned(
+            lambda: cd.simulate(
+                scene, 0.03, controller=pd, integrator=integrator, dt=5e-4, save_every=2, v0=v0,
+                control_dt=control_dt, accuracy_check="off", energy_check="warn",
+            )
+        )  # fmt: skip
         assert mine.loop == "compiled"
         _same(mine, theirs)
-        assert [str(w.message) for w in mine_warned] == [str(w.message) for w in their_warned]
+        assert mine_said == their_said
 
 
 def test_the_energy_monitor_starts_again() -> None:
@@ -74,17 +81,16 @@ def test_the_energy_monitor_starts_again() -> None:
     messages = []
     for kick in (0.3, 0.0, 0.3):
         v0 = rng.normal(size=scene.nv) * kick
-        with warnings.catch_warnings(record=True) as mine_warned:
-            warnings.simplefilter("always")
-            mine = sim.run(0.1, v0=v0)
-        with warnings.catch_warnings(record=True) as their_warned:
-            warnings.simplefilter("always")
-            theirs = cd.simulate(
-                scene, 0.1, controller=pd, integrator="trapezoid", dt=2.5e-3, v0=v0, accuracy_check="off", energy_check="warn"
+        mine, mine_said = _warned(lambda: sim.run(0.1, v0=v0))
+        theirs, their_said = _warned(
+            lambda: cd.simulate(
+                scene, 0.1, controller=pd, integrator="trapezoid", dt=2.5e-3, v0=v0,
+                accuracy_check="off", energy_check="warn",
             )
+        )  # fmt: skip
         _same(mine, theirs)
-        messages.append([str(w.message) for w in mine_warned])
-        assert messages[-1] == [str(w.message) for w in their_warned]
+        messages.append(mine_said)
+        assert mine_said == their_said
     assert [len(m) for m in messages] == [1, 0, 1] and "energy balance broken" in messages[2][0]
 
 
