@@ -240,6 +240,10 @@ def test_arms_of_different_robots_are_placed_around_a_box_in_python() -> None:
         assert np.max(np.abs(pin.log6(data.oMf[lk.tip_frame].actInv(targets[lk.name])).vector)) < 1e-8
     with pytest.raises(cd.SceneError, match=r"the target is 1.66 m from the arm's base, which reaches at most [0-9.]+ m"):
         cd.place_arm(ur5, [0.0, -2.0, 0.7])
+    with pytest.raises(cd.SceneError, match=r"place_arm places a coopdyn.Arm, got 'ur5'"):
+        cd.place_arm("ur5", targets["ur5"])  # type: ignore[arg-type]
+    with pytest.raises(cd.SceneError, match=r"arm 'ur5': tool_pose must be finite"):
+        cd.place_arm(ur5, [np.nan, 0.0, 0.5])
 
 
 def test_angles_that_look_like_degrees_are_named() -> None:

@@ -108,4 +108,6 @@ def place_arm(arm: Arm, tool_pose: Any) -> Arm:
     4x4 or translation [m]), found by :func:`solve_ik` near the reference posture — how arms of
     different robots are placed around one object (a scene file's ``tool_pose``). Raises
     SceneError with the target's distance and the arm's reach when it is out of reach."""
+    if not isinstance(arm, Arm):
+        raise SceneError(f"place_arm places a coopdyn.Arm, got {_validate._short(arm)}")
     return arm.replace(q0=solve_ik(arm.replace(q0=None), _validate.se3(tool_pose, f"arm {arm.name!r}: tool_pose")))
