@@ -20,6 +20,7 @@ class Kernel:
         damping: np.ndarray,
         actuated: np.ndarray,
         object_frame: int,
+        joint_springs: np.ndarray,
     ) -> None: ...
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, wrench: np.ndarray | None) -> np.ndarray: ...
     def implicit_terms(

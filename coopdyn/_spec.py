@@ -129,6 +129,19 @@ class GravityPDSpec(ControllerSpec):
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
+class MotorPDSpec(ControllerSpec):
+    name: ClassVar[str] = "motor_pd"
+    kp: np.ndarray  #: (n_actuated,) [N·m/rad or N/m]
+    kd: np.ndarray  #: (n_actuated,) [N·m·s/rad or N·s/m]
+    target: np.ndarray  #: (nq,) the configuration whose drive coordinates are held (θ_d, rigid joints' q_d) [rad, m]
+    g_d: np.ndarray  #: (n_actuated,) g(q_d), the arms' gravity at the target [N·m or N]
+    online: bool  #: the gravity term at θ̄ = θ − K⁻¹ g(q_d) (else the constant g_d)
+    arm_joints: np.ndarray  #: (n_actuated,) int32: each arm joint's v index (link side)
+    #: (m, 6) rows of (link q, link v, motor q, continuous, K⁻¹ g(q_d), 0) of the elastic joints
+    elastic: np.ndarray
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ComputedTorqueSpec(ControllerSpec):
     name: ClassVar[str] = "computed_torque"
     q_index: np.ndarray  #: (n_actuated,) int32: each actuated joint's configuration index
@@ -196,3 +209,6 @@ class ObjectImpedanceSpec(ControllerSpec):
     tip_offsets: np.ndarray  #: (4·n_grasps, 4): each tool frame's pose in the object frame at the start
     Ki: np.ndarray  #: (3,) internal rotational stiffness [N·m/rad] (collocated only)
     Di: np.ndarray  #: (3,) internal rotational damping [N·m·s/rad] (collocated only)
+    #: (4m,) the elastic joints' fast damping, four values each: (its entry in τ, link v, motor v,
+    #: K_v [N·m·s/rad]): τ += K_v (q̇ − θ̇)
+    transmissions: np.ndarray

@@ -54,7 +54,7 @@ import pinocchio as pin
 
 from ._optional import require
 from .dynamics import backend as _backend
-from .errors import KernelError, SimulationError
+from .errors import KernelError, SceneError, SimulationError
 from .model.scene import Scene
 
 __all__ = ["Callbacks", "mjcf"]
@@ -85,6 +85,8 @@ def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> st
     gravity; joint damping; one motor per actuated joint (gear 1, unlimited). No geometry:
     collisions are off, as in coopdyn. ``integrator``: a MuJoCo integrator name; ``dt`` [s]."""
     model = scene.model
+    if scene.joint_springs.size:
+        raise SceneError("coopdyn.mujoco: this scene has elastic joints, which the MJCF export does not model yet")
     joint_damping = np.zeros(model.nv)
     for arm in scene.arms:
         joint_damping[arm.v_index] = arm.damping

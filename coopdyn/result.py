@@ -165,9 +165,20 @@ class Result:
         return self.readouts.power[:, self._link(i)]
 
     def energy(self) -> Energy:
-        """Kinetic, gravity and elastic energy along the trajectory, each (n,) [J]."""
+        """Kinetic, gravity and elastic energy along the trajectory, each (n,) [J]; elastic: the
+        interconnections', the object's own elements' and the elastic joints' springs'."""
         r = self.readouts
-        return Energy(r.kinetic, r.potential, r.energy.sum(axis=1))
+        return Energy(r.kinetic, r.potential, r.energy.sum(axis=1) + self.scene.joint_springs.energy(self.q))
+
+    def joint_deflection(self) -> np.ndarray:
+        """Each elastic joint's deflection θ − q (n, m) [rad or m], in the order of
+        ``scene.joint_springs`` (arm after arm, each arm's elastic joints in its joint order)."""
+        return self.scene.joint_springs.deflection(self.q)
+
+    def joint_spring_torque(self) -> np.ndarray:
+        """The torque each elastic joint's transmission puts on its link, K(θ − q) + D(θ̇ − q̇)
+        (n, m) [N·m or N] (on its motor: the opposite), ordered as :meth:`joint_deflection`."""
+        return self.scene.joint_springs.torque(self.q, self.v)
 
     def frame_position(self, frame: str | int) -> np.ndarray:
         """World position of a frame of the scene model (n, 3) [m]."""

@@ -132,6 +132,20 @@ def test_the_hold_and_lift_examples_tell_the_resolved_runs_story(tmp_path: Path)
     np.testing.assert_allclose(mine, fine, rtol=0.0, atol=0.01)
 
 
+def test_elastic_joints_example_tells_the_resolved_runs_story(tmp_path: Path) -> None:
+    """Its printed figures at 1 ms (the trapezoid) equal those of a run at 0.1 ms, both arms'
+    kinds; the elastic arms track less closely (the motors' inertia) and hold the same squeeze."""
+    example = _load("elastic_joints")
+    mine = example.main(str(tmp_path / "mine"), html=False)
+    resolved = example.main(str(tmp_path / "resolved"), dt=1e-4, html=False)
+    for kind in ("rigid", "elastic"):
+        for key, tolerance in (("tracking_error_max_m", 1e-5), ("tracking_error_rms_m", 1e-5), ("internal_force_end_N", 0.01)):
+            assert mine[kind][1][key] == pytest.approx(resolved[kind][1][key], abs=tolerance), (kind, key)
+    assert mine["elastic"][1]["tracking_error_max_m"] > 1.2 * mine["rigid"][1]["tracking_error_max_m"]
+    assert mine["elastic"][1]["internal_force_end_N"] == pytest.approx(20.0, abs=0.01)
+    assert (tmp_path / "mine" / "elastic_joints.png").stat().st_size > 20_000
+
+
 def test_frames_example_draws_what_the_outputs_say(tmp_path: Path) -> None:
     """The frames figure's numbers: each grasp pushes the box inward (compression: positive
     squeeze, the y components equal and opposite), and the forces carry the weight."""

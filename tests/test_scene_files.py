@@ -44,6 +44,9 @@ def _same_model(a: cd.Scene, b: cd.Scene) -> None:
         assert type(x.element) is type(y.element) and (x.tip_frame, x.grasp_frame, x.arm) == (y.tip_frame, y.grasp_frame, y.arm)
         for attr in ("K", "D"):
             assert np.array_equal(getattr(x.element, attr, 0), getattr(y.element, attr, 0))
+    for field in ("link_v", "motor_v", "stiffness", "damping"):
+        assert np.array_equal(getattr(a.joint_springs, field), getattr(b.joint_springs, field))
+    assert [arm.motor_damping.tolist() for arm in a.arms] == [arm.motor_damping.tolist() for arm in b.arms]
 
 
 SCENES = {
@@ -51,7 +54,15 @@ SCENES = {
     "book": cd.scenes.linear_book,
     "beam": lambda: cd.scenes.held_beam(n_elements=4),
     "rigid": lambda: cd.rigid_limit(cd.scenes.facing_arms("ur5")),
+    "elastic_joints": lambda: _with_elastic_joints(cd.scenes.facing_arms("panda")),
 }
+
+
+def _with_elastic_joints(scene: cd.Scene) -> cd.Scene:
+    """The scene with the first arm's joints 2 and 4 elastic, the second arm's all."""
+    first = cd.JointElasticity([4000.0, 2500.0], 1e-4, damping=2.0, gear_ratio=60.0, joints=["panda_joint2", "panda_joint4"])
+    arms = [scene.arm_specs[0].replace(elasticity=first), scene.arm_specs[1].replace(elasticity=cd.JointElasticity(5e3, 0.3))]
+    return cd.Scene(arms, scene.object, scene.interconnection_specs)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

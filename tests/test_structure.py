@@ -79,14 +79,20 @@ def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
     kinds the kernel's controller registry (src/native/controllers/) holds, no more, no less."""
     import coopdyn as cd
     from coopdyn import _native
-    from coopdyn.control import ComputedTorque, GravityCompensationPD
+    from coopdyn.control import ComputedTorque, GravityCompensationPD, MotorPD
     from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
     from coopdyn.scenes import object_start
 
     pandas = cd.scenes.facing_arms("panda", stiffness=1e4)
+    elastic = cd.Scene(
+        [a.replace(elasticity=cd.JointElasticity(1e4, 0.5)) for a in pandas.arm_specs],
+        pandas.object,
+        pandas.interconnection_specs,
+    )
     book = cd.scenes.linear_book()
     built_in = [
         (GravityCompensationPD(pandas), pandas),
+        (MotorPD(elastic), elastic),
         (ComputedTorque(pandas), pandas),
         (ObjectImpedance(pandas), pandas),
         (ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas))), pandas),

@@ -1,6 +1,7 @@
 """The controllers: callables ``controller(t, q, v) -> τ`` for :func:`coopdyn.simulate`.
 
-* :mod:`.joint` — joint space: :class:`GravityCompensationPD`, :class:`ComputedTorque`;
+* :mod:`.joint` — joint space: :class:`GravityCompensationPD`, :class:`ComputedTorque`, and for
+  arms with elastic joints :class:`MotorPD`;
 * :mod:`.cooperative` — on the object: :class:`ObjectImpedance` (impedance, non-squeezing load
   distribution, commanded internal force) and its task :class:`GripLiftOscillate` (also
   ``coopdyn.cooperative``).
@@ -10,6 +11,6 @@ C++ twin in ``src/native/controllers/`` (docs/extending.md).
 """
 
 from .cooperative import GripLiftOscillate, ObjectImpedance, ObjectReference
-from .joint import ComputedTorque, GravityCompensationPD
+from .joint import ComputedTorque, GravityCompensationPD, MotorPD
 
-__all__ = ["ComputedTorque", "GravityCompensationPD", "GripLiftOscillate", "ObjectImpedance", "ObjectReference"]
+__all__ = ["ComputedTorque", "GravityCompensationPD", "GripLiftOscillate", "MotorPD", "ObjectImpedance", "ObjectReference"]

@@ -320,6 +320,12 @@ class ObjectImpedance:
             object's ends from turning against each other (the strip arching as it is lifted)
             and damp that motion; default: the object's rotational ``stiffness`` and ``damping``.
             ``(0, 0)`` turns it off. Collocated, so the loop stays passive.
+        transmission_damping: on arms with elastic joints (:class:`coopdyn.JointElasticity`),
+            the law's joint torques go to the motors with Spong's composite fast term
+            ``K_v (q̇ − θ̇)``, which damps each transmission's oscillation (it reads the link and
+            motor velocities): K_v [N·m·s/rad], a scalar or one per elastic joint of the scene;
+            default ``1.4 √(K B)`` (damping ratio 0.7 against the link held still). The links
+            then move as rigid ones with the motor inertia added (docs/physics.md).
     """
 
     def __init__(
@@ -333,6 +339,7 @@ class ObjectImpedance:
         null_damping: float = 5.0,
         measure: str = "auto",
         internal: tuple[Any, Any] | None = None,
+        transmission_damping: Any = None,
     ) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"ObjectImpedance: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -394,6 +401,18 @@ class ObjectImpedance:
         # each tool frame's pose in the object frame at the start: a tip's pose times its inverse
         # estimates the object frame's (measure="tips")
         self._o_M_T = [oMo.actInv(data.oMf[t_id]) for _, t_id, _ in self._links]
+        self._transmissions = self._fast_damping(transmission_damping)
+
+    def _fast_damping(self, value: Any) -> np.ndarray:
+        """(m, 4) rows (entry in τ, link v, motor v, K_v) of the scene's elastic joints."""
+        springs, arm_joints = self.scene.joint_springs, self.scene.arm_joints
+        if value is None:
+            inertia = np.diag(pin.crba(self.scene.model, self._data, self.scene.q0))[springs.motor_v]
+            kv = 1.4 * np.sqrt(springs.stiffness * inertia)
+        else:
+            kv = _validate.gain(value, "ObjectImpedance: transmission_damping", springs.size, "N·m·s/rad")
+        entry = [int(np.flatnonzero(arm_joints == link)[0]) for link in springs.link_v]
+        return np.column_stack([entry, springs.link_v, springs.motor_v, kv]).reshape(springs.size, 4)
 
     def object_state(self, tips: _Tips | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The object frame's world position [m], rotation, linear velocity of its origin [m/s] and
@@ -492,7 +511,11 @@ class ObjectImpedance:
             tau = J.T @ w + tau_full[arm.v_index] - self.joint_damping * vi
             tau += _null_space_part(J, self.null_stiffness * posture[arm.v_index] - self.null_damping * vi)
             out.append(tau)
-        return np.concatenate(out)
+        tau = np.concatenate(out)
+        if self._transmissions.size:  # Spong's fast term on the elastic joints: K_v (q̇ − θ̇)
+            entry, link, motor = (self._transmissions[:, k].astype(int) for k in range(3))
+            tau[entry] += self._transmissions[:, 3] * (v[link] - v[motor])
+        return tau
 
     def compiled_spec(self, scene: Scene) -> ObjectImpedanceSpec | None:
         """This law for the compiled step loop: with the default hold or a :class:`GripLiftOscillate`
@@ -533,12 +556,17 @@ class ObjectImpedance:
             Ki=self.Ki.copy(),
             Di=self.Di.copy(),
             tip_offsets=np.concatenate([M.homogeneous for M in self._o_M_T]),
+            transmissions=self._transmissions.reshape(-1).copy(),
         )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
-        """Joint damping added by the controller, for implicit integrators [N·m/rad], [N·m·s/rad]."""
+        """Joint damping added by the controller, for implicit integrators [N·m/rad], [N·m·s/rad];
+        on an elastic joint (whose torque acts on its motor) the fast term's −∂τ/∂θ̇ = K_v alone."""
         n = self.scene.n_actuated
-        return np.full(n, self.null_stiffness), np.full(n, self.joint_damping + self.null_damping)
+        kp, kd = np.full(n, self.null_stiffness), np.full(n, self.joint_damping + self.null_damping)
+        entry = self._transmissions[:, 0].astype(int)
+        kp[entry], kd[entry] = 0.0, self._transmissions[:, 3]
+        return kp, kd
 
     def effective(self, direction: Any = (0.0, 0.0, 1.0), q: np.ndarray | None = None) -> tuple[float, float, float]:
         """(mass [kg], damping [N·s/m], stiffness [N/m]) of the object's translation along

@@ -8,17 +8,31 @@ import numpy as np
 import pinocchio as pin
 
 from .. import _validate
-from .._spec import ComputedTorqueSpec, GravityPDSpec
+from .._spec import ComputedTorqueSpec, GravityPDSpec, MotorPDSpec
 from ..errors import SceneError
+from ..model.elastic_joints import motors_at_links, q_entries, turned
 from ..model.scene import Scene
 
 
-def _scene(scene: Any, who: str) -> Scene:
+def _scene(scene: Any, who: str, elastic: bool = False) -> Scene:
     if not isinstance(scene, Scene):
         raise SceneError(f"{who}: scene must be a coopdyn.Scene, got {type(scene).__name__}")
     if not scene.arms:
         raise SceneError(f"{who} drives arm joints; this scene has no arms (its object is held by fixtures only)")
+    if not elastic:
+        rigid_joints_only(scene, who)
     return scene
+
+
+def rigid_joints_only(scene: Scene, who: str) -> None:
+    """Refuse a scene with elastic joints for a controller written for rigid ones (its torque
+    would reach the link through a motor and a spring it does not know of)."""
+    elastic = [a.name for a in scene.arms if a.elastic.size]
+    if elastic:
+        raise SceneError(
+            f"{who} is written for rigid joints, and arms {elastic} have elastic ones (their torques act on the motors): "
+            "use coopdyn.control.MotorPD (motor-side PD with gravity compensation) or a controller of your own"
+        )
 
 
 class GravityCompensationPD:
@@ -118,3 +132,84 @@ class ComputedTorque:
         M = pin.crba(self.scene.model, self._data, self.scene.q0)
         d = np.diag(M)[self.scene.actuated]
         return d * self.kp, d * self.kd
+
+
+class MotorPD:
+    """Motor-side PD with gravity compensation, for arms with elastic joints (docs/physics.md).
+
+    On every arm joint's motor (a rigid joint: on the joint itself, θ ≡ q)::
+
+        τ = Kp (θ_d − θ) − Kd θ̇ + g_c,    θ_d = q_d + K⁻¹ g(q_d)
+
+    with g the arms' own gravity torque on their joints. ``gravity="constant"`` takes
+    ``g_c = g(q_d)`` (Tomei 1991); ``"online"`` takes ``g_c = g(θ̄)`` at the biased motor position
+    ``θ̄ = θ − K⁻¹ g(q_d)``, which equals q_d at rest (De Luca, Siciliano & Zollo, Automatica 41
+    (2005) 1809–1819). Both measure only the motors (position and velocity), and both regulate
+    to ``q = q_d`` when the stiffness K and the gain Kp dominate the gradient of g (the papers'
+    conditions). At rest the link is at q_d, the motor at θ_d.
+
+    Args:
+        scene: the scene (its arms may mix rigid and elastic joints).
+        kp: [N·m/rad], kd: [N·m·s/rad] — scalar or (n_actuated,).
+        q_des: the arms' joint targets q_d (n_actuated,) for 1-DOF joints; default the arms' q0.
+        gravity: ``"online"`` (default) or ``"constant"``.
+    """
+
+    GRAVITY = ("online", "constant")
+
+    def __init__(self, scene: Scene, kp: Any = 400.0, kd: Any = 40.0, q_des: Any = None, gravity: str = "online") -> None:
+        n = _scene(scene, "MotorPD", elastic=True).n_actuated
+        if gravity not in self.GRAVITY:
+            raise SceneError(f"MotorPD: gravity must be one of {self.GRAVITY}, got {_validate._short(gravity)}")
+        self.scene, self.gravity = scene, gravity
+        self.kp = _validate.gain(kp, "MotorPD: kp", n, "N·m/rad")
+        self.kd = _validate.gain(kd, "MotorPD: kd", n, "N·m·s/rad")
+        model, self._data = scene.model, scene.model.createData()
+        link_q = np.concatenate([a.q_index for a in scene.arms])
+        q_ref = scene.q0.copy()
+        if q_des is not None:
+            if link_q.size != n:
+                raise SceneError("MotorPD: q_des is per joint coordinate; give it only for arms of 1-DOF joints (nq = nv)")
+            q_ref[link_q] = _validate.finite_array(q_des, "MotorPD: q_des", (n,))
+        springs = scene.joint_springs
+        self._arm_joints = scene.arm_joints
+        self.g_d = pin.computeGeneralizedGravity(model, self._data, q_ref)[self._arm_joints].copy()
+        position = np.searchsorted(self._arm_joints, springs.link_v)  # each elastic joint among the arm joints
+        if not np.array_equal(self._arm_joints[position], springs.link_v):  # (arm_joints is sorted: arms in order)
+            raise SceneError("MotorPD: the scene's elastic joints are not among its arm joints")
+        self._bias = self.g_d[position] / springs.stiffness  # K⁻¹ g(q_d) [rad]
+        self._springs = springs
+        self._link_entries = q_entries(springs.link_q, springs.continuous)
+        self._motor_entries = q_entries(springs.motor_q, springs.continuous)
+        self.target = turned(model, motors_at_links(q_ref, springs), springs.motor_v, self._bias)
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Kp, Kd) (n_actuated,) on the motors [N·m/rad], [N·m·s/rad], for implicit integrators
+        and :func:`coopdyn.advise`."""
+        return self.kp, self.kd
+
+    def compiled_spec(self, scene: Scene) -> MotorPDSpec | None:
+        """This law for the compiled step loop (None: the scene is not this controller's)."""
+        if scene is not self.scene:
+            return None
+        s = self._springs
+        elastic = np.column_stack([s.link_q, s.link_v, s.motor_q, s.continuous, self._bias, np.zeros(s.size)])
+        return MotorPDSpec(
+            kp=self.kp.copy(),
+            kd=self.kd.copy(),
+            target=self.target.copy(),
+            g_d=self.g_d.copy(),
+            online=self.gravity == "online",
+            arm_joints=self._arm_joints.astype(np.int32),
+            elastic=elastic.astype(float).reshape(s.size, 6),
+        )
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        model, act = self.scene.model, self.scene.actuated_index
+        tau = self.kp * pin.difference(model, q, self.target)[act] - self.kd * v[act]
+        if self.gravity == "constant":
+            return tau + self.g_d
+        q_bar = q.copy()
+        q_bar[self._link_entries] = q[self._motor_entries]
+        q_bar = turned(model, q_bar, self._springs.link_v, -self._bias)  # θ̄ = θ − K⁻¹ g(q_d), link coordinates
+        return tau + pin.computeGeneralizedGravity(model, self._data, q_bar)[self._arm_joints]

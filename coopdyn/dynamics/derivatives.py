@@ -32,6 +32,7 @@ import pinocchio as pin
 
 from ..errors import KernelError
 from ..model.elements import Element
+from ..model.elements.joint_spring import JointSprings
 
 LOCAL = pin.ReferenceFrame.LOCAL
 
@@ -76,6 +77,7 @@ def dynamics_derivatives(
     v: np.ndarray,
     tau_full: np.ndarray,
     object_wrench: np.ndarray | None,
+    springs: JointSprings | None = None,
 ) -> Derivatives:
     """The derivatives at (q, v) for the generalized joint force ``tau_full`` (nv,) (torques on
     the actuated joints, already placed) — see the module docstring.
@@ -85,6 +87,8 @@ def dynamics_derivatives(
         damping: the joints' viscous damping B (nv,).
         actuated: the actuated joints' indices into v.
         object_frame: the frame an ``object_wrench`` (6,) acts at (world axes, constant).
+        springs: the elastic joints' transmissions (linear in the state: a generalized force
+            and constant matrices).
     """
     nv = model.nv
     zero = np.zeros(nv)
@@ -137,6 +141,12 @@ def dynamics_derivatives(
         dQ_dq += J_o.T @ (df @ J_o)
         add_wrench(object_frame, f_o)
     tau = tau_full - damping * v
+    if springs is not None and springs.size:
+        springs.add_force(tau, q, v)
+        K_s, D_s = np.zeros((nv, nv)), np.zeros((nv, nv))
+        springs.add_matrices(K_s, D_s)
+        dQ_dq -= K_s
+        dQ_dv -= D_s
     da_dq, da_dv, Minv = (np.array(m, copy=True) for m in pin.computeABADerivatives(model, data, q, v, tau, fext))
     Minv = np.triu(Minv) + np.triu(Minv, 1).T  # (Pinocchio fills the upper triangle)
     a = np.array(data.ddq, copy=True)

@@ -108,6 +108,8 @@ class Dynamics:
         self._damping = np.zeros(scene.nv)
         for arm in scene.arms:
             self._damping[arm.v_index] = arm.damping
+            self._damping[arm.motor_v_index] = arm.motor_damping
+        self._springs = scene.joint_springs  # (elastic joints: their transmissions, joint_spring.py)
         self._has_damping = bool(np.any(self._damping))
         self.actuated_index = scene.actuated_index
         self._frames = [(lk.tip_frame, lk.grasp_frame, lk.element) for lk in scene.elements]
@@ -127,7 +129,8 @@ class Dynamics:
         """What a linearly implicit step needs at (q, v), from one kinematics pass:
         ``(f, M, K̃, D̃)`` with ``f = S τ + Q − B q̇ − b(q, q̇) = M q̈`` (nv,) and the (nv, nv)
         mass matrix, Gauss–Newton stiffness ``K̃ = Σ Jrᵀ S_K Jr`` and damping
-        ``D̃ = Σ Jrᵀ S_D Jr + B`` (the force-proportional geometric stiffness is left out)."""
+        ``D̃ = Σ Jrᵀ S_D Jr + B`` (the force-proportional geometric stiffness is left out); Q and
+        both matrices include the elastic joints' springs (exact: they are linear)."""
         raise NotImplementedError
 
     def factor(
@@ -175,7 +178,8 @@ class Dynamics:
         raise NotImplementedError
 
     def elastic_energy(self, q: np.ndarray) -> np.ndarray:
-        """Elastic energy of each interconnection (n_links,) [J]."""
+        """Elastic energy of each interconnection (n_links,) [J] (the elastic joints' springs:
+        ``scene.joint_springs.energy(q)``)."""
         pin.forwardKinematics(self.model, self.data, q)
         return self._elastic()
 
@@ -232,12 +236,14 @@ class Dynamics:
         return M, K, D
 
     def generalized_spring_force(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``Q = Σ Jrᵀ G_f_G``, the interconnections' generalized force (nv,) at (q, v)."""
+        """``Q = Σ Jrᵀ G_f_G``, the interconnections' generalized force (nv,) at (q, v) (and the
+        elastic joints' springs')."""
         f = self.implicit_terms(q, v, np.zeros(self.scene.n_actuated))[0]  # Q − B q̇ − b(q, q̇)
         return f + pin.nonLinearEffects(self.model, self.data, q, v) + self._damping * v
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> Energy:
-        """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass)."""
+        """Kinetic, gravity and elastic energy at (q, v) [J] (one kinematics pass); elastic: the
+        interconnections', the object's own elements' and the elastic joints' springs'."""
         if np.shape(q) != (self.scene.nq,) or np.shape(v) != (self.scene.nv,):
             raise SceneError(f"energy: q must have shape ({self.scene.nq},) and v ({self.scene.nv},)")
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
@@ -245,7 +251,7 @@ class Dynamics:
         model, data = self.model, self.data
         kinetic = float(pin.computeKineticEnergy(model, data, q, v))  # runs forward kinematics (q, v)
         potential = float(pin.computePotentialEnergy(model, data))
-        return Energy(kinetic, potential, float(np.sum(self._elastic())))
+        return Energy(kinetic, potential, float(np.sum(self._elastic()) + self._springs.energy(q)))
 
 
 class PythonDynamics(Dynamics):
@@ -316,6 +322,10 @@ class PythonDynamics(Dynamics):
         if self._has_damping:
             Q -= self._damping * v
             p_diss += v @ (self._damping * v)
+        if self._springs.size:
+            p_diss += self._springs.add_force(Q, q, v)
+            if matrices:
+                self._springs.add_matrices(K_t, D_t)
         self._dissipation = p_diss
         return Q
 
@@ -364,7 +374,17 @@ class PythonDynamics(Dynamics):
         tau_full[self.actuated_index] += tau
         frame = self.scene.object_frame
         return dynamics_derivatives(
-            self.model, self.data, self._forces, self._damping, self.actuated_index, frame, q, v, tau_full, object_wrench
+            self.model,
+            self.data,
+            self._forces,
+            self._damping,
+            self.actuated_index,
+            frame,
+            q,
+            v,
+            tau_full,
+            object_wrench,
+            self._springs,
         )
 
     def element_states(self, q: np.ndarray, v: np.ndarray) -> list[ElementEval]:

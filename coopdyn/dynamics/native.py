@@ -41,7 +41,10 @@ class NativeDynamics(Dynamics):
         ]
         actuated = np.asarray(scene.actuated, dtype=np.int32)
         kernel = _backend.kernel_module().Kernel
-        self._kernel = self._call("the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame)
+        springs = scene.joint_springs.native_table()
+        self._kernel = self._call(
+            "the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame, springs
+        )
 
     def _call(self, what: str, method: Any, *args: Any) -> Any:
         """``method(*args)`` on the kernel, what it raises turned into a :class:`CoopdynError`

@@ -55,6 +55,8 @@ KIND_SCHEMAS: dict[str, dict[str, Any]] = {
     "masses": {"type": "object", "additionalProperties": NUMBER},
     "parameters": {"type": "object", "additionalProperties": NUMBER},
     "paths": {"type": "array", "items": {"type": "string", "minLength": 1}},
+    "per_joint": {"oneOf": [NUMBER, NUMBERS]},
+    "joint_names": {"type": "array", "items": {"type": "string"}, "minItems": 1},
 }
 
 
@@ -115,7 +117,7 @@ SWEEP: dict[str, Any] = {
 def _table(fields: Mapping[str, d.Field], extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     properties: dict[str, Any] = {}
     for key, f in fields.items():
-        schema = _section() if f.kind == "section" else KIND_SCHEMAS[f.kind]
+        schema = _section() if f.kind == "section" else _table(d.ELASTICITY) if f.kind == "elasticity" else KIND_SCHEMAS[f.kind]
         properties[key] = {**schema, "description": f.doc}
     properties.update(extra or {})
     required = [k for k, f in fields.items() if f.required]

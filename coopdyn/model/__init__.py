@@ -3,6 +3,7 @@
 from .arm import Arm
 from .beam import Beam
 from .body import RigidObject
+from .elastic_joints import JointElasticity
 from .elements import BeamSegment, Section
 from .ik import place_arm
 from .interconnection import Interconnection, axial, diagonal
@@ -14,6 +15,7 @@ __all__ = [
     "Beam",
     "BeamSegment",
     "Interconnection",
+    "JointElasticity",
     "RigidObject",
     "Scene",
     "Section",

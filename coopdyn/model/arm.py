@@ -21,6 +21,8 @@ import pinocchio as pin
 
 from .. import _validate
 from ..errors import ModelLoadError, SceneError, did_you_mean
+from .elastic_joints import JointElasticity, ResolvedElasticity
+from .elastic_joints import resolve as resolve_elasticity
 
 #: Tool frames of well-known example-robot-data arms, used when ``tip_frame`` is not given.
 DEFAULT_TIP_FRAMES: dict[str, str] = {
@@ -55,6 +57,8 @@ class Arm:
             mapping gives the value explicitly. ``None`` uses the robot's default (Panda: fingers).
         joint_damping: viscous joint friction ``τ_f = -d q̇`` [N·m·s/rad or N·s/m]: a scalar, one
             value per unlocked joint, or ``"urdf"`` for the URDF ``<dynamics damping>`` values.
+        elasticity: elastic joints (:class:`coopdyn.JointElasticity`: a motor coordinate, a motor
+            inertia and a transmission spring per joint); default ``None``: rigid joints.
         mass_overrides: mapping ``joint name -> total mass [kg]`` of the body that joint carries;
             that body's spatial inertia is scaled to the new mass (centre of mass kept).
         package_dirs: folders that hold the ROS packages a URDF's ``package://NAME/...`` mesh
@@ -72,6 +76,7 @@ class Arm:
     joint_damping: float | Sequence[float] | str = 0.0
     mass_overrides: Mapping[str, float] = field(default_factory=dict)
     package_dirs: Sequence[str | os.PathLike[str]] = ()
+    elasticity: JointElasticity | None = None
 
     def replace(self, **changes: Any) -> Arm:
         """A copy with some fields changed."""
@@ -89,6 +94,7 @@ class LoadedArm:
     base: pin.SE3
     damping: np.ndarray
     visual: pin.GeometryModel | None = None  #: display geometry (``load_arm(..., meshes=...)``)
+    elasticity: ResolvedElasticity | None = None  #: its elastic joints, if any
 
 
 def _robot_name(robot: str | os.PathLike[str]) -> str | None:
@@ -331,6 +337,7 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     _check_limits(model, q0, what)
 
     damping = _damping(arm, model, what)
+    elasticity = resolve_elasticity(arm.elasticity, model, what)
     base = pin.SE3.Identity() if arm.base is None else _validate.se3(arm.base, f"{what}, base")
 
     # Prefix joint and frame names so that several arms merge into one model.
@@ -341,7 +348,16 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     if visual is not None:
         for g in visual.geometryObjects:
             g.name = f"{arm.name}/{g.name}"
-    return LoadedArm(spec=arm, model=model, q0=q0, tip_frame=f"{arm.name}/{tip}", base=base, damping=damping, visual=visual)
+    return LoadedArm(
+        spec=arm,
+        model=model,
+        q0=q0,
+        tip_frame=f"{arm.name}/{tip}",
+        base=base,
+        damping=damping,
+        visual=visual,
+        elasticity=elasticity,
+    )
 
 
 def _configuration(model: pin.Model, value: Any, what: str) -> np.ndarray:

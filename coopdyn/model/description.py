@@ -33,6 +33,7 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, did_you_mean
 from .arm import Arm, _robot_name, load_arm
+from .elastic_joints import JointElasticity
 from .elements import ELEMENTS, Section, lookup
 from .fields import Field, numbers, pose_data
 from .ik import place_arm
@@ -58,6 +59,9 @@ KINDS = {
     "parameters": "a table: parameter name = number (the element's own parameters, with their units)",
     "paths": "a list of folder paths",
     "section": "a table: shape = 'rectangle' | 'circle' with its dimensions, or the section's properties",
+    "per_joint": "a number, or one number per elastic joint",
+    "joint_names": "a list of joint names",
+    "elasticity": "a table: stiffness, motor_inertia (required), damping, gear_ratio, motor_damping, joints",
 }
 
 GRAVITY = Field("vector3", "gravity acceleration in the world [m/s²]; default [0, 0, -9.81]")
@@ -78,6 +82,17 @@ ARM: dict[str, Field] = {
     "joint_damping": Field("joint_damping", "viscous joint friction [N·m·s/rad or N·s/m]; default 0"),
     "mass_overrides": Field("masses", "joint name = total mass [kg] of the body the joint carries"),
     "package_dirs": Field("paths", "folders holding the ROS packages a URDF's package:// mesh paths name"),
+    "elasticity": Field("elasticity", "elastic joints: a motor, a motor inertia and a spring per joint; default: rigid"),
+}
+
+#: an arm's ``elasticity`` keys (coopdyn.JointElasticity)
+ELASTICITY: dict[str, Field] = {
+    "stiffness": Field("per_joint", "K, the transmission's spring [N·m/rad or N/m]", True),
+    "motor_inertia": Field("per_joint", "the rotor's inertia [kg·m² or kg]: reflected B, or J_m with gear_ratio", True),
+    "damping": Field("per_joint", "D, the transmission's damping [N·m·s/rad or N·s/m]; default 0"),
+    "gear_ratio": Field("per_joint", "n: B = n² motor_inertia; default 1"),
+    "motor_damping": Field("per_joint", "the motor's viscous friction [N·m·s/rad], reflected like motor_inertia; default 0"),
+    "joints": Field("joint_names", "the elastic joints (URDF names); default: every unlocked joint"),
 }
 
 #: ``[object]`` keys, per ``type`` (each object class declares its own: object_types.OBJECTS)
@@ -192,6 +207,14 @@ def _describe_arm(arm: Arm) -> dict[str, Any]:
         out["mass_overrides"] = {str(k): float(v) for k, v in arm.mass_overrides.items()}
     if arm.package_dirs:
         out["package_dirs"] = [str(Path(p).resolve()) for p in arm.package_dirs]
+    if arm.elasticity is not None:
+        el, what = arm.elasticity, f"arm {arm.name!r}: elasticity"
+        out["elasticity"] = {
+            key: numbers(getattr(el, key), f"{what}.{key}")
+            for key in ("stiffness", "motor_inertia", "damping", "gear_ratio", "motor_damping")
+        }
+        if el.joints is not None:
+            out["elasticity"]["joints"] = [str(j) for j in el.joints]
     return out
 
 
@@ -324,6 +347,12 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         return value
     if kind == "section":
         return _section(value, where)
+    if kind == "elasticity":
+        return _elasticity(value, where)
+    if kind == "joint_names":
+        if isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+            return value
+        raise bad()
     try:
         if kind == "pose":
             return _pose(value, str(where))
@@ -336,6 +365,7 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         "axis": [(3,)],
         "vector": [(arr.size,)],
         "joint_damping": [(), (arr.size,)],
+        "per_joint": [(), (arr.size,)],
     }
     if kind in shapes and arr.shape not in shapes[kind]:
         raise bad()
@@ -393,6 +423,13 @@ def _section(value: Any, where: Location) -> Section:
         return Section.rectangle(**kwargs) if shape == "rectangle" else Section.circle(**kwargs)
     except SceneError as exc:
         raise DescriptionError(str(exc), where) from None
+
+
+def _elasticity(value: Any, where: Location) -> JointElasticity:
+    if not isinstance(value, Mapping):
+        raise DescriptionError(f"must be {KINDS['elasticity']}, got {_validate._short(value)}", where)
+    _keys(value, ELASTICITY, where)
+    return JointElasticity(**_values(value, ELASTICITY, where))
 
 
 def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:

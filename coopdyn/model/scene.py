@@ -19,7 +19,9 @@ import pinocchio as pin
 from .. import _validate
 from ..errors import SceneError, SceneWarning, did_you_mean
 from .arm import Arm, LoadedArm, load_arm
+from .elastic_joints import add_motor, continuous, motors_at_links, turned
 from .elements import Element
+from .elements.joint_spring import JointSprings
 from .interconnection import Interconnection
 from .objects import SceneObject
 
@@ -34,6 +36,13 @@ class ArmInfo:
     v_index: np.ndarray  #: its coordinates in the scene ``v`` (and torque vector), (nv_arm,)
     tip_frame: int  #: frame id of the tip T
     damping: np.ndarray  #: viscous joint damping, (nv_arm,) [N·m·s/rad or N·s/m]
+    #: where its torques act, (nv_arm,): a rigid joint's own v index, an elastic joint's motor's
+    drive_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))
+    #: positions of its elastic joints among its joints (empty: rigid joints only)
+    elastic: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))
+    motor_q_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))  #: its motors' q
+    motor_v_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))  #: its motors' v
+    motor_damping: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  #: d_m [N·m·s/rad]
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,8 +129,12 @@ class Scene:
         arm_specs, interconnection_specs, object: the descriptions the scene was built from.
         loaded_arms: the arms as loaded (:class:`coopdyn.model.arm.LoadedArm`), for display.
         q0, v0: the initial state, (nq,) and (nv,).
-        actuated: indices in ``v`` of all arm joints, in scene order; a controller returns one
+        actuated: indices in ``v`` where the arms' torques act, one per arm joint in scene order —
+            the joint itself, or for an elastic joint its motor; a controller returns one
             torque/force per entry [N·m or N].
+        arm_joints: indices in ``v`` of all arm joints (link side), in scene order.
+        joint_springs: the elastic joints' transmissions
+            (:class:`~coopdyn.model.elements.joint_spring.JointSprings`; empty for rigid arms).
         actuated_index: the same as a slice when the indices are contiguous (cheaper to index
             with on hot paths), else ``actuated``.
         object_joint: joint id of the object (a beam's reference node); ``object_q``/``object_v``
@@ -142,6 +155,8 @@ class Scene:
     object_q: np.ndarray
     object_v: np.ndarray
     actuated: np.ndarray
+    arm_joints: np.ndarray
+    joint_springs: JointSprings
     actuated_index: slice | np.ndarray
     q0: np.ndarray
     v0: np.ndarray
@@ -189,12 +204,16 @@ class Scene:
         for la in loaded:
             model = pin.appendModel(model, la.model, 0, la.base)
         model.gravity = pin.Motion(np.concatenate([_validate.finite_array(gravity, "gravity", (3,)), np.zeros(3)]))
+        motors = _add_motors(model, loaded)
 
         placed = obj.add_to(model)
         obj_joint, node_joints, q_obj = placed.reference, list(placed.joints), placed.q0
 
-        arm_infos = tuple(_arm_info(model, la) for la in loaded)
-        q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
+        arm_infos = tuple(_arm_info(model, la, motors) for la in loaded)
+        springs = _joint_springs(model, arm_infos, loaded)
+        q_motors = np.concatenate([model.joints[j].nq * [0.0] for _, j in motors] + [np.zeros(0)])
+        q0 = np.concatenate([la.q0 for la in loaded] + [q_motors, q_obj])
+        q0 = _motors_at_rest(model, q0, springs)
         check_memory(model.nv, obj)
         data = pin.Data(model)  # (createData() copies it once more: twice the peak)
         pin.framesForwardKinematics(model, data, q0)
@@ -250,7 +269,7 @@ class Scene:
             Link(il.name, None, il.tip_frame, il.grasp_frame, il.element, il.native) for il in obj.internal_links(model, placed)
         ]
         j_first, j_last = model.joints[node_joints[0]], model.joints[node_joints[-1]]
-        actuated = np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
+        actuated = np.concatenate([a.drive_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
         first, n = int(actuated[0]) if actuated.size else 0, actuated.size
         contiguous = n > 0 and np.array_equal(actuated, np.arange(first, first + n))
         set_ = object.__setattr__
@@ -268,6 +287,8 @@ class Scene:
         set_(self, "object_q", _frozen(np.arange(j_first.idx_q, j_last.idx_q + j_last.nq)))
         set_(self, "object_v", _frozen(np.arange(j_first.idx_v, j_last.idx_v + j_last.nv)))
         set_(self, "actuated", _frozen(actuated))
+        set_(self, "arm_joints", _frozen(np.concatenate([a.v_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)))
+        set_(self, "joint_springs", springs)
         set_(self, "actuated_index", slice(first, first + n) if contiguous else self.actuated)
         set_(self, "q0", _frozen(q0))
         set_(self, "v0", _frozen(np.zeros(model.nv)))
@@ -320,6 +341,8 @@ class Scene:
         v_names: list[str] = []
         for i in range(1, self.model.njoints):
             name, joint = self.model.names[i], self.model.joints[i]
+            if name.endswith(MOTOR_SUFFIX):  # a motor's θ is in its link joint's units (docs/physics.md)
+                joint = self.model.joints[self.model.getJointId(name.removesuffix(MOTOR_SUFFIX))]
             qs, vs = _JOINT_COORDINATES.get(joint.shortname(), (None, None))
             if qs is None or vs is None or len(qs) != joint.nq or len(vs) != joint.nv:
                 qs = [(f"[{k}]", "") for k in range(joint.nq)]
@@ -442,7 +465,24 @@ def _rebuilt(state: dict[str, Any]) -> Scene:
     return scene
 
 
-def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
+MOTOR_SUFFIX = ".motor"  #: an elastic joint's motor is the joint ``"<arm>/<joint>.motor"``
+
+
+def _add_motors(model: pin.Model, loaded: Sequence[LoadedArm]) -> list[tuple[str, int]]:
+    """A motor joint per elastic joint, arm after arm, after every arm's joints (in place);
+    returns (link joint name, motor joint id) of each."""
+    motors = []
+    for la in loaded:
+        if la.elasticity is None:
+            continue
+        for k, inertia in zip(la.elasticity.joints, la.elasticity.inertia, strict=True):
+            name = la.model.names[int(k) + 1]
+            link = model.joints[model.getJointId(name)]
+            motors.append((name, add_motor(model, name + MOTOR_SUFFIX, float(inertia), bool(continuous(link)))))
+    return motors
+
+
+def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]]) -> ArmInfo:
     joint_names = tuple(la.model.names[i] for i in range(1, la.model.njoints))
     q_index: list[int] = []
     v_index: list[int] = []
@@ -450,6 +490,11 @@ def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
         j = model.joints[model.getJointId(name)]
         q_index.extend(range(j.idx_q, j.idx_q + j.nq))
         v_index.extend(range(j.idx_v, j.idx_v + j.nv))
+    motor_of = dict(motors)
+    elastic = np.zeros(0, dtype=int) if la.elasticity is None else la.elasticity.joints
+    motor_joints = [model.joints[motor_of[joint_names[k]]] for k in elastic]
+    drive = np.array(v_index, dtype=int)
+    drive[elastic] = [j.idx_v for j in motor_joints]
     return ArmInfo(
         name=la.spec.name,
         joint_names=joint_names,
@@ -457,4 +502,45 @@ def _arm_info(model: pin.Model, la: LoadedArm) -> ArmInfo:
         v_index=_frozen(np.array(v_index, dtype=int)),
         tip_frame=int(model.getFrameId(la.tip_frame)),
         damping=_frozen(np.array(la.damping, dtype=float)),
+        drive_index=_frozen(drive),
+        elastic=_frozen(np.array(elastic, dtype=int)),
+        motor_q_index=_frozen(np.array([j.idx_q for j in motor_joints], dtype=int)),
+        motor_v_index=_frozen(np.array([j.idx_v for j in motor_joints], dtype=int)),
+        motor_damping=_frozen(np.zeros(0) if la.elasticity is None else la.elasticity.motor_damping.copy()),
     )
+
+
+def _joint_springs(model: pin.Model, arms: Sequence[ArmInfo], loaded: Sequence[LoadedArm]) -> JointSprings:
+    """The scene's elastic joints, arm after arm."""
+    rows = []
+    for info, la in zip(arms, loaded, strict=True):
+        if la.elasticity is None:
+            continue
+        for k, motor_q, motor_v, K, D in zip(
+            info.elastic, info.motor_q_index, info.motor_v_index, la.elasticity.stiffness, la.elasticity.damping, strict=True
+        ):
+            link = model.joints[model.getJointId(info.joint_names[k])]
+            rows.append((link.idx_q, link.idx_v, motor_q, motor_v, K, D, bool(continuous(link))))
+    if not rows:
+        return JointSprings.none()
+    columns = list(zip(*rows, strict=True))
+    link_q, link_v, motor_q, motor_v = (_frozen(np.array(c, dtype=int)) for c in columns[:4])
+    return JointSprings(
+        link_q=link_q,
+        link_v=link_v,
+        motor_q=motor_q,
+        motor_v=motor_v,
+        stiffness=_frozen(np.array(columns[4], dtype=float)),
+        damping=_frozen(np.array(columns[5], dtype=float)),
+        continuous=_frozen(np.array(columns[6], dtype=bool)),
+    )
+
+
+def _motors_at_rest(model: pin.Model, q0: np.ndarray, springs: JointSprings) -> np.ndarray:
+    """``q0`` with each motor where its spring holds its link still against the arms' weight
+    (θ = q + K⁻¹ g(q)): the arms start at rest under gravity, as the grasps start undeformed."""
+    if not springs.size:
+        return q0
+    q = motors_at_links(q0, springs)
+    g = pin.computeGeneralizedGravity(model, model.createData(), q)
+    return turned(model, q, springs.motor_v, g[springs.link_v] / springs.stiffness)

@@ -148,8 +148,8 @@ BOOST_PYTHON_MODULE(_native) {
   bp::register_exception_translator<StepMatrixError>(&translate_step_matrix_error);
   bp::class_<Kernel, boost::noncopyable>(
     "Kernel", "The scene dynamics' hot path (see coopdyn.dynamics.native).",
-    bp::init<bp::object, bp::object, bp::list, RefVec, Eigen::Ref<const Eigen::VectorXi>, FrameIndex>(
-      bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame")))
+    bp::init<bp::object, bp::object, bp::list, RefVec, Eigen::Ref<const Eigen::VectorXi>, FrameIndex, RefVec>(
+      bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame", "joint_springs")))
     .def("acceleration", &Kernel::acceleration, bp::args("self", "q", "v", "tau", "wrench"))
     .def("implicit_terms", &Kernel::implicit_terms, bp::args("self", "q", "v", "tau", "wrench"))
     .def("factor", &Kernel::factor, bp::args("self", "M", "K", "D", "gh", "kp", "kd", "gh2"))

@@ -19,6 +19,7 @@
 
 #include "aba.hpp"
 #include "elements/element.hpp"
+#include "elements/joint_springs.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -70,10 +71,11 @@ inline void check_size(const RefVec & x, Eigen::Index n, const char * name) {
 class Kernel {
 public:
   Kernel(bp::object model_obj, bp::object data_obj, bp::list links, const RefVec & damping,
-         const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame)
+         const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame, const RefVec & joint_springs)
     : model_obj_(model_obj), data_obj_(data_obj),
       model_(bp::extract<const Model &>(model_obj)), data_(bp::extract<Data &>(data_obj)), aba_(model_),
-      damping_(damping), actuated_(actuated), object_frame_(object_frame) {
+      damping_(damping), actuated_(actuated), object_frame_(object_frame),
+      springs_(joint_springs, model_.nq, model_.nv) {
     const auto nv = model_.nv;
     check_size(damping, nv, "damping");
     if (object_frame_ >= model_.frames.size()) throw std::invalid_argument("object_frame out of range");
@@ -108,12 +110,15 @@ public:
     return forward_dynamics(v, tau, wrench.is_none() ? nullptr : &w);
   }
 
-  // Q = Σ Jrᵀ G_f_G (nv), the interconnections' generalized force at (q, v).
+  // Q = Σ Jrᵀ G_f_G (nv), the interconnections' generalized force at (q, v), and the elastic
+  // joints' springs'.
   VectorXd spring_force(const RefVec & q, const RefVec & v) {
     const VectorXd tau = VectorXd::Zero(actuated_.size());
     kinematics(q, v, true);
     generalized_force(v, tau, nullptr, false);
-    return Q_;
+    VectorXd out = Q_;
+    springs_.add_force(q, v, out);
+    return out;
   }
 
   // g(q) on the actuated joints (n_actuated), as pinocchio::computeGeneralizedGravity.
@@ -219,9 +224,9 @@ public:
     kinematics_ = NONE;
     const double kinetic = pinocchio::computeKineticEnergy(model_, data_, q, v);
     const double potential = pinocchio::computePotentialEnergy(model_, data_);
-    const VectorXd u = elastic_energies();
-    if (motion) *motion = kinetic + u.sum();
-    return kinetic + potential + u.sum();
+    const double u = elastic_energies().sum() + springs_.energy(q);
+    if (motion) *motion = kinetic + u;
+    return kinetic + potential + u;
   }
 
   // (f, M, K̃, D̃): f = Sτ + Q − Bq̇ − b(q, q̇) = M q̈ and the stiffness matrices (without gains).
@@ -383,6 +388,13 @@ public:
     }
     VectorXd tau_full = -damping_.cwiseProduct(v);
     for (Eigen::Index i = 0; i < na; ++i) tau_full[actuated_[i]] += tau[i];
+    if (!springs_.empty()) {
+      springs_.add_force(q, v, tau_full);
+      MatrixXd K_s = MatrixXd::Zero(nv, nv), D_s = MatrixXd::Zero(nv, nv);
+      springs_.add_matrices(K_s, D_s);
+      dQ_dq -= K_s;
+      dQ_dv -= D_s;
+    }
     pinocchio::computeABADerivatives(model_, data_, q, v, tau_full, fext);
     MatrixXd Minv = data_.Minv;
     Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
@@ -595,6 +607,7 @@ private:
     }
     tau_full_ = Q_;
     joint_torques(v, tau, p_diss);
+    if (matrices) springs_.add_matrices(K_t_, D_t_);
   }
 
   // A world-axes wrench at the object frame, in the object frame's axes (updates its placement).
@@ -606,13 +619,15 @@ private:
     return local;
   }
 
-  // tau_full_ += Sτ − Bq̇; last_dissipation_ = p_diss + q̇ᵀBq̇.
+  // tau_full_ += Sτ − Bq̇ + the elastic joints' springs at (q of the last kinematics, v);
+  // last_dissipation_ = p_diss + q̇ᵀBq̇ + the springs' damping power.
   void joint_torques(const RefVec & v, const RefVec & tau, double p_diss) {
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) tau_full_[actuated_[i]] += tau[i];
     if (has_damping_) {
       tau_full_.array() -= damping_.array() * v.array();
       p_diss += (damping_.array() * v.array().square()).sum();
     }
+    if (!springs_.empty()) p_diss += springs_.add_force(kinematics_q_, v, tau_full_);
     last_dissipation_ = p_diss;
   }
 
@@ -672,6 +687,7 @@ private:
   VectorXd damping_;
   Eigen::VectorXi actuated_;
   FrameIndex object_frame_;
+  coopdyn::JointSprings springs_;
   bool has_damping_ = false;
   double last_dissipation_ = 0.0;
   int rotation_alarm_ = -1;

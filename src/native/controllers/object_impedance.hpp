@@ -71,10 +71,11 @@ struct ObjectImpedanceLaw : Controller {
   ObjectImpedanceLaw(const Model & model, Kernel::LentData lent, pinocchio::FrameIndex object_frame, std::vector<Grasp> grasps, ObjectTask task,
                    double mass, Vector3 com, Vector3 gravity, Vector3 Kp, Vector3 Kr, Vector3 Dp, Vector3 Dr,
                    double joint_damping, double null_k, double null_d, VectorXd q0, bool collocated,
-                   std::vector<pinocchio::SE3> tip_offsets, Vector3 Ki, Vector3 Di)
+                   std::vector<pinocchio::SE3> tip_offsets, Vector3 Ki, Vector3 Di, VectorXd transmissions)
     : model(model), lent(std::move(lent)), data(*this->lent), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
       mass(mass), com(com), gravity(gravity), Kp(Kp), Kr(Kr), Dp(Dp), Dr(Dr), joint_damping(joint_damping),
-      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated), Ki(Ki), Di(Di) {
+      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated), Ki(Ki), Di(Di),
+      transmissions(std::move(transmissions)) {
     for (const pinocchio::SE3 & o_M_T : tip_offsets) T_M_o.push_back(o_M_T.inverse());
   }
 
@@ -210,6 +211,11 @@ struct ObjectImpedanceLaw : Controller {
       tau.segment(offset, m) = ti;
       offset += m;
     }
+    for (Eigen::Index i = 0; i < transmissions.size(); i += 4) {  // Spong's fast term: K_v (q̇ − θ̇)
+      const auto entry = static_cast<Eigen::Index>(transmissions[i]);
+      tau[entry] += transmissions[i + 3] * (v[static_cast<Eigen::Index>(transmissions[i + 1])] -
+                                            v[static_cast<Eigen::Index>(transmissions[i + 2])]);
+    }
   }
 
   // G⁺F as rows: y = (G Gᵀ)⁻¹F = (F_f / N, A⁻¹ F_m), f_i = [y_f − r_i × y_m; y_m].
@@ -266,6 +272,7 @@ struct ObjectImpedanceLaw : Controller {
   std::vector<pinocchio::SE3> T_M_o;  // each tool frame's inverse offset from the object frame at the start
   std::vector<Matrix3> tip_R;  // (collocated) each tool's estimate of the object's rotation, at the last torque()
   std::vector<Vector3> tip_w;  // and each tool's angular velocity, world axes
+  VectorXd transmissions;  // the elastic joints' fast damping: (entry in τ, link v, motor v, K_v) each
 };
 
 // {grasps: (grasp frame, tip frame, arm velocity indices) each, task: {hold, start, rotation, and
@@ -315,11 +322,18 @@ inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & 
     offsets.emplace_back(Matrix3(M.topLeftCorner<3, 3>()), Vector3(M.topRightCorner<3, 1>()));
   }
   if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
+  const VectorXd transmissions = c.get<VectorXd>("transmissions");
+  const Eigen::Index na = k.actuated().size();
+  for (Eigen::Index i = 0; i + 3 < transmissions.size(); i += 4)
+    if (transmissions[i] < 0 || transmissions[i] >= na || transmissions[i + 1] < 0 || transmissions[i + 1] >= nv ||
+        transmissions[i + 2] < 0 || transmissions[i + 2] >= nv)
+      throw std::invalid_argument("compiled loop: a transmission's index is out of range");
+  if (transmissions.size() % 4) throw std::invalid_argument("compiled loop: transmissions are 4 values each");
   return std::make_unique<ObjectImpedanceLaw>(
     model, k.lend_data(), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
     c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
     c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq),
-    c.get<bool>("collocated"), offsets, c.vec("Ki", 3), c.vec("Di", 3));
+    c.get<bool>("collocated"), offsets, c.vec("Ki", 3), c.vec("Di", 3), transmissions);
 }
 
 inline const bool object_impedance_registered = register_controller("object_impedance", &make_object_impedance);

@@ -1,0 +1,315 @@
+"""Elastic joints (Spong's reduced model): closed forms, limits, conservation, both backends.
+
+The model (coopdyn/model/elastic_joints.py): per elastic joint a motor angle θ with inertia B,
+``M(q)q̈ + h = K(θ − q) + D(θ̇ − q̇) + Jᵀf``, ``Bθ̈ + K(θ − q) + D(θ̇ − q̇) = τ_m``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.control import GravityCompensationPD, MotorPD, ObjectImpedance
+from coopdyn.errors import SceneError
+
+PLANAR = str(Path(__file__).resolve().parents[1] / "urdf" / "planar_3r.urdf")
+
+
+def free_arm_scene(
+    elasticity: cd.JointElasticity | None,
+    locked: tuple[str, ...] = (),
+    gravity: tuple[float, float, float] = (0, 0, -9.81),
+    fixture_damping: float = 200.0,
+) -> cd.Scene:
+    """The planar 3R arm, free (the scene's box hangs on a world fixture, away from it)."""
+    q0 = {"joint1": 0.3, "joint2": -0.5, "joint3": 0.4}
+    kept = [v for k, v in q0.items() if k not in locked]
+    arm = cd.Arm("arm", PLANAR, tip_frame="tip", q0=kept, locked_joints={k: q0[k] for k in locked}, elasticity=elasticity)
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[1.0, 0.0, 0.5])
+    damping = cd.diagonal(fixture_damping, fixture_damping / 100) if fixture_damping else None
+    fixture = cd.Interconnection(None, stiffness=cd.diagonal(1e4, 1e3), damping=damping)
+    return cd.Scene([arm], box, [fixture], gravity=gravity)
+
+
+def two_inertia(K: float, B: float, D: float = 0.0) -> tuple[cd.Scene, float]:
+    """One revolute joint (the planar arm with joints 2 and 3 locked) without gravity; its
+    link inertia I_l about the axis [kg·m²]."""
+    scene = free_arm_scene(cd.JointElasticity(K, B, damping=D), locked=("joint2", "joint3"), gravity=(0, 0, 0))
+    link = int(scene.arms[0].v_index[0])
+    I_l = float(pin.crba(scene.model, scene.model.createData(), scene.q0)[link, link])
+    return scene, I_l
+
+
+def test_two_inertia_resonance_from_the_linearisation() -> None:
+    K, B = 2000.0, 0.05
+    scene, I_l = two_inertia(K, B)
+    for backend in ("python", "native"):
+        lin = cd.linearize(scene, backend=backend)
+        arm = np.r_[scene.arms[0].v_index, scene.arms[0].motor_v_index]
+        n = scene.nv
+        rows = np.r_[arm, n + arm]
+        w = np.sort(np.abs(np.linalg.eigvals(lin.A[np.ix_(rows, rows)]).imag))
+        assert w[-1] == pytest.approx(np.sqrt(K * (1 / I_l + 1 / B)), rel=1e-9)
+        assert w[0] == pytest.approx(0.0, abs=1e-6)  # the rigid-body mode
+        # the antiresonance: the motor's response to its own torque vanishes at √(K/I_l)
+        w_a = np.sqrt(K / I_l)
+        motor = int(scene.arms[0].motor_v_index[0])
+        B_in = lin.B[np.ix_(rows, [0])]
+        A = lin.A[np.ix_(rows, rows)]
+        gain = [abs(np.linalg.solve(1j * w * np.eye(4) - A, B_in)[list(arm).index(motor), 0]) for w in (w_a, 0.5 * w_a)]
+        assert gain[0] < 1e-9 * gain[1]
+
+
+@pytest.mark.parametrize("loop", ["python", "compiled"])
+def test_two_inertia_from_simulated_responses(loop: str) -> None:
+    """Free vibration from a deflection at rest swings at ω_r; a motor torque at ω_a, from its
+    steady state, leaves the motor still (the link absorbs it)."""
+    K, B = 2000.0, 0.05
+    scene, I_l = two_inertia(K, B)
+    link, motor = int(scene.arms[0].q_index[0]), int(scene.arms[0].motor_q_index[0])
+    w_r, w_a = np.sqrt(K * (1 / I_l + 1 / B)), np.sqrt(K / I_l)
+    q0 = scene.q0.copy()
+    q0[motor] += 0.01
+    run = cd.simulate(scene, 2 * np.pi / w_r * 10, None, "rk4", dt=2 * np.pi / w_r / 400, q0=q0, loop=loop)
+    delta = run.q[:, motor] - run.q[:, link]
+    up = np.flatnonzero((delta[:-1] < 0) & (delta[1:] >= 0))
+    t_up = run.t[up] - delta[up] * (run.t[up + 1] - run.t[up]) / (delta[up + 1] - delta[up])
+    assert np.diff(t_up).mean() == pytest.approx(2 * np.pi / w_r, rel=1e-6)
+
+    T = 0.5  # [N·m]
+    v0 = np.zeros(scene.nv)
+    v0[scene.arms[0].v_index[0]] = -T / K * w_a  # q = −T/K sin(ω_a t), θ = 0
+    periods = 5 * 2 * np.pi / w_a
+
+    def drive(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.array([T * np.sin(w_a * t)])
+
+    run = cd.simulate(scene, periods, drive, "rk4", dt=2 * np.pi / w_r / 200, q0=scene.q0, v0=v0, loop=loop)
+    assert np.abs(run.q[:, link] - scene.q0[link]).max() == pytest.approx(T / K, rel=1e-3)
+    assert np.abs(run.q[:, motor] - scene.q0[motor]).max() < 1e-6 * T / K
+
+
+def test_static_deflection_at_rest() -> None:
+    """The scene starts its motors at θ = q + K⁻¹ g(q): the arm is at rest under its weight."""
+    K = np.array([3000.0, 2000.0, 800.0])
+    scene = free_arm_scene(cd.JointElasticity(K, 0.1))
+    arm = scene.arms[0]
+    g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[arm.v_index]
+    deflection = scene.joint_springs.deflection(scene.q0)
+    np.testing.assert_allclose(deflection, g / K, rtol=1e-12)
+    for backend in ("python", "native"):
+        a = cd.Dynamics(scene, backend).acceleration(scene.q0, scene.v0, np.zeros(3))
+        assert np.abs(a[np.r_[arm.v_index]]).max() < 1e-10
+        # the motors need τ_m = K(θ − q) = g(q) to stay: without it they accelerate by −g/B
+        np.testing.assert_allclose(a[arm.motor_v_index], -g / 0.1, rtol=1e-10)
+        a = cd.Dynamics(scene, backend).acceleration(scene.q0, scene.v0, g)
+        assert np.abs(a[: scene.arms[0].motor_v_index[-1] + 1]).max() < 1e-11
+
+
+def test_stiff_joints_converge_to_the_rigid_arm_with_armature_at_order_one_over_k() -> None:
+    """K → ∞: the link follows the rigid arm whose joints carry the motor inertia as armature,
+    (M(q) + B) q̈ + h = τ (integrated here from Pinocchio directly), with an error O(1/K)."""
+    from scipy.integrate import solve_ivp
+
+    B, T = 0.02, 0.3
+    rigid = free_arm_scene(None)
+    model, data = rigid.model, rigid.model.createData()
+    idx = rigid.arms[0].v_index
+
+    def torque(t: float, q_link: np.ndarray) -> np.ndarray:
+        q = rigid.q0.copy()
+        q[idx] = q_link
+        return pin.computeGeneralizedGravity(model, data, q)[idx] * 0.9 + np.array([2.0, -1.0, 0.5]) * np.sin(8 * t)
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        q = rigid.q0.copy()
+        q[idx], v = x[:3], np.zeros(rigid.nv)
+        v[idx] = x[3:]
+        M = pin.crba(model, data, q)[np.ix_(idx, idx)] + B * np.eye(3)
+        h = pin.nonLinearEffects(model, data, q, v)[idx]
+        return np.r_[x[3:], np.linalg.solve(M, torque(t, x[:3]) - h)]
+
+    times = np.linspace(0, T, 61)
+    ref = solve_ivp(rhs, (0, T), np.r_[rigid.q0[idx], np.zeros(3)], t_eval=times, rtol=1e-11, atol=1e-12).y[:3].T
+    errors = []
+    for K in (2e4, 8e4, 3.2e5):
+        scene = free_arm_scene(cd.JointElasticity(K, B, damping=2 * np.sqrt(K * B)))
+        arm = scene.arms[0]
+
+        def control(t: float, q: np.ndarray, v: np.ndarray, arm: object = arm) -> np.ndarray:
+            return torque(t, q[scene.arms[0].q_index])
+
+        run = cd.simulate(scene, T, control, "dopri5", dt=1e-4, save_every=1, loop="python")
+        q = np.array([np.interp(times, run.t, run.q[:, i]) for i in arm.q_index]).T
+        errors.append(np.abs(q - ref).max())
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    assert np.all((ratios > 3.0) & (ratios < 5.5)), (errors, ratios)
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+def test_energy_is_conserved_undamped_at_the_method_order(backend: str) -> None:
+    scene = free_arm_scene(cd.JointElasticity([3000.0, 2000.0, 800.0], 0.05), fixture_damping=0.0)
+    q0 = scene.q0.copy()
+    q0[scene.arms[0].motor_q_index] += [0.02, -0.03, 0.01]
+    dyn = cd.Dynamics(scene, backend)
+    e0 = dyn.energy(q0, scene.v0).total
+    drift = []
+    for dt in (4e-4, 2e-4):
+        run = cd.simulate(scene, 0.2, None, "rk4", dt=dt, q0=q0, backend=backend, energy_check="off")
+        drift.append(abs(dyn.energy(run.q[-1], run.v[-1]).total - e0))
+    # rk4 is fourth order; on an oscillation its energy error falls faster (h⁶ for a linear one)
+    assert 2**4 * 0.85 < drift[0] / drift[1] < 2**6 * 1.2
+    assert drift[1] < 1e-6 * e0
+
+
+def test_backends_agree_on_elastic_joints() -> None:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    el = cd.JointElasticity(stiffness=5000.0, motor_inertia=0.4, damping=3.0, motor_damping=0.5)
+    scene = cd.Scene([a.replace(elasticity=el) for a in base.arm_specs], base.object, base.interconnection_specs)
+    rng = np.random.default_rng(3)
+    py, nat = cd.Dynamics(scene, "python"), cd.Dynamics(scene, "native")
+    for _ in range(3):
+        q = pin.integrate(scene.model, scene.q0, 0.05 * rng.standard_normal(scene.nv))
+        v, tau = rng.standard_normal(scene.nv), 5 * rng.standard_normal(scene.n_actuated)
+        np.testing.assert_allclose(nat.acceleration(q, v, tau), py.acceleration(q, v, tau), rtol=1e-9, atol=1e-9)
+        for a, b in zip(nat.implicit_terms(q, v, tau), py.implicit_terms(q, v, tau), strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+        assert nat.last_dissipation == pytest.approx(py.last_dissipation, rel=1e-10)
+        dn, dp = nat.derivatives(q, v, tau), py.derivatives(q, v, tau)
+        np.testing.assert_allclose(dn.da_dq, dp.da_dq, rtol=1e-7, atol=1e-7)
+        np.testing.assert_allclose(dn.da_dv, dp.da_dv, rtol=1e-9, atol=1e-9)
+
+
+def test_derivatives_against_finite_differences() -> None:
+    scene = free_arm_scene(cd.JointElasticity([3000.0, 2000.0, 800.0], 0.05, damping=1.5))
+    rng = np.random.default_rng(0)
+    q = pin.integrate(scene.model, scene.q0, 0.1 * rng.standard_normal(scene.nv))
+    v, tau = rng.standard_normal(scene.nv), rng.standard_normal(3)
+    dyn = cd.Dynamics(scene, "python")
+    d = dyn.derivatives(q, v, tau)
+    eps = 1e-6
+    E = np.eye(scene.nv)
+
+    def at(dq: np.ndarray) -> np.ndarray:
+        return dyn.acceleration(pin.integrate(scene.model, q, dq), v, tau)
+
+    fd_q = np.array([(at(eps * e) - at(-eps * e)) / (2 * eps) for e in E]).T
+    fd_v = np.array([(dyn.acceleration(q, v + eps * e, tau) - dyn.acceleration(q, v - eps * e, tau)) / (2 * eps) for e in E]).T
+    np.testing.assert_allclose(d.da_dq, fd_q, rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(d.da_dv, fd_v, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("gravity", ["constant", "online"])
+def test_motor_pd_regulates_to_the_target(gravity: str) -> None:
+    """Tomei's and De Luca–Siciliano–Zollo's laws bring the link to q_d, the motor to
+    θ_d = q_d + K⁻¹ g(q_d), from a start away from both, measuring only the motors."""
+    K = np.array([3000.0, 2000.0, 800.0])
+    scene = free_arm_scene(cd.JointElasticity(K, 0.05, damping=1.0))
+    arm = scene.arms[0]
+    q_d = scene.q0[arm.q_index] + np.array([0.3, -0.2, 0.25])
+    pd = MotorPD(scene, kp=300.0, kd=20.0, q_des=q_d, gravity=gravity)
+    run = cd.simulate(scene, 4.0, pd, "dopri5", dt=1e-3)
+    q_end = run.q[-1]
+    np.testing.assert_allclose(q_end[arm.q_index], q_d, atol=1e-6)
+    q_rest = scene.q0.copy()
+    q_rest[arm.q_index] = q_d
+    g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), q_rest)[arm.v_index]
+    np.testing.assert_allclose(scene.joint_springs.deflection(q_end), g / K, atol=1e-6)
+
+
+def test_motor_pd_compiled_equals_python() -> None:
+    scene = free_arm_scene(cd.JointElasticity([3000.0, 2000.0, 800.0], 0.05, damping=1.0))
+    q_d = scene.q0[scene.arms[0].q_index] + 0.1
+    for gravity in ("constant", "online"):
+        pd = MotorPD(scene, q_des=q_d, gravity=gravity)
+        runs = [cd.simulate(scene, 0.3, pd, "implicit_euler", dt=1e-3, loop=loop) for loop in ("python", "compiled")]
+        np.testing.assert_allclose(runs[1].q, runs[0].q, atol=1e-11)
+        np.testing.assert_allclose(runs[1].tau, runs[0].tau, atol=1e-8)
+
+
+def test_elastic_joints_in_a_cooperative_scene_run_compiled_with_every_method() -> None:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.02)
+    el = cd.JointElasticity(stiffness=8000.0, motor_inertia=0.4, damping=5.0)
+    scene = cd.Scene([a.replace(elasticity=el) for a in base.arm_specs], base.object, base.interconnection_specs)
+    pd = MotorPD(scene)
+    finals = {}
+    for method in ("rk4", "implicit_euler", "trapezoid", "generalized_alpha", "dopri5"):
+        run = cd.simulate(scene, 0.2, pd, method, dt=5e-4, loop="compiled")
+        finals[method] = run.q[-1]
+    ref = finals.pop("dopri5")
+    for method, q in finals.items():
+        assert np.abs(q - ref).max() < 1e-4, method  # (implicit Euler: 2e-5; the others below 1e-7)
+
+
+def test_rigid_joint_controllers_refuse_elastic_arms() -> None:
+    scene = free_arm_scene(cd.JointElasticity(3000.0, 0.05))
+    for make in (lambda: GravityCompensationPD(scene), lambda: cd.control.ComputedTorque(scene)):
+        with pytest.raises(SceneError, match=r"elastic ones.*MotorPD"):
+            make()
+
+
+def test_bad_elasticity_is_refused_by_name() -> None:
+    cases = [
+        (cd.JointElasticity(-1.0, 0.1), "stiffness must be > 0"),
+        (cd.JointElasticity(1000.0, 0.0), "motor_inertia must be > 0"),
+        (cd.JointElasticity([1.0, 2.0], 0.1), "stiffness must be a scalar or have 3 entries"),
+        (cd.JointElasticity(1000.0, 0.1, damping=-1), "damping must be >= 0"),
+        (cd.JointElasticity(1000.0, 0.1, joints=["joint9"]), "names 'joint9'.*Joints"),
+        (cd.JointElasticity(1000.0, 0.1, joints=["joint1", "joint1"]), "twice"),
+        (cd.JointElasticity(1000.0, 0.1, gear_ratio=0.5), "gear_ratio"),
+        (cd.JointElasticity(float("nan"), 0.1), "stiffness"),
+    ]
+    for spec, message in cases:
+        with pytest.raises(SceneError, match=message):
+            free_arm_scene(spec)
+    with pytest.raises(SceneError, match=r"must be a coopdyn\.JointElasticity"):
+        free_arm_scene({"stiffness": 1.0})  # type: ignore[arg-type]
+
+
+def test_some_joints_elastic_and_gear_reflection() -> None:
+    scene = free_arm_scene(cd.JointElasticity(1000.0, 1e-4, gear_ratio=50.0, joints=["joint2"]))
+    arm = scene.arms[0]
+    assert arm.elastic.tolist() == [1] and scene.nv == 3 + 1 + 6
+    M = pin.crba(scene.model, scene.model.createData(), scene.q0)
+    assert M[arm.motor_v_index[0], arm.motor_v_index[0]] == pytest.approx(50.0**2 * 1e-4)
+    assert scene.actuated.tolist() == [arm.v_index[0], arm.motor_v_index[0], arm.v_index[2]]
+    q_names, v_names = scene.coordinates()
+    assert "arm/joint2.motor [rad]" in q_names and "arm/joint2.motor [rad/s]" in v_names
+
+
+def elastic_pandas() -> cd.Scene:
+    """The demo's scene with every joint of both arms elastic (examples/elastic_joints.py's)."""
+    base = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    el = cd.JointElasticity(stiffness=1e4, motor_inertia=0.5, damping=5.0)
+    return cd.Scene([a.replace(elasticity=el) for a in base.arm_specs], base.object, base.interconnection_specs)
+
+
+def test_object_impedance_holds_elastic_arms_only_with_its_fast_term() -> None:
+    """The closed loop's linearisation at the hold: ObjectImpedance's torques sent to the motors
+    as they are leave a 17.8 Hz transmission mode growing; Spong's fast term K_v (q̇ − θ̇) at its
+    default damps every mode."""
+    scene = elastic_pandas()
+    growth = {}
+    for kv in (0.0, None):
+        A = cd.linearize(scene, controller=ObjectImpedance(scene, transmission_damping=kv)).A
+        growth[kv] = float(np.linalg.eigvals(A).real.max())  # [1/s]
+    assert growth[0.0] > 0.5
+    assert growth[None] < -1.0
+
+
+def test_grip_lift_oscillate_on_elastic_arms_compiled_equals_python() -> None:
+    from coopdyn.cooperative import GripLiftOscillate
+    from coopdyn.scenes import object_start
+
+    scene = elastic_pandas()
+    controller = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), squeeze=20.0))
+    runs = [cd.simulate(scene, 0.3, controller, "trapezoid", dt=1e-3, loop=loop) for loop in ("python", "compiled")]
+    np.testing.assert_allclose(runs[1].q, runs[0].q, atol=1e-12)
+    np.testing.assert_allclose(runs[1].tau, runs[0].tau, atol=1e-10)
+    kp, kd = controller.gains()
+    motors = np.isin(scene.actuated, scene.joint_springs.motor_v)
+    assert np.all(kp[motors] == 0.0) and np.all(kd[motors] > 0.0)  # the fast term's −∂τ/∂θ̇, on the motors
