@@ -12,15 +12,22 @@ spot what each of the three models costs:
 * ``"quasi-static"`` — :func:`coopdyn.quasi_static`: one rigid body on elastic grasps (the
   object's own flexibility condensed into them);
 * ``"elastic"`` — the full scene: every node of an elastic object a body.
+
+Arms with elastic joints (:class:`coopdyn.JointElasticity`) get the same test of their own: the
+joints' lowest transmission mode (arms and motors with the object released) against the
+bandwidth says whether the elastic joints matter or rigid ones carrying the motor inertia as
+armature (``stiffness=inf``) give the motion; both are measured (``"rigid joints"``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 import scipy.linalg
 
 from . import _validate
@@ -59,10 +66,13 @@ class ModelAdvice:
     grasp_mode_hz: float  #: the grasps' lowest mode in the quasi-static system [Hz]
     reason: str
     costs: tuple[ModelCost, ...]
+    joint_mode_hz: float | None = None  #: the elastic joints' lowest transmission mode [Hz] (None: rigid joints)
+    joints: str | None = None  #: "elastic" or "rigid" (with the motor inertia as armature); None: rigid joints given
 
     def __str__(self) -> str:
         rows = [
-            f"model advice at a control bandwidth of {self.bandwidth:g} Hz: {self.recommendation}",
+            f"model advice at a control bandwidth of {self.bandwidth:g} Hz: {self.recommendation}"
+            + (f", {self.joints} joints" if self.joints else ""),
             f"  {self.reason}",
             f"  {'model':<13}{'states':>7}{'lowest mode':>14}{'fastest mode':>15}{'rk4 dt limit':>14}"
             f"{'CPU / sim. s':>14}  (measured with, dt = {self.dt:g} s)",
@@ -86,6 +96,27 @@ def _modes(scene: Scene) -> np.ndarray:
     elements only, no controller)."""
     M, K, _ = Dynamics(scene).stiffness(scene.q0, scene.v0)
     return _frequencies(K, M)
+
+
+def _joint_modes(scene: Scene) -> np.ndarray:
+    """The elastic joints' transmission modes [rad/s] at q0: the arms and their motors on the
+    springs alone (the object released, the arms' other joints free)."""
+    springs = scene.joint_springs
+    K = np.zeros((scene.nv, scene.nv))
+    springs.add_matrices(K)
+    M = pin.crba(scene.model, scene.model.createData(), scene.q0)
+    M = np.triu(M) + np.triu(M, 1).T
+    arm = np.concatenate([scene.arm_joints, springs.motor_v])
+    return _frequencies(K[np.ix_(arm, arm)], M[np.ix_(arm, arm)])
+
+
+def rigid_joints(scene: Scene) -> Scene:
+    """The scene with every elastic joint rigid, its motor inertia as armature (K → ∞)."""
+    arms = [
+        a if a.elasticity is None else a.replace(elasticity=dataclasses.replace(a.elasticity, stiffness=math.inf))
+        for a in scene.arm_specs
+    ]
+    return Scene(arms, scene.object, scene.interconnection_specs, gravity=scene.gravity)
 
 
 def _cost(name: str, scene: Scene, dt: float, t_measure: float, omega: np.ndarray) -> ModelCost:
@@ -165,8 +196,21 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     if object_hz is None:
         models.pop("elastic")  # a rigid object's elastic system is its massless grasps: quasi-static already
     modes = {"rigid": np.zeros(0), "quasi-static": grasp}  # computed above; the elastic model's only if it is run
+    joint_hz, joints = None, None
+    if scene.joint_springs.size:
+        w = _joint_modes(scene)
+        joint_hz = float(w.min() / (2 * np.pi))
+        joints = "elastic" if joint_hz < limit else "rigid"
+        reason += (
+            f"; the joints' lowest transmission mode, {joint_hz:.3g} Hz, is within {MODE_SEPARATION:g}× the bandwidth: keep "
+            "the elastic joints"
+            if joints == "elastic"
+            else f"; the joints' transmission modes (from {joint_hz:.3g} Hz) are above {MODE_SEPARATION:g}× the bandwidth: rigid "
+            "joints carrying the motor inertia (stiffness=inf) give the motion"
+        )
+        models["rigid joints"] = rigid_joints(scene)
     costs = tuple(_cost(name, s, dt, measure, modes[name] if name in modes else _modes(s)) for name, s in models.items())
-    return ModelAdvice(choice, bandwidth, dt, object_hz, grasp_hz, reason, costs)
+    return ModelAdvice(choice, bandwidth, dt, object_hz, grasp_hz, reason, costs, joint_hz, joints)
 
 
 __all__ = ["MODELS", "MODE_SEPARATION", "ModelAdvice", "ModelCost", "advise_model"]

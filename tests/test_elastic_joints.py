@@ -135,6 +135,10 @@ def test_stiff_joints_converge_to_the_rigid_arm_with_armature_at_order_one_over_
 
     times = np.linspace(0, T, 61)
     ref = solve_ivp(rhs, (0, T), np.r_[rigid.q0[idx], np.zeros(3)], t_eval=times, rtol=1e-11, atol=1e-12).y[:3].T
+    geared = free_arm_scene(cd.JointElasticity(np.inf, B))  # K = inf: coopdyn's own rigid arm with B as armature
+    run = cd.simulate(geared, T, lambda t, q, v: torque(t, q[idx]), "dopri5", dt=1e-4, loop="python")
+    limit = np.array([np.interp(times, run.t, run.q[:, i]) for i in idx]).T
+    assert np.abs(limit - ref).max() < 1e-8
     errors = []
     for K in (2e4, 8e4, 3.2e5):
         scene = free_arm_scene(cd.JointElasticity(K, B, damping=2 * np.sqrt(K * B)))
@@ -313,3 +317,96 @@ def test_grip_lift_oscillate_on_elastic_arms_compiled_equals_python() -> None:
     kp, kd = controller.gains()
     motors = np.isin(scene.actuated, scene.joint_springs.motor_v)
     assert np.all(kp[motors] == 0.0) and np.all(kd[motors] > 0.0)  # the fast term's −∂τ/∂θ̇, on the motors
+
+
+def test_infinite_stiffness_is_the_rigid_joint_with_the_motor_inertia_as_armature() -> None:
+    """K = inf: no motor coordinate, B on the joint's diagonal of the mass matrix, the motor
+    friction on the joint; it survives a scene file (TOML has inf)."""
+    import math
+
+    from coopdyn.model.description import build, describe
+
+    spec = cd.JointElasticity([math.inf, 2000.0, math.inf], 0.05, motor_damping=0.3)
+    scene = free_arm_scene(spec)
+    rigid = free_arm_scene(None)
+    arm = scene.arms[0]
+    assert arm.elastic.tolist() == [1] and scene.nv == rigid.nv + 1
+    assert arm.damping.tolist() == [0.3, 0.0, 0.3] and arm.motor_damping.tolist() == [0.3]
+    q = scene.q0
+    M, M_rigid = (pin.crba(s.model, s.model.createData(), s.q0) for s in (scene, rigid))
+    link = arm.v_index[[0, 2]]
+    np.testing.assert_allclose(np.diag(M)[link] - np.diag(M_rigid)[link], 0.05, rtol=1e-12)
+    assert describe(build(describe(scene)))["arms"][0]["elasticity"]["stiffness"] == [math.inf, 2000.0, math.inf]
+    for backend in ("python", "native"):
+        e = cd.Dynamics(scene, backend).energy(q, np.ones(scene.nv))
+        assert e.kinetic == pytest.approx(0.5 * np.ones(scene.nv) @ M @ np.ones(scene.nv), rel=1e-12)
+
+
+def test_the_advisor_compares_the_joint_modes_with_the_bandwidth() -> None:
+    """The transmission mode of the one-joint arm is the two-inertia resonance; below 5× the
+    bandwidth the joints stay elastic, above it rigid joints with the motor inertia do, and the
+    rigid-joint model is measured beside the others."""
+    K, B = 2000.0, 0.05
+    scene, I_l = two_inertia(K, B)
+    w_r = np.sqrt(K * (1 / I_l + 1 / B)) / (2 * np.pi)  # [Hz]
+    advice = cd.advise_model(scene, bandwidth=w_r / 4)
+    assert advice.joint_mode_hz == pytest.approx(w_r, rel=1e-9)
+    assert advice.joints == "elastic" and "keep the elastic joints" in str(advice)
+    advice = cd.advise_model(scene, bandwidth=w_r / 6)
+    assert advice.joints == "rigid" and "rigid joints" in [c.model for c in advice.costs]
+    rigid_row = next(c for c in advice.costs if c.model == "rigid joints")
+    assert rigid_row.states == scene.nq + scene.nv - 2  # (one motor fewer: its angle and its speed)
+    assert cd.advise_model(free_arm_scene(None)).joint_mode_hz is None
+
+
+def test_everything_elastic_arms_joints_grasps_and_a_beam() -> None:
+    """The book's fourth system: elastic arms holding an elastic object. Both backends agree, the
+    compiled loop runs it, and undamped it keeps its energy (at the method's order)."""
+    base = cd.scenes.held_beam("panda", n_elements=4, beam_damping=0.0)
+    el = cd.JointElasticity(stiffness=5e3, motor_inertia=0.3)
+    scene = cd.Scene([a.replace(elasticity=el) for a in base.arm_specs], base.object, base.interconnection_specs)
+    rng = np.random.default_rng(5)
+    arms = np.r_[scene.arm_joints, scene.joint_springs.motor_v]  # (a random shape of the beam is a 1e7 N/m kick)
+    dq = np.zeros(scene.nv)
+    dq[arms] = 0.01 * rng.standard_normal(arms.size)
+    q = pin.integrate(scene.model, scene.q0, dq)
+    v, tau = np.zeros(scene.nv), rng.standard_normal(scene.n_actuated)
+    v[arms] = rng.standard_normal(arms.size)
+    np.testing.assert_allclose(
+        cd.Dynamics(scene, "native").acceleration(q, v, tau),
+        cd.Dynamics(scene, "python").acceleration(q, v, tau),
+        rtol=1e-9,
+        atol=1e-7,
+    )
+    dyn = cd.Dynamics(scene, "native")
+    e0 = dyn.energy(q, 0.1 * v).total
+    drift = []
+    for dt in (1e-5, 5e-6):  # (the beam's fastest element mode: 8.6 kHz; |λ|·dt ≤ 0.54)
+        run = cd.simulate(scene, 0.01, None, "rk4", dt=dt, q0=q, v0=0.1 * v, loop="compiled", energy_check="off")
+        drift.append(abs(dyn.energy(run.q[-1], run.v[-1]).total - e0))
+    assert drift[0] / drift[1] > 2**4 * 0.85 and drift[1] < 1e-6 * abs(e0)
+
+
+def test_a_sweep_sets_the_joints_stiffness_through_the_arms_elasticity_table() -> None:
+    from coopdyn.sweeps.spec import put
+
+    doc = {"arms": [{"name": "a", "elasticity": {"stiffness": 1.0, "motor_inertia": 0.1}}, {"name": "b"}]}
+    put(doc, "arms.0.elasticity.stiffness", 5e3)
+    assert doc["arms"][0]["elasticity"]["stiffness"] == 5e3
+    with pytest.raises(cd.errors.SweepError, match="entry has no 'elasticity' table"):
+        put(doc, "arms.elasticity.stiffness", 7e3)  # arm b has none
+    with pytest.raises(cd.errors.SweepError, match="not deeper"):
+        put(doc, "arms.elasticity.stiffness.x", 1.0)
+
+
+def test_the_run_figure_draws_the_motor_torques(tmp_path: Path) -> None:
+    from coopdyn.cooperative import GripLiftOscillate
+    from coopdyn.scenes import object_start
+    from coopdyn.viz.plotting import cooperative_figure
+
+    scene = elastic_pandas()
+    task = GripLiftOscillate(start=object_start(scene), squeeze=20.0)
+    res = cd.simulate(scene, 0.1, ObjectImpedance(scene, task), "trapezoid", dt=1e-3)
+    fig = cooperative_figure(res, task, tmp_path / "run.png")
+    labels = fig.axes[3].get_legend_handles_labels()[1]
+    assert labels[0] == "left/panda_joint1.motor" and len(labels) == scene.n_actuated

@@ -158,7 +158,7 @@ def test_frames_example_draws_what_the_outputs_say(tmp_path: Path) -> None:
     assert (tmp_path / "frames.png").stat().st_size > 20_000
 
 
-@pytest.mark.parametrize("name", ["linear_book", "slider_and_fixture", "two_pandas", "two_ur5s"])
+@pytest.mark.parametrize("name", sorted(p.stem for p in (EXAMPLES / "scenes").glob("*.toml")))
 def test_the_scene_file_examples_tell_the_resolved_runs_story(name: str) -> None:
     """Each examples/scenes file's reported figures (the run's metrics: tracking error, squeeze,
     peak forces) at its own method and step against the same method at a tenth of the step:

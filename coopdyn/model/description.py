@@ -87,7 +87,9 @@ ARM: dict[str, Field] = {
 
 #: an arm's ``elasticity`` keys (coopdyn.JointElasticity)
 ELASTICITY: dict[str, Field] = {
-    "stiffness": Field("per_joint", "K, the transmission's spring [N·m/rad or N/m]", True),
+    "stiffness": Field(
+        "per_joint", "K, the transmission's spring [N·m/rad or N/m]; inf: rigid, the motor inertia as armature", True
+    ),
     "motor_inertia": Field("per_joint", "the rotor's inertia [kg·m² or kg]: reflected B, or J_m with gear_ratio", True),
     "damping": Field("per_joint", "D, the transmission's damping [N·m·s/rad or N·s/m]; default 0"),
     "gear_ratio": Field("per_joint", "n: B = n² motor_inertia; default 1"),
@@ -210,9 +212,11 @@ def _describe_arm(arm: Arm) -> dict[str, Any]:
     if arm.elasticity is not None:
         el, what = arm.elasticity, f"arm {arm.name!r}: elasticity"
         out["elasticity"] = {
-            key: numbers(getattr(el, key), f"{what}.{key}")
-            for key in ("stiffness", "motor_inertia", "damping", "gear_ratio", "motor_damping")
+            key: numbers(getattr(el, key), f"{what}.{key}") for key in ("motor_inertia", "damping", "gear_ratio", "motor_damping")
         }
+        stiffness = np.asarray(el.stiffness, dtype=float)  # (+inf, a rigid transmission, is a TOML number)
+        finite = np.asarray(numbers(np.where(np.isposinf(stiffness), 1.0, stiffness), f"{what}.stiffness"))
+        out["elasticity"]["stiffness"] = np.where(np.isposinf(stiffness), np.inf, finite).tolist()
         if el.joints is not None:
             out["elasticity"]["joints"] = [str(j) for j in el.joints]
     return out
@@ -349,6 +353,11 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         return _section(value, where)
     if kind == "elasticity":
         return _elasticity(value, where)
+    if kind == "per_joint":  # (JointElasticity checks the values; its stiffness may be +inf)
+        numeric = isinstance(value, int | float) and not isinstance(value, bool)
+        if numeric or (isinstance(value, list) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
+            return value
+        raise bad()
     if kind == "joint_names":
         if isinstance(value, list) and value and all(isinstance(v, str) for v in value):
             return value
@@ -365,7 +374,6 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         "axis": [(3,)],
         "vector": [(arr.size,)],
         "joint_damping": [(), (arr.size,)],
-        "per_joint": [(), (arr.size,)],
     }
     if kind in shapes and arr.shape not in shapes[kind]:
         raise bad()

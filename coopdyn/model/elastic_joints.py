@@ -38,7 +38,8 @@ class JointElasticity:
     arm's joint order. For a prismatic joint read N/m for N·m/rad, kg for kg·m², N·s/m for N·m·s/rad.
 
     Attributes:
-        stiffness: K, the transmission's spring [N·m/rad], > 0.
+        stiffness: K, the transmission's spring [N·m/rad], > 0; ``math.inf`` makes that joint
+            rigid with the motor inertia as armature (no motor coordinate: the K → ∞ limit).
         motor_inertia: the rotor's inertia [kg·m²], > 0: reflected to the joint (B) when
             ``gear_ratio`` is 1, else the motor-side J_m, and B = n² J_m.
         damping: D, the transmission's viscous damping on θ̇ − q̇ [N·m·s/rad], ≥ 0. Default 0.
@@ -63,7 +64,7 @@ class ResolvedElasticity:
     """An arm's elasticity checked against its model: one entry per elastic joint."""
 
     joints: np.ndarray  #: positions of the elastic joints among the arm's joints (its v order)
-    stiffness: np.ndarray  #: K [N·m/rad]
+    stiffness: np.ndarray  #: K [N·m/rad] (inf: rigid, B as armature)
     damping: np.ndarray  #: D [N·m·s/rad]
     inertia: np.ndarray  #: B, reflected [kg·m²]
     motor_damping: np.ndarray  #: d_m, reflected [N·m·s/rad]
@@ -116,19 +117,26 @@ def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None
             )
     n = len(chosen)
 
-    def per_joint(value: Any, field: str, unit: str, positive: bool) -> np.ndarray:
+    def per_joint(value: Any, field: str, unit: str, positive: bool, infinite: bool = False) -> np.ndarray:
+        rigid: Any = False  # (stiffness: its +inf entries, a rigid joint each)
+        if infinite and not isinstance(value, str | bytes):
+            try:
+                given = np.asarray(value, dtype=float)
+                rigid, value = np.isposinf(given), np.where(np.isposinf(given), 1.0, given)
+            except (TypeError, ValueError, OverflowError):
+                pass  # (finite_array names what is wrong)
         x = _validate.finite_array(value, f"{what}, elasticity.{field}")
         if x.ndim == 0:
-            x = np.full(n, float(x))
+            x, rigid = np.full(n, float(x)), np.full(n, bool(rigid))
         if x.shape != (n,):
             raise SceneError(
                 f"{what}: elasticity.{field} must be a scalar or have {n} entries (one per elastic joint), got shape {x.shape}"
             )
         if np.any(x <= 0.0) if positive else np.any(x < 0.0):
             raise SceneError(f"{what}: elasticity.{field} must be {'> 0' if positive else '>= 0'} [{unit}], got {x.tolist()}")
-        return x
+        return np.where(rigid, np.inf, x)
 
-    stiffness = per_joint(spec.stiffness, "stiffness", "N·m/rad", True)
+    stiffness = per_joint(spec.stiffness, "stiffness", "N·m/rad", True, infinite=True)
     inertia = per_joint(spec.motor_inertia, "motor_inertia", "kg·m²", True)
     ratio = _validate.finite_array(spec.gear_ratio, f"{what}, elasticity.gear_ratio")
     ratio = np.full(n, float(ratio)) if ratio.ndim == 0 else ratio

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -205,6 +206,7 @@ class Scene:
             model = pin.appendModel(model, la.model, 0, la.base)
         model.gravity = pin.Motion(np.concatenate([_validate.finite_array(gravity, "gravity", (3,)), np.zeros(3)]))
         motors = _add_motors(model, loaded)
+        _add_armature(model, loaded)
 
         placed = obj.add_to(model)
         obj_joint, node_joints, q_obj = placed.reference, list(placed.joints), placed.q0
@@ -475,11 +477,27 @@ def _add_motors(model: pin.Model, loaded: Sequence[LoadedArm]) -> list[tuple[str
     for la in loaded:
         if la.elasticity is None:
             continue
-        for k, inertia in zip(la.elasticity.joints, la.elasticity.inertia, strict=True):
+        el = la.elasticity
+        for k, inertia, K in zip(el.joints, el.inertia, el.stiffness, strict=True):
+            if math.isinf(K):
+                continue  # a rigid transmission: the motor inertia is the joint's armature (_add_armature)
             name = la.model.names[int(k) + 1]
             link = model.joints[model.getJointId(name)]
             motors.append((name, add_motor(model, name + MOTOR_SUFFIX, float(inertia), bool(continuous(link)))))
     return motors
+
+
+def _add_armature(model: pin.Model, loaded: Sequence[LoadedArm]) -> None:
+    """Each joint with an infinitely stiff transmission carries its motor's inertia as armature
+    (in place): the K → ∞ limit of the elastic joint."""
+    for la in loaded:
+        el = la.elasticity
+        if el is None:
+            continue
+        rigid = np.isinf(el.stiffness)
+        for k, inertia in zip(el.joints[rigid], el.inertia[rigid], strict=True):
+            joint = model.joints[model.getJointId(la.model.names[int(k) + 1])]
+            model.armature[joint.idx_v] += inertia
 
 
 def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]]) -> ArmInfo:
@@ -491,22 +509,26 @@ def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]]
         q_index.extend(range(j.idx_q, j.idx_q + j.nq))
         v_index.extend(range(j.idx_v, j.idx_v + j.nv))
     motor_of = dict(motors)
-    elastic = np.zeros(0, dtype=int) if la.elasticity is None else la.elasticity.joints
+    el = la.elasticity
+    elastic = np.zeros(0, dtype=int) if el is None else el.joints[np.isfinite(el.stiffness)]
     motor_joints = [model.joints[motor_of[joint_names[k]]] for k in elastic]
     drive = np.array(v_index, dtype=int)
     drive[elastic] = [j.idx_v for j in motor_joints]
+    damping = np.array(la.damping, dtype=float)
+    if el is not None:  # a rigid transmission's motor friction acts on its joint
+        damping[el.joints[np.isinf(el.stiffness)]] += el.motor_damping[np.isinf(el.stiffness)]
     return ArmInfo(
         name=la.spec.name,
         joint_names=joint_names,
         q_index=_frozen(np.array(q_index, dtype=int)),
         v_index=_frozen(np.array(v_index, dtype=int)),
         tip_frame=int(model.getFrameId(la.tip_frame)),
-        damping=_frozen(np.array(la.damping, dtype=float)),
+        damping=_frozen(damping),
         drive_index=_frozen(drive),
         elastic=_frozen(np.array(elastic, dtype=int)),
         motor_q_index=_frozen(np.array([j.idx_q for j in motor_joints], dtype=int)),
         motor_v_index=_frozen(np.array([j.idx_v for j in motor_joints], dtype=int)),
-        motor_damping=_frozen(np.zeros(0) if la.elasticity is None else la.elasticity.motor_damping.copy()),
+        motor_damping=_frozen(np.zeros(0) if el is None else el.motor_damping[np.isfinite(el.stiffness)].copy()),
     )
 
 
@@ -516,8 +538,10 @@ def _joint_springs(model: pin.Model, arms: Sequence[ArmInfo], loaded: Sequence[L
     for info, la in zip(arms, loaded, strict=True):
         if la.elasticity is None:
             continue
+        finite = np.isfinite(la.elasticity.stiffness)
+        stiffness, damping = la.elasticity.stiffness[finite], la.elasticity.damping[finite]
         for k, motor_q, motor_v, K, D in zip(
-            info.elastic, info.motor_q_index, info.motor_v_index, la.elasticity.stiffness, la.elasticity.damping, strict=True
+            info.elastic, info.motor_q_index, info.motor_v_index, stiffness, damping, strict=True
         ):
             link = model.joints[model.getJointId(info.joint_names[k])]
             rows.append((link.idx_q, link.idx_v, motor_q, motor_v, K, D, bool(continuous(link))))

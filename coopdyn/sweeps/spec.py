@@ -54,34 +54,44 @@ class Spec:
 
 def put(doc: dict[str, Any], name: str, value: Any) -> None:
     """Set the scene-file value named ``"table.key"`` (or ``"table.N.key"`` / ``"table.key"`` in
-    every entry of an array of tables) in the TOML document ``doc``."""
+    every entry of an array of tables; a key of a sub-table as ``"arms.elasticity.stiffness"`` or
+    ``"arms.N.elasticity.stiffness"``) in the TOML document ``doc``."""
     parts = name.split(".")
-    if len(parts) not in (2, 3) or parts[0] not in SETTABLE:
+    if not 2 <= len(parts) <= 4 or parts[0] not in SETTABLE:
         raise SweepError(
-            f"{name!r}: a swept value is named 'table.key' (or 'table.N.key' in [[arms]] / [[interconnections]]), "
-            f"table one of {list(SETTABLE)}"
+            f"{name!r}: a swept value is named 'table.key' (or 'table.N.key' in [[arms]] / [[interconnections]], "
+            f"'arms.elasticity.stiffness' in a sub-table), table one of {list(SETTABLE)}"
         )
-    table, key = parts[0], parts[-1]
+    table, rest = parts[0], parts[1:]
     if table not in doc:
-        raise SweepError(f"{name!r}: the file has no [{table}] table to set {key!r} in")
+        raise SweepError(f"{name!r}: the file has no [{table}] table to set {rest[-1]!r} in")
     target = doc[table]
+    numbered = rest[0].lstrip("-").isdigit() and len(rest) > 1
     if isinstance(target, list):
-        if len(parts) == 3:
+        if numbered:
             try:
-                index = int(parts[1])
+                index = int(rest[0])
                 if index < 0:
                     raise IndexError
                 entries = [target[index]]
             except (ValueError, IndexError):
-                raise SweepError(f"{name!r}: [[{table}]] has entries 0..{len(target) - 1}, not {parts[1]!r}") from None
+                raise SweepError(f"{name!r}: [[{table}]] has entries 0..{len(target) - 1}, not {rest[0]!r}") from None
+            rest = rest[1:]
         else:
             entries = target
-    elif len(parts) == 3:
-        raise SweepError(f"{name!r}: [{table}] is one table, not an array of tables: write '{table}.{key}'")
+    elif numbered:
+        raise SweepError(f"{name!r}: [{table}] is one table, not an array of tables: write '{table}.{'.'.join(rest[1:])}'")
     else:
         entries = [target]
+    if len(rest) > 2:
+        raise SweepError(f"{name!r}: a swept value is a key of a table or of one of its sub-tables, not deeper")
     for entry in entries:
-        entry[key] = value
+        if len(rest) == 2:
+            sub = entry.get(rest[0])
+            if not isinstance(sub, dict):
+                raise SweepError(f"{name!r}: a [{table}] entry has no {rest[0]!r} table to set {rest[1]!r} in")
+            entry = sub
+        entry[rest[-1]] = value
 
 
 @dataclass

@@ -144,9 +144,9 @@ def cooperative_figure(result: Result, reference: Any = None, path: str | os.Pat
     v_names = result.scene.coordinates()[1]
     for a, arm in enumerate(result.scene.arms):
         c = ARM_COLOURS[a % len(ARM_COLOURS)]
-        for j, index in enumerate(arm.v_index):
-            column = int(np.flatnonzero(result.scene.actuated == index)[0])
-            joint = v_names[index].split(" [")[0]
+        for j, drive in enumerate(arm.drive_index):
+            column = int(np.flatnonzero(result.scene.actuated == drive)[0])  # (an elastic joint's: its motor's)
+            joint = v_names[drive].split(" [")[0]
             axes[3].plot(t, result.tau[:, column], linestyle=JOINT_STYLES[j % len(JOINT_STYLES)], color=c, lw=1, label=joint)
     units = {v_names[i].rsplit("[", 1)[-1] for i in result.scene.actuated}
     what = {"rad/s]": "torque [N·m]", "m/s]": "force [N]"}.get(units.pop(), "") if len(units) == 1 else "torque [N·m], force [N]"
