@@ -54,8 +54,8 @@ import pinocchio as pin
 
 from ._optional import require
 from .dynamics import backend as _backend
-from .errors import KernelError, SceneError, SimulationError
-from .model.scene import Scene
+from .errors import KernelError, SimulationError
+from .model.scene import MOTOR_SUFFIX, Scene
 
 __all__ = ["Callbacks", "mjcf"]
 
@@ -82,14 +82,18 @@ def _rotation(w: float, x: float, y: float, z: float) -> np.ndarray:
 def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> str:
     """MJCF of the scene's kinematic tree: one body per Pinocchio joint, named after it, with its
     placement, axis and inertia (Pinocchio has merged fixed links into their joints' bodies);
-    gravity; joint damping; one motor per actuated joint (gear 1, unlimited). No geometry:
-    collisions are off, as in coopdyn. ``integrator``: a MuJoCo integrator name; ``dt`` [s]."""
+    gravity; joint damping and armature; one motor per actuated joint (gear 1, unlimited). An
+    elastic joint (:class:`coopdyn.JointElasticity`) is two hinges: its motor's on the world,
+    carrying the rotor inertia B as armature, and the link's, joined by a fixed tendon θ − q with
+    the transmission's stiffness K and damping D — Spong's reduced model, as coopdyn's. No
+    geometry: collisions are off, as in coopdyn. ``integrator``: a MuJoCo integrator name;
+    ``dt`` [s]."""
     model = scene.model
-    if scene.joint_springs.size:
-        raise SceneError("coopdyn.mujoco: this scene has elastic joints, which the MJCF export does not model yet")
     joint_damping = np.zeros(model.nv)
     for arm in scene.arms:
         joint_damping[arm.v_index] = arm.damping
+        joint_damping[arm.motor_v_index] = arm.motor_damping
+    motors = {int(model.joints[j].idx_v): j for j in range(1, model.njoints) if model.names[j].endswith(MOTOR_SUFFIX)}
     children: dict[int, list[int]] = {}
     for j in range(1, model.njoints):
         children.setdefault(model.parents[j], []).append(j)
@@ -99,13 +103,19 @@ def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> st
         M, I = model.jointPlacements[j], model.inertias[j]
         mass = max(float(I.mass), 1e-9)
         Ic = I.inertia if I.mass > 0 else np.eye(3) * 1e-9
+        armature = float(model.armature[model.joints[j].idx_v]) if model.joints[j].nv == 1 else 0.0
+        if model.joints[j].idx_v in motors:  # a motor: its rotor inertia B as the hinge's armature (less the 1e-9 stand-in)
+            armature += float(I.inertia[2, 2]) - 1e-9
         full = " ".join(repr(float(x)) for x in (Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2]))
         if kind == "FreeFlyer":
             joint = f'<freejoint name="{name}"/>'
         elif kind in _AXES:
             jtype = "hinge" if kind.startswith("R") else "slide"
             damping = float(joint_damping[model.joints[j].idx_v])
-            joint = f'<joint name="{name}" type="{jtype}" axis="{_AXES[kind]}" damping="{damping!r}" limited="false"/>'
+            joint = (
+                f'<joint name="{name}" type="{jtype}" axis="{_AXES[kind]}" damping="{damping!r}" armature="{armature!r}" '
+                'limited="false"/>'
+            )
         else:
             raise SimulationError(f"coopdyn.mujoco takes revolute, prismatic and free-flyer joints; {name!r} is {kind}")
         pos = " ".join(repr(float(x)) for x in M.translation)
@@ -117,8 +127,15 @@ def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> st
         )
 
     g = " ".join(repr(float(x)) for x in scene.gravity)
+    springs = scene.joint_springs
+    tendons = "".join(
+        f'    <fixed name="{model.names[motors[int(mv)]]}.spring" stiffness="{float(K)!r}" damping="{float(D)!r}" '
+        f'springlength="0">\n      <joint joint="{model.names[motors[int(mv)]]}" coef="1"/>\n'
+        f'      <joint joint="{model.names[motors[int(mv)]].removesuffix(MOTOR_SUFFIX)}" coef="-1"/>\n    </fixed>\n'
+        for mv, K, D in zip(springs.motor_v, springs.stiffness, springs.damping, strict=True)
+    )
     actuated = set(scene.actuated.tolist())
-    motors = "".join(
+    actuators = "".join(
         f'    <motor joint="{model.names[j]}" ctrllimited="false"/>\n'
         for j in range(1, model.njoints)
         if model.joints[j].idx_v in actuated
@@ -127,7 +144,9 @@ def mjcf(scene: Scene, integrator: str = "implicitfast", dt: float = 1e-3) -> st
         f'<mujoco model="coopdyn">\n  <option timestep="{dt!r}" integrator="{integrator}" gravity="{g}">\n'
         '    <flag contact="disable"/>\n  </option>\n  <worldbody>\n'
         + "".join(body(c, "    ") for c in children.get(0, []))
-        + f"  </worldbody>\n  <actuator>\n{motors}  </actuator>\n</mujoco>\n"
+        + "  </worldbody>\n"
+        + (f"  <tendon>\n{tendons}  </tendon>\n" if tendons else "")
+        + f"  <actuator>\n{actuators}  </actuator>\n</mujoco>\n"
     )
 
 

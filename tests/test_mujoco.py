@@ -199,3 +199,23 @@ def test_the_documented_example_runs() -> None:
     with contextlib.redirect_stdout(out):
         exec(compile(code, "docs/mujoco.md", "exec"), {})
     assert out.getvalue().startswith("1000 law evaluations; object at")
+
+
+@pytest.mark.parametrize("controller", ["none", "motor_pd", "grip_lift_oscillate"])
+def test_elastic_joints_are_two_hinges_and_a_tendon_with_coopdyns_accelerations(controller: str) -> None:
+    """An elastic joint in MuJoCo: the motor's hinge on the world with the rotor inertia as
+    armature, a fixed tendon θ − q with K and D to the link's hinge; q̈ equals coopdyn's at random
+    states, without a controller, under MotorPD and under the grip-lift-oscillate task."""
+    from coopdyn.control import MotorPD
+
+    base = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    el = cd.JointElasticity(stiffness=1e4, motor_inertia=0.5, damping=5.0, motor_damping=0.2)
+    scene = cd.Scene([a.replace(elasticity=el) for a in base.arm_specs], base.object, base.interconnection_specs)
+    ctrl = {
+        "none": None,
+        "motor_pd": MotorPD(scene),
+        "grip_lift_oscillate": ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), squeeze=20.0)),
+    }[controller]
+    model = mujoco.MjModel.from_xml_string(mjcf(scene, "RK4", 1e-3))
+    assert model.ntendon == 14
+    assert Callbacks(scene, model, ctrl).check(n=5) < 1e-12
