@@ -102,6 +102,18 @@ public:
     tau_full_.setZero(nv);
     K_t_.setZero(nv, nv);
     D_t_.setZero(nv, nv);
+    // The elastic joints' motors: no element's Jacobian reaches them (they hang on the world, no
+    // frame of an interconnection is theirs), their block of M is diagonal, and only their
+    // springs couple them to the links — the step matrix eliminates them in O(m) (factor()).
+    std::vector<bool> motor(nv, false);
+    for (const auto & sp : springs_.springs) motor[sp.motor_v] = true;
+    for (Eigen::Index i = 0; i < nv; ++i)
+      if (!motor[i]) {
+        position_.push_back(static_cast<Eigen::Index>(links_active_.size()));
+        links_active_.push_back(i);
+      } else
+        position_.push_back(-1);
+    eliminate_ = !springs_.empty();
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
@@ -207,7 +219,7 @@ public:
   // k_v, k_q of the last factor() (see solve()).
   void solve_into(const VectorXd & f_q, const VectorXd & Mf_v, VectorXd & k_q, VectorXd & k_v) {
     rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
-    k_v = llt_.solve(rhs_);
+    step_solve(rhs_, k_v);
     k_q = f_q + gh_ * k_v;
   }
   // After kinematics(q, v, true).
@@ -217,7 +229,8 @@ public:
     implicit_parts(q, v, tau, nullptr);
     factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
-    v_new = v + h * llt_.solve(rhs_);
+    step_solve(rhs_, x_);
+    v_new = v + h * x_;
   }
   // Kinetic + gravity + elastic energy at (q, v) [J], as Dynamics.energy.
   double total_energy(const VectorXd & q, const VectorXd & v, double * motion = nullptr) {
@@ -258,6 +271,29 @@ public:
       factored_ = false;
       throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
     }
+    eliminated_ = eliminate_ && motors_decoupled();
+    if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
+      const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
+      S_a_.resize(na, na);
+      for (Eigen::Index c = 0; c < na; ++c)
+        for (Eigen::Index r = c; r < na; ++r) S_a_(r, c) = S_(links_active_[r], links_active_[c]);
+      for (const auto & sp : springs_.springs) {
+        const double d = S_(sp.motor_v, sp.motor_v);
+        if (!(d > 0.0)) {
+          factored_ = false;
+          throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+        }
+        const Eigen::Index l = position_[sp.link_v];
+        S_a_(l, l) -= S_(sp.link_v, sp.motor_v) * S_(sp.motor_v, sp.link_v) / d;
+      }
+      llt_a_.compute(S_a_);
+      if (llt_a_.info() != Eigen::Success) {
+        factored_ = false;
+        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+      }
+      factored_ = true;
+      return;
+    }
     llt_.compute(S_);  // reads the lower triangle
     if (llt_.info() != Eigen::Success) {
       factored_ = false;
@@ -266,13 +302,33 @@ public:
     factored_ = true;
   }
 
+  // x = S⁻¹ b with the last factor(): the full Cholesky factor, or (motors eliminated) the
+  // links' Schur complement then each motor from its own row.
+  void step_solve(const VectorXd & b, VectorXd & x) {
+    if (!eliminated_) {
+      x = llt_.solve(b);
+      return;
+    }
+    const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
+    b_a_.resize(na);
+    for (Eigen::Index c = 0; c < na; ++c) b_a_[c] = b[links_active_[c]];
+    for (const auto & sp : springs_.springs)
+      b_a_[position_[sp.link_v]] -= S_(sp.link_v, sp.motor_v) * b[sp.motor_v] / S_(sp.motor_v, sp.motor_v);
+    llt_a_.solveInPlace(b_a_);
+    x.resize(b.size());
+    for (Eigen::Index c = 0; c < na; ++c) x[links_active_[c]] = b_a_[c];
+    for (const auto & sp : springs_.springs)
+      x[sp.motor_v] = (b[sp.motor_v] - S_(sp.motor_v, sp.link_v) * x[sp.link_v]) / S_(sp.motor_v, sp.motor_v);
+  }
+
   // (k_q, k_v) of (I − γhJ) k = (f_q, f_v), given M f_v: S k_v = M f_v − γh K̃ f_q, k_q = f_q + γh k_v.
   bp::tuple solve(const RefVec & f_q, const RefVec & Mf_v) {
     if (!factored_) throw std::logic_error("solve before a successful factor");
     check_size(f_q, model_.nv, "f_q");
     check_size(Mf_v, model_.nv, "Mf_v");
     rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
-    const VectorXd k_v = llt_.solve(rhs_);
+    VectorXd k_v;
+    step_solve(rhs_, k_v);
     return bp::make_tuple(VectorXd(f_q + gh_ * k_v), k_v);
   }
 
@@ -285,7 +341,8 @@ public:
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
-    return v + h * llt_.solve(rhs_);
+    step_solve(rhs_, x_);
+    return v + h * x_;
   }
 
   // ½ eᵀ K e of each link (n_links,) [J] at the frame placements of the last kinematics pass.
@@ -590,7 +647,17 @@ private:
       Q_.noalias() += J_G_.transpose() * ev_.f;
       p_diss += ev_.power;
       watch_rotation(i);
-      if (matrices) {
+      if (matrices && eliminate_) {  // Jr is zero in the motors' columns: the products over the others
+        const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
+        Ja_.resize(6, na);
+        for (Eigen::Index c = 0; c < na; ++c) Ja_.col(c) = J_G_.col(links_active_[c]);
+        SJa_ = ev_.SK.lazyProduct(Ja_);
+        add_active(Ja_.transpose().lazyProduct(SJa_), K_t_);
+        if (lk.element->damped()) {
+          SJa_ = ev_.SD.lazyProduct(Ja_);
+          add_active(Ja_.transpose().lazyProduct(SJa_), D_t_);
+        }
+      } else if (matrices) {
         SJ_ = ev_.SK.lazyProduct(J_G_);
         K_t_ += J_G_.transpose().lazyProduct(SJ_);
         if (lk.element->damped()) {
@@ -706,6 +773,30 @@ private:
   double gh_ = 0.0;
   bool factored_ = false;
   Eigen::LLT<MatrixXd> llt_;
+  // the motors' elimination (factor()): the v indices that are not motors, each one's place among
+  // them (−1 for a motor), whether the scene has motors and whether the last factor() used it
+  std::vector<Eigen::Index> links_active_, position_;
+  bool eliminate_ = false, eliminated_ = false;
+  MatrixXd S_a_;
+  Eigen::LLT<MatrixXd> llt_a_;
+  VectorXd b_a_, x_;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> Ja_, SJa_;
+
+  // Whether every motor's row of S_ holds only its diagonal and its link (what the elimination
+  // takes; true by construction — checked, not assumed).
+  bool motors_decoupled() const {
+    for (const auto & sp : springs_.springs)
+      for (Eigen::Index j = 0; j < S_.cols(); ++j)
+        if (j != sp.motor_v && j != sp.link_v && (S_(sp.motor_v, j) != 0.0 || S_(j, sp.motor_v) != 0.0)) return false;
+    return true;
+  }
+  // out(active, active) += A (na × na).
+  template <class Block>
+  void add_active(const Block & A, MatrixXd & out) const {
+    const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
+    for (Eigen::Index c = 0; c < na; ++c)
+      for (Eigen::Index r = 0; r < na; ++r) out(links_active_[r], links_active_[c]) += A(r, c);
+  }
 };
 
 }  // namespace coopdyn_native
