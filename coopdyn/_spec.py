@@ -137,7 +137,7 @@ class MotorPDSpec(ControllerSpec):
     g_d: np.ndarray  #: (n_actuated,) g(q_d), the arms' gravity at the target [N·m or N]
     online: bool  #: the gravity term at θ̄ = θ − K⁻¹ g(q_d) (else the constant g_d)
     arm_joints: np.ndarray  #: (n_actuated,) int32: each arm joint's v index (link side)
-    #: (m, 6) rows of (link q, link v, motor q, continuous, K⁻¹ g(q_d), 0) of the elastic joints
+    #: (m, 5) rows of (link q, link v, motor q, continuous, K⁻¹ g(q_d)) of the elastic joints
     elastic: np.ndarray
 
 

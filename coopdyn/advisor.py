@@ -195,7 +195,8 @@ def advise_model(scene: Scene, bandwidth: float = 15.0, dt: float = 1e-3, measur
     models = {"rigid": rigid, "quasi-static": qs, "elastic": scene}
     if object_hz is None:
         models.pop("elastic")  # a rigid object's elastic system is its massless grasps: quasi-static already
-    modes = {"rigid": np.zeros(0), "quasi-static": grasp}  # computed above; the elastic model's only if it is run
+    # computed above; the elastic model's only if it is run; the rigid limit's: its elastic joints' (it keeps them)
+    modes = {"rigid": _joint_modes(rigid) if rigid.joint_springs.size else np.zeros(0), "quasi-static": grasp}
     joint_hz, joints = None, None
     if scene.joint_springs.size:
         w = _joint_modes(scene)

@@ -235,14 +235,14 @@ class System:
 
     def _record(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> None:
         """Keep the torque and the net power of the state just evaluated."""
-        record = (q, v, self._net_power(v, tau, w), tau)
+        record = (q, v, self._net_power(q, v, tau, w), tau)
         if self._first is None:
             self._first = record
         self._last = record
 
-    def _net_power(self, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> float:
-        """``τ·q̇ + external − dissipation`` [W] at the state of the last dynamics evaluation."""
-        p_ext = 0.0 if w is None else self._object_power(w)
+    def _net_power(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, w: np.ndarray | None) -> float:
+        """``τ·q̇ + external − dissipation`` [W] at the state (q, v) of the last dynamics evaluation."""
+        p_ext = 0.0 if w is None else self._object_power(q, v, w)
         return p_ext + float(tau @ v[self._act]) - self.dynamics.last_dissipation
 
     def _recorded(self, q: np.ndarray, v: np.ndarray) -> _Record | None:
@@ -291,7 +291,7 @@ class System:
             return record[2]
         tau, w = self._inputs(t, q, v)
         self.dynamics.acceleration(q, v, tau, w)
-        return self._net_power(v, tau, w)
+        return self._net_power(q, v, tau, w)
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
@@ -346,11 +346,12 @@ class System:
             self.dynamics.add_joint_gains(K, D, *self._own_gains)
         return M, K, D
 
-    def _object_power(self, wrench: np.ndarray) -> float:
-        """Power [W] of a world-aligned wrench at the object origin, at the last evaluated state."""
-        V = pin.getFrameVelocity(
-            self._model, self.dynamics.data, self._scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        ).vector
+    def _object_power(self, q: np.ndarray, v: np.ndarray, wrench: np.ndarray) -> float:
+        """Power [W] of a world-aligned wrench at the object origin at (q, v) (its own kinematics
+        pass: the compiled kernel keeps its kinematics in data of its own)."""
+        data = self.dynamics.data
+        pin.forwardKinematics(self._model, data, q, v)
+        V = pin.getFrameVelocity(self._model, data, self._scene.object_frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).vector
         return float(wrench @ V)
 
     def integrate(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:

@@ -1,20 +1,8 @@
-"""The demo's task on arms with elastic joints: two Pandas grip, lift and oscillate the 2 kg box,
-once with rigid joints and once with an elastic transmission in every joint.
+"""The demo's task on rigid and on elastic joints: two Pandas grip, lift and oscillate the box.
 
-The transmissions (`coopdyn.JointElasticity`, docs/physics.md "Elastic joints"): K = 1e4 N·m/rad
-on the joint's side, a motor inertia reflected to the joint of B = 0.5 kg·m² (for instance a
-5e-5 kg·m² rotor behind a 100:1 gear), transmission damping D = 5 N·m·s/rad. These are assumed
-values of the order of a lightweight arm's harmonic drives, not an identification of the Panda.
-The same `ObjectImpedance` law runs on both: on the elastic arms its joint torques go to the
-motors with Spong's fast damping term `K_v (q̇ − θ̇)` (`transmission_damping`). The elastic arms
-track less closely: the motors' inertia B adds to every joint's and the law, written for the
-links, does not compensate it.
-
-Writes `elastic_joints.png` (link vs motor angle of the left arm's joint 4, every left joint's
-deflection, the squeeze and the tracking error with and without joint elasticity) and `elastic_joints.html` (meshcat);
-prints each run's figures.
-
-    python examples/elastic_joints.py [OUT_FOLDER]
+Every joint gets K = 1e4 N·m/rad, B = 0.5 kg·m² reflected, D = 5 N·m·s/rad (assumed values of the
+order of a lightweight arm's harmonic drives, not a Panda identification). Prints both runs'
+figures; writes elastic_joints.png and .html.  Run: python examples/elastic_joints.py [OUT_FOLDER]
 """
 
 from __future__ import annotations

@@ -107,7 +107,7 @@ def test_static_deflection_at_rest() -> None:
         # the motors need τ_m = K(θ − q) = g(q) to stay: without it they accelerate by −g/B
         np.testing.assert_allclose(a[arm.motor_v_index], -g / 0.1, rtol=1e-10)
         a = cd.Dynamics(scene, backend).acceleration(scene.q0, scene.v0, g)
-        assert np.abs(a[: scene.arms[0].motor_v_index[-1] + 1]).max() < 1e-11
+        assert np.abs(a[np.r_[arm.v_index, arm.motor_v_index]]).max() < 1e-11
 
 
 def test_stiff_joints_converge_to_the_rigid_arm_with_armature_at_order_one_over_k() -> None:
@@ -256,22 +256,121 @@ def test_rigid_joint_controllers_refuse_elastic_arms() -> None:
             make()
 
 
-def test_bad_elasticity_is_refused_by_name() -> None:
-    cases = [
-        (cd.JointElasticity(-1.0, 0.1), "stiffness must be > 0"),
-        (cd.JointElasticity(1000.0, 0.0), "motor_inertia must be > 0"),
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        (cd.JointElasticity(-1.0, 0.1), r"stiffness must be > 0 \[N·m/rad\]"),
+        (cd.JointElasticity(1000.0, 0.0), r"motor_inertia must be > 0 \[kg·m²\]"),
         (cd.JointElasticity([1.0, 2.0], 0.1), "stiffness must be a scalar or have 3 entries"),
         (cd.JointElasticity(1000.0, 0.1, damping=-1), "damping must be >= 0"),
         (cd.JointElasticity(1000.0, 0.1, joints=["joint9"]), "names 'joint9'.*Joints"),
         (cd.JointElasticity(1000.0, 0.1, joints=["joint1", "joint1"]), "twice"),
         (cd.JointElasticity(1000.0, 0.1, gear_ratio=0.5), "gear_ratio"),
-        (cd.JointElasticity(float("nan"), 0.1), "stiffness"),
-    ]
-    for spec, message in cases:
-        with pytest.raises(SceneError, match=message):
-            free_arm_scene(spec)
-    with pytest.raises(SceneError, match=r"must be a coopdyn\.JointElasticity"):
-        free_arm_scene({"stiffness": 1.0})  # type: ignore[arg-type]
+        (cd.JointElasticity(float("nan"), 0.1), r"stiffness \[N·m/rad\] must be finite"),
+        (cd.JointElasticity(True, 0.1), "stiffness .*must be numeric"),  # type: ignore[arg-type]
+        (cd.JointElasticity("stiff", 0.1), "stiffness"),  # type: ignore[arg-type]
+        ({"stiffness": 1.0}, r"must be a coopdyn\.JointElasticity"),
+    ],
+)
+def test_bad_elasticity_is_refused_by_name(spec: object, message: str) -> None:
+    with pytest.raises(SceneError, match=message):
+        free_arm_scene(spec)  # type: ignore[arg-type]
+
+
+def test_a_locked_joint_cannot_be_elastic_and_a_slider_s_units_are_linear() -> None:
+    with pytest.raises(SceneError, match="'joint3', a locked joint"):
+        free_arm_scene(cd.JointElasticity(1e3, 0.1, joints=["joint3"]), locked=("joint3",))
+    slider = cd.Arm("s", str(PLANAR.replace("planar_3r", "slider_z")), tip_frame="tip", elasticity=cd.JointElasticity(-1.0, 1.0))
+    with pytest.raises(SceneError, match=r"stiffness must be > 0 \[N/m\]"):
+        cd.Scene([slider], cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[1, 0, 0]), [cd.Interconnection(None, stiffness=1e3)])
+
+
+def test_values_pair_with_the_joints_as_named() -> None:
+    scene = free_arm_scene(cd.JointElasticity([4000.0, 800.0], [0.1, 0.2], joints=["joint3", "joint1"]))
+    springs, arm = scene.joint_springs, scene.arms[0]
+    assert springs.link_v.tolist() == [arm.v_index[0], arm.v_index[2]]  # (kept in the arm's joint order)
+    assert springs.stiffness.tolist() == [800.0, 4000.0]
+    M = pin.crba(scene.model, scene.model.createData(), scene.q0)
+    assert M[springs.motor_v[0], springs.motor_v[0]] == pytest.approx(0.2)
+
+
+PLANAR_BASE = """<?xml version="1.0"?>
+<robot name="planar_base">
+  <link name="base"/>
+  <link name="cart"><inertial><mass value="2.0"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/></inertial></link>
+  <joint name="plane" type="planar"><parent link="base"/><child link="cart"/><axis xyz="0 0 1"/></joint>
+  <link name="arm"><inertial><origin xyz="0.25 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/></inertial></link>
+  <joint name="elbow" type="revolute"><parent link="cart"/><child link="arm"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="100" velocity="10"/></joint>
+  <link name="tip"/>
+  <joint name="tip_joint" type="fixed"><parent link="arm"/><child link="tip"/><origin xyz="0.5 0 0"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+def test_an_elastic_joint_after_a_multi_dof_joint(tmp_path: Path, backend: str) -> None:
+    """A planar joint (3 velocities) then an elastic elbow: the elbow's torque goes to its motor,
+    the planar joint keeps its three entries, and the backends and loops agree."""
+    urdf = tmp_path / "planar_base.urdf"
+    urdf.write_text(PLANAR_BASE)
+    arm = cd.Arm("a", str(urdf), tip_frame="tip", elasticity=cd.JointElasticity(1000.0, 0.1, joints=["elbow"]))
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[0.5, 0.0, 0.0])
+    scene = cd.Scene([arm], box, [cd.Interconnection("a", stiffness=cd.diagonal(1e4, 1e2))], gravity=(0, 0, 0))
+    info = scene.arms[0]
+    assert info.elastic.tolist() == [3] and scene.actuated.tolist() == [0, 1, 2, int(info.motor_v_index[0])]
+    assert scene.joint_springs.link_v.tolist() == [3]
+    rng = np.random.default_rng(1)
+    q = pin.integrate(scene.model, scene.q0, 0.1 * rng.standard_normal(scene.nv))
+    v, tau = rng.standard_normal(scene.nv), rng.standard_normal(scene.n_actuated)
+    reference = cd.Dynamics(scene, "python").acceleration(q, v, tau)
+    np.testing.assert_allclose(cd.Dynamics(scene, backend).acceleration(q, v, tau), reference, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("robot", ["kinova", "ur5"])
+def test_continuous_and_revolute_arms_agree_on_both_backends(robot: str) -> None:
+    """The Kinova's continuous joints (q a (cos, sin) pair, the deflection by atan2) and the UR5's
+    revolute ones: the native kernel equals the Python reference, and the derivatives match
+    finite differences."""
+    arm = cd.Arm("a", robot, elasticity=cd.JointElasticity(3e3, 0.2, damping=1.0))
+    tip = cd.scenes.facing_arms(robot).arm_specs[0]
+    arm = arm.replace(q0=tip.q0, base=tip.base)
+    obj = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[2.0, 0.0, 0.5])
+    scene = cd.Scene([arm], obj, [cd.Interconnection(None, stiffness=1e3)])
+    if robot == "kinova":
+        assert scene.joint_springs.continuous.any()
+    rng = np.random.default_rng(4)
+    q = pin.integrate(scene.model, scene.q0, 0.1 * rng.standard_normal(scene.nv))
+    v, tau = rng.standard_normal(scene.nv), rng.standard_normal(scene.n_actuated)
+    py, nat = cd.Dynamics(scene, "python"), cd.Dynamics(scene, "native")
+    np.testing.assert_allclose(nat.acceleration(q, v, tau), py.acceleration(q, v, tau), rtol=1e-9, atol=1e-9)
+    d = nat.derivatives(q, v, tau)
+    eps = 1e-6
+    fd = np.array(
+        [
+            (
+                py.acceleration(pin.integrate(scene.model, q, eps * e), v, tau)
+                - py.acceleration(pin.integrate(scene.model, q, -eps * e), v, tau)
+            )
+            / (2 * eps)
+            for e in np.eye(scene.nv)
+        ]
+    ).T
+    np.testing.assert_allclose(d.da_dq, fd, rtol=1e-5, atol=1e-4 * np.abs(fd).max())
+
+
+def test_the_book_with_elastic_sliders_stays_linear() -> None:
+    """Motors are rotors on the world about a fixed axis: the book's prismatic system with
+    elastic sliders is still linear (its exact discretisation applies)."""
+    book = cd.scenes.linear_book()
+    arms = [a.replace(elasticity=cd.JointElasticity(5e4, 2.0)) for a in book.arm_specs]
+    scene = cd.Scene(arms, book.object, book.interconnection_specs, gravity=book.gravity)
+    assert scene.nonlinearity() is None
+    run = cd.simulate(scene, 0.05, None, "exponential", dt=1e-3)
+    ref = cd.simulate(scene, 0.05, None, "dopri5", dt=1e-3)
+    assert np.abs(run.q[-1] - ref.q[-1]).max() < 1e-7
 
 
 def test_some_joints_elastic_and_gear_reflection() -> None:
@@ -433,3 +532,38 @@ def test_the_kernel_eliminates_the_motors_from_the_step_matrix_exactly() -> None
     for method in ("implicit_euler", "trapezoid", "generalized_alpha"):
         runs = [cd.simulate(scene, 0.1, pd, method, dt=1e-3, backend=b, energy_check="off") for b in ("native", "python")]
         np.testing.assert_allclose(runs[0].q, runs[1].q, atol=1e-10)
+
+
+def test_a_scene_file_controls_elastic_arms_and_names_a_bad_elasticity_key(tmp_path: Path) -> None:
+    from coopdyn.io.scenefile import SceneFileError, load
+
+    text = (Path(__file__).resolve().parents[1] / "examples" / "scenes" / "two_ur5s_elastic_joints.toml").read_text()
+    text = text.replace('[controller]\ntype = "object_impedance"', '[controller]\ntype = "motor_pd"\n[unused]').split("[unused]")[
+        0
+    ]
+    path = tmp_path / "motor_pd.toml"
+    path.write_text(text + '\n[simulation]\nduration = 0.1\nintegrator = "trapezoid"\n')
+    loaded = load(path)
+    assert isinstance(loaded.controller, MotorPD)
+    bad = tmp_path / "typo.toml"
+    bad.write_text(
+        text.replace("stiffness = 2e4, motor_inertia", "stifness = 2e4, motor_inertia", 1) + "\n[simulation]\nduration = 0.1\n"
+    )
+    with pytest.raises(SceneFileError, match=r"line 16: \[\[arms\]\] #1 elasticity\.stifness: unknown key.*stiffness"):
+        load(bad)
+
+
+def test_what_takes_rigid_joints_only_says_so() -> None:
+    scene = free_arm_scene(None)
+    with pytest.raises(SceneError, match="transmission_damping is for arms with elastic joints"):
+        ObjectImpedance(cd.scenes.facing_arms("panda"), transmission_damping=5.0)
+    with pytest.raises(SceneError, match="one value per elastic joint"):
+        ObjectImpedance(elastic_pandas(), transmission_damping=[1.0, 2.0])
+    from coopdyn.bench.drake_scene import DrakeScene
+    from coopdyn.bench.exudyn_scene import ExudynScene
+
+    elastic = free_arm_scene(cd.JointElasticity(1e3, 0.1))
+    for peer in (DrakeScene, ExudynScene):
+        with pytest.raises(cd.errors.SimulationError, match="does not model elastic joints"):
+            peer(elastic, None)
+    assert scene.joint_springs.size == 0

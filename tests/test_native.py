@@ -162,7 +162,14 @@ def test_gravity_and_external_forces_are_right_for_every_joint_kind() -> None:
     model, actuated, tip, grasp, frame = _every_joint_kind_arm()
     K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
     kernel = backend.kernel_module().Kernel(
-        model, model.createData(), [("se3", tip, grasp, {"K": K, "D": D})], np.zeros(model.nv), actuated, frame, np.zeros(0)
+        model,
+        model.createData(),
+        [("se3", tip, grasp, {"K": K, "D": D})],
+        np.zeros(model.nv),
+        actuated,
+        frame,
+        np.zeros(0),
+        model,
     )
     rng, data = np.random.default_rng(1), model.createData()
     for _ in range(10):
@@ -184,7 +191,14 @@ def test_the_articulated_body_pass_is_pinocchios_aba(seed: int) -> None:
     model, actuated, tip, grasp, frame = _every_joint_kind_arm(multi_dof=True)
     K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
     kernel = backend.kernel_module().Kernel(
-        model, model.createData(), [("se3", tip, grasp, {"K": K, "D": D})], np.zeros(model.nv), actuated, frame, np.zeros(0)
+        model,
+        model.createData(),
+        [("se3", tip, grasp, {"K": K, "D": D})],
+        np.zeros(model.nv),
+        actuated,
+        frame,
+        np.zeros(0),
+        model,
     )
     rng, data = np.random.default_rng(seed), model.createData()
     G, T = model.frames[grasp], model.frames[tip]
@@ -213,7 +227,7 @@ def test_gravity_refuses_joints_it_cannot_read() -> None:
     j = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
     model.appendBodyToJoint(j, pin.Inertia.FromSphere(1.0, 0.1), pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3])))
     kernel = backend.kernel_module().Kernel(
-        model, model.createData(), [], np.zeros(3), np.arange(3, dtype=np.int32), 0, np.zeros(0)
+        model, model.createData(), [], np.zeros(3), np.arange(3, dtype=np.int32), 0, np.zeros(0), model
     )
     with pytest.raises(ValueError, match="revolute, prismatic or helical"):
         kernel.gravity(pin.neutral(model))

@@ -61,6 +61,8 @@ class DrakeScene:
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None, time_step: float = 0.0) -> None:
         if not isinstance(scene, Scene):
             raise SimulationError(f"the Drake peer takes a coopdyn.Scene, got {type(scene).__name__}")
+        if scene.joint_springs.size:
+            raise SimulationError("the Drake peer does not model elastic joints (their motors and springs); give rigid arms")
         time_step = _validate.number(time_step, "time_step", "s", SimulationError)
         if time_step < 0:
             raise SimulationError(f"time_step must be >= 0 [s] (0: a continuous plant), got {time_step!r}")

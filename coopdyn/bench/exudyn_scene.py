@@ -39,6 +39,8 @@ class ExudynScene:
     """
 
     def __init__(self, scene: Scene, controller: Callable[..., np.ndarray] | None) -> None:
+        if scene.joint_springs.size:
+            raise SimulationError("the Exudyn peer does not model elastic joints (their motors and springs); give rigid arms")
         exu: Any = require("exudyn", "the Exudyn peer", "exudyn")
         from exudyn.itemInterface import (  # type: ignore[import-not-found,unused-ignore]
             MarkerBodyRigid,

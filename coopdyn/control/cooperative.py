@@ -409,8 +409,10 @@ class ObjectImpedance:
         if value is None:
             inertia = np.diag(pin.crba(self.scene.model, self._data, self.scene.q0))[springs.motor_v]
             kv = 1.4 * np.sqrt(springs.stiffness * inertia)
+        elif not springs.size:
+            raise SceneError("ObjectImpedance: transmission_damping is for arms with elastic joints; this scene has none")
         else:
-            kv = _validate.gain(value, "ObjectImpedance: transmission_damping", springs.size, "N·m·s/rad")
+            kv = _validate.gain(value, "ObjectImpedance: transmission_damping", springs.size, "N·m·s/rad", per="elastic joint")
         entry = [int(np.flatnonzero(arm_joints == link)[0]) for link in springs.link_v]
         return np.column_stack([entry, springs.link_v, springs.motor_v, kv]).reshape(springs.size, 4)
 

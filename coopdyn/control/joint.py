@@ -193,7 +193,7 @@ class MotorPD:
         if scene is not self.scene:
             return None
         s = self._springs
-        elastic = np.column_stack([s.link_q, s.link_v, s.motor_q, s.continuous, self._bias, np.zeros(s.size)])
+        elastic = np.column_stack([s.link_q, s.link_v, s.motor_q, s.continuous, self._bias])
         return MotorPDSpec(
             kp=self.kp.copy(),
             kd=self.kd.copy(),
@@ -201,7 +201,7 @@ class MotorPD:
             g_d=self.g_d.copy(),
             online=self.gravity == "online",
             arm_joints=self._arm_joints.astype(np.int32),
-            elastic=elastic.astype(float).reshape(s.size, 6),
+            elastic=elastic.astype(float).reshape(s.size, 5),
         )
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:

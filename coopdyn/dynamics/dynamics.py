@@ -181,9 +181,10 @@ class Dynamics:
         """Elastic energy of each interconnection (n_links,) [J] (the elastic joints' springs:
         ``scene.joint_springs.energy(q)``)."""
         pin.forwardKinematics(self.model, self.data, q)
-        return self._elastic()
+        return self._elastic(q)
 
-    def _elastic(self) -> np.ndarray:
+    def _elastic(self, q: np.ndarray) -> np.ndarray:
+        """Each interconnection's elastic energy at q, after ``forwardKinematics(model, data, q)``."""
         raise NotImplementedError
 
     @property
@@ -251,7 +252,7 @@ class Dynamics:
         model, data = self.model, self.data
         kinetic = float(pin.computeKineticEnergy(model, data, q, v))  # runs forward kinematics (q, v)
         potential = float(pin.computePotentialEnergy(model, data))
-        return Energy(kinetic, potential, float(np.sum(self._elastic()) + self._springs.energy(q)))
+        return Energy(kinetic, potential, float(np.sum(self._elastic(q)) + self._springs.energy(q)))
 
 
 class PythonDynamics(Dynamics):
@@ -402,7 +403,7 @@ class PythonDynamics(Dynamics):
         V_G = pin.getFrameVelocity(model, data, g_id, LOCAL)
         return element.evaluate(T_M_G, (V_G - T_M_G.actInv(V_T)).vector, jacobians)
 
-    def _elastic(self) -> np.ndarray:
+    def _elastic(self, q: np.ndarray) -> np.ndarray:
         model, data = self.model, self.data
         zero = np.zeros(6)
         out = []

@@ -43,7 +43,16 @@ class NativeDynamics(Dynamics):
         kernel = _backend.kernel_module().Kernel
         springs = scene.joint_springs.native_table()
         self._kernel = self._call(
-            "the scene", kernel, self.model, self.data, links, self._damping, actuated, scene.object_frame, springs
+            "the scene",
+            kernel,
+            self.model,
+            self.data,
+            links,
+            self._damping,
+            actuated,
+            scene.object_frame,
+            springs,
+            scene.link_model,
         )
 
     def _call(self, what: str, method: Any, *args: Any) -> Any:
@@ -144,8 +153,8 @@ class NativeDynamics(Dynamics):
             out.append(ElementEval(energy, e[: lk.element.deformation_size], f, power, S_K, S_D, theta))
         return out
 
-    def _elastic(self) -> np.ndarray:
-        return self._call("elastic_energies()", self._kernel.elastic_energies)
+    def _elastic(self, q: np.ndarray) -> np.ndarray:
+        return self._call("elastic_energies(q)", self._kernel.elastic_energies, q)
 
     def readouts(self, Q: np.ndarray, V: np.ndarray, TAU: np.ndarray | None = None) -> Readouts:
         Q, V = np.asarray(Q, dtype=float), np.asarray(V, dtype=float)

@@ -25,7 +25,7 @@ from typing import Any
 
 from .. import _validate, scenes
 from .._validate import _short
-from ..control import ComputedTorque, GravityCompensationPD
+from ..control import ComputedTorque, GravityCompensationPD, MotorPD
 from ..cooperative import GripLiftOscillate, ObjectImpedance
 from ..errors import CoopdynError, SceneFileError, SimulationError, did_you_mean
 from ..integrators import INTEGRATORS
@@ -49,6 +49,7 @@ CONTROLLERS: dict[str, Any] = {
     "none": None,
     "gravity_pd": GravityCompensationPD,
     "computed_torque": ComputedTorque,
+    "motor_pd": MotorPD,
     "object_impedance": ObjectImpedance,
     "book_drives": "book_drives",
 }
@@ -95,7 +96,8 @@ class _File:
             start = hits[index or 0]
             if key is None:
                 return start + 1
-        pattern = re.compile(rf"^\s*{re.escape(key or '')}\s*=")
+        first = (key or "").split(".")[0]  # ("elasticity.stiffness": the line of an inline table's key)
+        pattern = re.compile(rf"^\s*{re.escape(first)}\s*=")
         for i in range(start + (1 if table else 0), len(self.lines)):
             if table is not None and i > start and re.match(r"^\s*\[", self.lines[i]):
                 break

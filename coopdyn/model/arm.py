@@ -337,7 +337,7 @@ def load_arm(arm: Arm, meshes: str | None = None) -> LoadedArm:
     _check_limits(model, q0, what)
 
     damping = _damping(arm, model, what)
-    elasticity = resolve_elasticity(arm.elasticity, model, what)
+    elasticity = resolve_elasticity(arm.elasticity, model, what, [str(j) for j in locked])
     base = pin.SE3.Identity() if arm.base is None else _validate.se3(arm.base, f"{what}, base")
 
     # Prefix joint and frame names so that several arms merge into one model.

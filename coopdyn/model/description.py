@@ -436,8 +436,15 @@ def _section(value: Any, where: Location) -> Section:
 def _elasticity(value: Any, where: Location) -> JointElasticity:
     if not isinstance(value, Mapping):
         raise DescriptionError(f"must be {KINDS['elasticity']}, got {_validate._short(value)}", where)
-    _keys(value, ELASTICITY, where)
-    return JointElasticity(**_values(value, ELASTICITY, where))
+    for key in value:
+        if key not in ELASTICITY:
+            valid = sorted(ELASTICITY)
+            message = f"unknown key; valid keys: {valid}.{did_you_mean(str(key), valid)}"
+            raise DescriptionError(message, where._replace(key=f"elasticity.{key}"))
+    missing = [k for k, f in ELASTICITY.items() if f.required and k not in value]
+    if missing:
+        raise DescriptionError(f"missing required key(s) {missing}", where)
+    return JointElasticity(**{k: _value(ELASTICITY[k].kind, v, where._replace(key=f"elasticity.{k}")) for k, v in value.items()})
 
 
 def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:

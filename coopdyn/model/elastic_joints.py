@@ -13,7 +13,7 @@ which is exact up to O(1/n) for high gear ratios). The arm's torques act on θ.
 
 In the merged model each motor is one more 1-DOF joint on the world, carrying a body that has
 only the rotor's inertia about its axis (no mass: gravity does not act on it); its coordinates
-sit after every arm's joints and before the object's (docs/physics.md, "Elastic joints").
+sit last, after the object's (docs/physics.md, "Elastic joints").
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ class JointElasticity:
     """The elastic transmissions of an arm (``Arm(..., elasticity=JointElasticity(...))``).
 
     Each numeric field is a scalar (every elastic joint) or one value per elastic joint, in the
-    arm's joint order. For a prismatic joint read N/m for N·m/rad, kg for kg·m², N·s/m for N·m·s/rad.
+    order of ``joints`` (default: the arm's joint order). For a prismatic joint read N/m for
+    N·m/rad, kg for kg·m², N·s/m for N·m·s/rad.
 
     Attributes:
         stiffness: K, the transmission's spring [N·m/rad], > 0; ``math.inf`` makes that joint
@@ -63,28 +64,31 @@ class JointElasticity:
 class ResolvedElasticity:
     """An arm's elasticity checked against its model: one entry per elastic joint."""
 
-    joints: np.ndarray  #: positions of the elastic joints among the arm's joints (its v order)
-    stiffness: np.ndarray  #: K [N·m/rad] (inf: rigid, B as armature)
-    damping: np.ndarray  #: D [N·m·s/rad]
-    inertia: np.ndarray  #: B, reflected [kg·m²]
-    motor_damping: np.ndarray  #: d_m, reflected [N·m·s/rad]
+    joint_ids: np.ndarray  #: (m,) the elastic joints' ids in the arm's model, in its joint order
+    joints: np.ndarray  #: (m,) their velocity indices within the arm (offsets into ``ArmInfo.v_index``)
+    stiffness: np.ndarray  #: (m,) K [N·m/rad or N/m] (inf: rigid, B as armature)
+    damping: np.ndarray  #: (m,) D [N·m·s/rad or N·s/m]
+    inertia: np.ndarray  #: (m,) B, reflected [kg·m² or kg]
+    motor_damping: np.ndarray  #: (m,) d_m, reflected [N·m·s/rad or N·s/m]
 
 
-#: Pinocchio joints a motor can drive through a spring: one coordinate (revolute, prismatic) or
-#: a continuous joint's (cos, sin) pair.
-_ONE_DOF = {
+#: Pinocchio joints a motor can drive through a spring, each mapped to whether it is continuous:
+#: one coordinate (revolute, prismatic: False) or a continuous joint's (cos, sin) pair (True).
+_DRIVABLE = {
     **dict.fromkeys(("RX", "RY", "RZ", "RevoluteUnaligned", "PX", "PY", "PZ", "PrismaticUnaligned"), False),
     **dict.fromkeys(("RUBX", "RUBY", "RUBZ", "RevoluteUnboundedUnaligned"), True),
 }
 
 
 def continuous(joint: pin.JointModel) -> bool | None:
-    """Whether a joint is continuous (q a (cos, sin) pair); None when no motor can drive it."""
-    return _ONE_DOF.get(joint.shortname().removeprefix("JointModel"))
+    """Whether a joint a motor can drive is continuous (q a (cos, sin) pair): True or False; None
+    for a joint no motor drives (a free flyer, a planar joint, …)."""
+    return _DRIVABLE.get(joint.shortname().removeprefix("JointModel"))
 
 
-def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None:
-    """Check an arm's ``elasticity`` against its (reduced, unprefixed) model."""
+def resolve(spec: Any, model: pin.Model, what: str, locked: Sequence[str] = ()) -> ResolvedElasticity | None:
+    """Check an arm's ``elasticity`` against its (reduced, unprefixed) model, whose ``locked``
+    joints were removed."""
     if spec is None:
         return None
     if not isinstance(spec, JointElasticity):
@@ -99,6 +103,8 @@ def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None
             )
         chosen = []
         for name in spec.joints:
+            if name in locked:
+                raise SceneError(f"{what}: elasticity.joints names {name!r}, a locked joint (removed from the model)")
             if name not in names:
                 hint = did_you_mean(name, names) if isinstance(name, str) else ""
                 raise SceneError(
@@ -107,7 +113,6 @@ def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None
             if names.index(name) in chosen:
                 raise SceneError(f"{what}: elasticity.joints names {name!r} twice")
             chosen.append(names.index(name))
-        chosen.sort()
     for k in chosen:
         joint = model.joints[k + 1]
         if continuous(joint) is None or joint.nv != 1:
@@ -116,28 +121,37 @@ def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None
                 "prismatic or continuous joint"
             )
     n = len(chosen)
+    turning = [continuous(model.joints[k + 1]) or model.joints[k + 1].shortname().startswith("JointModelR") for k in chosen]
+    rotary = all(turning)
+    linear = not any(turning)
+
+    def unit(rotational: str, translational: str) -> str:
+        return rotational if rotary else translational if linear else f"{rotational} or {translational}"
 
     def per_joint(value: Any, field: str, unit: str, positive: bool, infinite: bool = False) -> np.ndarray:
+        name = f"{what}, elasticity.{field} [{unit}]"
         rigid: Any = False  # (stiffness: its +inf entries, a rigid joint each)
-        if infinite and not isinstance(value, str | bytes):
+        if infinite and not isinstance(value, str | bytes | bool):
             try:
-                given = np.asarray(value, dtype=float)
-                rigid, value = np.isposinf(given), np.where(np.isposinf(given), 1.0, given)
+                given = np.asarray(value)
+                if given.dtype.kind == "f":  # (text, booleans and the rest: finite_array names what is wrong)
+                    rigid, value = np.isposinf(given), np.where(np.isposinf(given), 1.0, given)
             except (TypeError, ValueError, OverflowError):
-                pass  # (finite_array names what is wrong)
-        x = _validate.finite_array(value, f"{what}, elasticity.{field}")
+                pass
+        x = _validate.finite_array(value, name)
         if x.ndim == 0:
             x, rigid = np.full(n, float(x)), np.full(n, bool(rigid))
         if x.shape != (n,):
             raise SceneError(
-                f"{what}: elasticity.{field} must be a scalar or have {n} entries (one per elastic joint), got shape {x.shape}"
+                f"{what}: elasticity.{field} must be a scalar or have {n} entries (one per elastic joint, in the order of "
+                f"joints), got shape {x.shape}"
             )
         if np.any(x <= 0.0) if positive else np.any(x < 0.0):
             raise SceneError(f"{what}: elasticity.{field} must be {'> 0' if positive else '>= 0'} [{unit}], got {x.tolist()}")
         return np.where(rigid, np.inf, x)
 
-    stiffness = per_joint(spec.stiffness, "stiffness", "N·m/rad", True, infinite=True)
-    inertia = per_joint(spec.motor_inertia, "motor_inertia", "kg·m²", True)
+    stiffness = per_joint(spec.stiffness, "stiffness", unit("N·m/rad", "N/m"), True, infinite=True)
+    inertia = per_joint(spec.motor_inertia, "motor_inertia", unit("kg·m²", "kg"), True)
     ratio = _validate.finite_array(spec.gear_ratio, f"{what}, elasticity.gear_ratio")
     ratio = np.full(n, float(ratio)) if ratio.ndim == 0 else ratio
     if ratio.shape != (n,) or np.any(np.abs(ratio) < 1.0):
@@ -145,12 +159,17 @@ def resolve(spec: Any, model: pin.Model, what: str) -> ResolvedElasticity | None
             f"{what}: elasticity.gear_ratio must be a scalar or one per elastic joint, each |n| >= 1, got {ratio.tolist()}"
         )
     squared = ratio**2
+    damping = per_joint(spec.damping, "damping", unit("N·m·s/rad", "N·s/m"), False)
+    motor_damping = squared * per_joint(spec.motor_damping, "motor_damping", unit("N·m·s/rad", "N·s/m"), False)
+    order = np.argsort(chosen)  # (the values pair with the names as given; kept in the arm's joint order)
+    ids = np.array(chosen, dtype=int)[order] + 1
     return ResolvedElasticity(
-        joints=np.array(chosen, dtype=int),
-        stiffness=stiffness,
-        damping=per_joint(spec.damping, "damping", "N·m·s/rad", False),
-        inertia=squared * inertia,
-        motor_damping=squared * per_joint(spec.motor_damping, "motor_damping", "N·m·s/rad", False),
+        joint_ids=ids,
+        joints=np.array([model.joints[int(j)].idx_v for j in ids], dtype=int),
+        stiffness=stiffness[order],
+        damping=damping[order],
+        inertia=(squared * inertia)[order],
+        motor_damping=motor_damping[order],
     )
 
 

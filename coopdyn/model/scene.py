@@ -37,13 +37,13 @@ class ArmInfo:
     v_index: np.ndarray  #: its coordinates in the scene ``v`` (and torque vector), (nv_arm,)
     tip_frame: int  #: frame id of the tip T
     damping: np.ndarray  #: viscous joint damping, (nv_arm,) [N·m·s/rad or N·s/m]
-    #: where its torques act, (nv_arm,): a rigid joint's own v index, an elastic joint's motor's
-    drive_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))
-    #: positions of its elastic joints among its joints (empty: rigid joints only)
-    elastic: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))
-    motor_q_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))  #: its motors' q
-    motor_v_index: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=int))  #: its motors' v
-    motor_damping: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  #: d_m [N·m·s/rad]
+    #: (nv_arm,) where its torques act: a rigid joint's own v index, an elastic joint's motor's
+    drive_index: np.ndarray
+    #: (m,) its elastic joints (with a motor), as offsets into ``v_index`` (empty: rigid joints only)
+    elastic: np.ndarray
+    motor_q_index: np.ndarray  #: (m,) each motor's first q index in the scene
+    motor_v_index: np.ndarray  #: (m,) each motor's v index in the scene
+    motor_damping: np.ndarray  #: (m,) the motors' viscous friction d_m [N·m·s/rad or N·s/m]
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +122,10 @@ class Scene:
         gravity: gravity acceleration in the world, (3,) [m/s²].
 
     Attributes:
-        model: the merged ``pin.Model`` (arms in order, then the object's root joint).
+        model: the merged ``pin.Model`` (arms in order, then the object's root joint — a beam's
+            nodes —, then the elastic joints' motors, if any).
+        link_model: ``model`` without the motors (the same as ``model`` for rigid joints): its
+            joints, frames and coordinates are the head of ``model``'s.
         arms: one :class:`ArmInfo` per arm. ``links``: one :class:`Link` per interconnection.
         elements: the links, then the object's own elements (a :class:`~coopdyn.model.beam.Beam`'s
             beam elements; none for a rigid object): everything the dynamics evaluate.
@@ -143,6 +146,7 @@ class Scene:
     """
 
     model: pin.Model
+    link_model: pin.Model
     arms: tuple[ArmInfo, ...]
     links: tuple[Link, ...]
     elements: tuple[Link, ...]
@@ -205,18 +209,14 @@ class Scene:
         for la in loaded:
             model = pin.appendModel(model, la.model, 0, la.base)
         model.gravity = pin.Motion(np.concatenate([_validate.finite_array(gravity, "gravity", (3,)), np.zeros(3)]))
-        motors = _add_motors(model, loaded)
         _add_armature(model, loaded)
 
         placed = obj.add_to(model)
         obj_joint, node_joints, q_obj = placed.reference, list(placed.joints), placed.q0
 
-        arm_infos = tuple(_arm_info(model, la, motors) for la in loaded)
-        springs = _joint_springs(model, arm_infos, loaded)
-        q_motors = np.concatenate([model.joints[j].nq * [0.0] for _, j in motors] + [np.zeros(0)])
-        q0 = np.concatenate([la.q0 for la in loaded] + [q_motors, q_obj])
-        q0 = _motors_at_rest(model, q0, springs)
-        check_memory(model.nv, obj)
+        arm_infos = tuple(_arm_info(model, la, None) for la in loaded)  # (the motors come last: below)
+        q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
+        check_memory(model.nv + _motor_count(loaded), obj)
         data = pin.Data(model)  # (createData() copies it once more: twice the peak)
         pin.framesForwardKinematics(model, data, q0)
         o_frame = model.getFrameId(obj.name)
@@ -271,11 +271,20 @@ class Scene:
             Link(il.name, None, il.tip_frame, il.grasp_frame, il.element, il.native) for il in obj.internal_links(model, placed)
         ]
         j_first, j_last = model.joints[node_joints[0]], model.joints[node_joints[-1]]
+        # The elastic joints' motors come after every other joint and frame: the model without them
+        # (`link_model`) reads the head of q and v and has the same joint and frame ids.
+        link_model = model.copy()
+        motors = _add_motors(model, loaded)
+        arm_infos = tuple(_arm_info(model, la, motors) for la in loaded)
+        springs = _joint_springs(model, arm_infos, loaded)
+        q_motors = np.concatenate([model.joints[j].nq * [0.0] for _, j in motors] + [np.zeros(0)])
+        q0 = _motors_at_rest(model, np.concatenate([q0, q_motors]), springs)
         actuated = np.concatenate([a.drive_index for a in arm_infos] + [np.zeros(0, dtype=int)]).astype(int)
         first, n = int(actuated[0]) if actuated.size else 0, actuated.size
         contiguous = n > 0 and np.array_equal(actuated, np.arange(first, first + n))
         set_ = object.__setattr__
         set_(self, "model", model)
+        set_(self, "link_model", link_model)
         set_(self, "arms", arm_infos)
         set_(self, "links", tuple(links))
         set_(self, "arm_specs", tuple(arms))
@@ -378,10 +387,10 @@ class Scene:
     def nonlinearity(self) -> str | None:
         """Why the scene's dynamics are not linear (``None`` when they are: every joint, arms and
         object, prismatic — a constant mass matrix, no Coriolis terms, translations only)."""
-        bad = [
+        bad = [  # (a motor is a rotor on the world, a fixed axis: a constant inertia, linear like a slider)
             f"{self.model.names[i]} ({j.shortname()})"
             for i, j in enumerate(self.model.joints)
-            if i and j.shortname() not in _PRISMATIC
+            if i and j.shortname() not in _PRISMATIC and not self.model.names[i].endswith(MOTOR_SUFFIX)
         ]
         if bad:
             return "joints that are not prismatic make the mass matrix or the kinematics configuration-dependent: " + ", ".join(
@@ -470,18 +479,23 @@ def _rebuilt(state: dict[str, Any]) -> Scene:
 MOTOR_SUFFIX = ".motor"  #: an elastic joint's motor is the joint ``"<arm>/<joint>.motor"``
 
 
+def _motor_count(loaded: Sequence[LoadedArm]) -> int:
+    """How many motors the arms have (their elastic joints of finite stiffness)."""
+    return sum(int(np.isfinite(la.elasticity.stiffness).sum()) for la in loaded if la.elasticity is not None)
+
+
 def _add_motors(model: pin.Model, loaded: Sequence[LoadedArm]) -> list[tuple[str, int]]:
-    """A motor joint per elastic joint, arm after arm, after every arm's joints (in place);
-    returns (link joint name, motor joint id) of each."""
+    """A motor joint per elastic joint, arm after arm, after every other joint and frame (in
+    place); returns (link joint name, motor joint id) of each."""
     motors = []
     for la in loaded:
         if la.elasticity is None:
             continue
         el = la.elasticity
-        for k, inertia, K in zip(el.joints, el.inertia, el.stiffness, strict=True):
+        for jid, inertia, K in zip(el.joint_ids, el.inertia, el.stiffness, strict=True):
             if math.isinf(K):
                 continue  # a rigid transmission: the motor inertia is the joint's armature (_add_armature)
-            name = la.model.names[int(k) + 1]
+            name = la.model.names[int(jid)]
             link = model.joints[model.getJointId(name)]
             motors.append((name, add_motor(model, name + MOTOR_SUFFIX, float(inertia), bool(continuous(link)))))
     return motors
@@ -495,12 +509,14 @@ def _add_armature(model: pin.Model, loaded: Sequence[LoadedArm]) -> None:
         if el is None:
             continue
         rigid = np.isinf(el.stiffness)
-        for k, inertia in zip(el.joints[rigid], el.inertia[rigid], strict=True):
-            joint = model.joints[model.getJointId(la.model.names[int(k) + 1])]
+        for jid, inertia in zip(el.joint_ids[rigid], el.inertia[rigid], strict=True):
+            joint = model.joints[model.getJointId(la.model.names[int(jid)])]
             model.armature[joint.idx_v] += inertia
 
 
-def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]]) -> ArmInfo:
+def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]] | None) -> ArmInfo:
+    """Where the arm sits in ``model``; ``motors`` (link joint name, motor joint id) of the
+    scene's motors, None before they are added (the arm's joints then act as rigid)."""
     joint_names = tuple(la.model.names[i] for i in range(1, la.model.njoints))
     q_index: list[int] = []
     v_index: list[int] = []
@@ -508,10 +524,11 @@ def _arm_info(model: pin.Model, la: LoadedArm, motors: Sequence[tuple[str, int]]
         j = model.joints[model.getJointId(name)]
         q_index.extend(range(j.idx_q, j.idx_q + j.nq))
         v_index.extend(range(j.idx_v, j.idx_v + j.nv))
-    motor_of = dict(motors)
-    el = la.elasticity
-    elastic = np.zeros(0, dtype=int) if el is None else el.joints[np.isfinite(el.stiffness)]
-    motor_joints = [model.joints[motor_of[joint_names[k]]] for k in elastic]
+    motor_of = dict(motors or [])
+    el = la.elasticity if motors is not None else None
+    finite = np.zeros(0, dtype=bool) if el is None else np.isfinite(el.stiffness)
+    elastic = np.zeros(0, dtype=int) if el is None else el.joints[finite]  # (v offsets within the arm)
+    motor_joints = [] if el is None else [model.joints[motor_of[la.model.names[int(j)]]] for j in el.joint_ids[finite]]
     drive = np.array(v_index, dtype=int)
     drive[elastic] = [j.idx_v for j in motor_joints]
     damping = np.array(la.damping, dtype=float)
@@ -540,10 +557,10 @@ def _joint_springs(model: pin.Model, arms: Sequence[ArmInfo], loaded: Sequence[L
             continue
         finite = np.isfinite(la.elasticity.stiffness)
         stiffness, damping = la.elasticity.stiffness[finite], la.elasticity.damping[finite]
-        for k, motor_q, motor_v, K, D in zip(
+        for offset, motor_q, motor_v, K, D in zip(
             info.elastic, info.motor_q_index, info.motor_v_index, stiffness, damping, strict=True
         ):
-            link = model.joints[model.getJointId(info.joint_names[k])]
+            link = next(model.joints[j] for j in range(1, model.njoints) if model.joints[j].idx_v == info.v_index[offset])
             rows.append((link.idx_q, link.idx_v, motor_q, motor_v, K, D, bool(continuous(link))))
     if not rows:
         return JointSprings.none()

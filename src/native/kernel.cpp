@@ -148,15 +148,15 @@ BOOST_PYTHON_MODULE(_native) {
   bp::register_exception_translator<StepMatrixError>(&translate_step_matrix_error);
   bp::class_<Kernel, boost::noncopyable>(
     "Kernel", "The scene dynamics' hot path (see coopdyn.dynamics.native).",
-    bp::init<bp::object, bp::object, bp::list, RefVec, Eigen::Ref<const Eigen::VectorXi>, FrameIndex, RefVec>(
-      bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame", "joint_springs")))
+    bp::init<bp::object, bp::object, bp::list, RefVec, Eigen::Ref<const Eigen::VectorXi>, FrameIndex, RefVec, bp::object>(
+      bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame", "joint_springs", "link_model")))
     .def("acceleration", &Kernel::acceleration, bp::args("self", "q", "v", "tau", "wrench"))
     .def("implicit_terms", &Kernel::implicit_terms, bp::args("self", "q", "v", "tau", "wrench"))
     .def("factor", &Kernel::factor, bp::args("self", "M", "K", "D", "gh", "kp", "kd", "gh2"))
     .def("solve", &Kernel::solve, bp::args("self", "f_q", "Mf_v"))
     .def("implicit_euler_velocity", &Kernel::implicit_euler_velocity,
          bp::args("self", "q", "v", "tau", "h", "kp", "kd", "wrench"))
-    .def("elastic_energies", &Kernel::elastic_energies, bp::args("self"))
+    .def("elastic_energies", &Kernel::elastic_energies_at, bp::args("self", "q"))
     .def("spring_force", &Kernel::spring_force, bp::args("self", "q", "v"))
     .def("gravity", &Kernel::gravity, bp::args("self", "q"))
     .def("element_states", &Kernel::element_states, bp::args("self", "q", "v"))

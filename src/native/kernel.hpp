@@ -70,13 +70,26 @@ inline void check_size(const RefVec & x, Eigen::Index n, const char * name) {
 
 class Kernel {
 public:
+  // model: the scene's; link_model: the same without the elastic joints' motors, which come last
+  // (Scene.link_model: its joints, frames and coordinates are the head of model's).
   Kernel(bp::object model_obj, bp::object data_obj, bp::list links, const RefVec & damping,
-         const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame, const RefVec & joint_springs)
-    : model_obj_(model_obj), data_obj_(data_obj),
-      model_(bp::extract<const Model &>(model_obj)), data_(bp::extract<Data &>(data_obj)), aba_(model_),
-      damping_(damping), actuated_(actuated), object_frame_(object_frame),
-      springs_(joint_springs, model_.nq, model_.nv) {
-    const auto nv = model_.nv;
+         const Eigen::Ref<const Eigen::VectorXi> & actuated, FrameIndex object_frame, const RefVec & joint_springs,
+         bp::object link_model_obj)
+    : model_obj_(model_obj), data_obj_(data_obj), link_model_obj_(link_model_obj),
+      full_model_(bp::extract<const Model &>(model_obj)), full_data_(bp::extract<Data &>(data_obj)),
+      model_(bp::extract<const Model &>(link_model_obj)),
+      own_data_(model_.nv == full_model_.nv ? nullptr : std::make_unique<Data>(model_)),
+      data_(own_data_ ? *own_data_ : full_data_), aba_(model_), nq_(full_model_.nq),
+      nv_(full_model_.nv), nql_(model_.nq), nvl_(model_.nv), damping_(damping), actuated_(actuated),
+      object_frame_(object_frame), springs_(joint_springs, full_model_.nq, full_model_.nv) {
+    const auto nv = nv_;
+    if (nql_ > nq_ || nvl_ > nv_ || model_.njoints > full_model_.njoints || model_.nframes > full_model_.nframes)
+      throw std::invalid_argument("link_model must be the head of model");
+    for (const auto & sp : springs_.springs)
+      if (sp.motor_v < nvl_ || sp.link_v >= nvl_ || sp.motor_q < nql_ || sp.link_q >= nql_)
+        throw std::invalid_argument("joint springs: the motors must come after link_model's coordinates");
+    if (full_model_.nv - nvl_ != static_cast<Eigen::Index>(springs_.springs.size()))
+      throw std::invalid_argument("every coordinate after link_model's must be a motor's");
     check_size(damping, nv, "damping");
     if (object_frame_ >= model_.frames.size()) throw std::invalid_argument("object_frame out of range");
     for (Eigen::Index i = 0; i < actuated_.size(); ++i)
@@ -95,25 +108,27 @@ public:
     has_damping_ = !damping_.isZero(0.0);
     fext_.assign(model_.njoints, pinocchio::Force::Zero());
     gravity_axes(model_);
-    J_G_.setZero(6, nv);
-    J_T_.setZero(6, nv);
-    SJ_.setZero(6, nv);
+    J_G_.setZero(6, nvl_);
+    J_T_.setZero(6, nvl_);
+    SJ_.setZero(6, nvl_);
     Q_.setZero(nv);
     tau_full_.setZero(nv);
     K_t_.setZero(nv, nv);
     D_t_.setZero(nv, nv);
     // The elastic joints' motors: no element's Jacobian reaches them (they hang on the world, no
-    // frame of an interconnection is theirs), their block of M is diagonal, and only their
-    // springs couple them to the links — the step matrix eliminates them in O(m) (factor()).
-    std::vector<bool> motor(nv, false);
-    for (const auto & sp : springs_.springs) motor[sp.motor_v] = true;
-    for (Eigen::Index i = 0; i < nv; ++i)
-      if (!motor[i]) {
-        position_.push_back(static_cast<Eigen::Index>(links_active_.size()));
-        links_active_.push_back(i);
-      } else
-        position_.push_back(-1);
+    // frame of an interconnection is theirs), their block of M is diagonal (B), and only their
+    // springs couple them to the links — every Pinocchio pass runs on the links' model, each
+    // motor is solved beside it, and the step matrix eliminates them in O(m) (factor()).
     eliminate_ = !springs_.empty();
+    if (eliminate_) {
+      Data tmp(full_model_);
+      pinocchio::crba(full_model_, tmp, pinocchio::neutral(full_model_));
+      B_.resize(nv_ - nvl_);
+      for (Eigen::Index i = nvl_; i < nv_; ++i) B_[i - nvl_] = tmp.M(i, i);
+      M_.setZero(nv, nv);
+      acc_.setZero(nv);
+      tau_link_.setZero(nvl_);
+    }
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
@@ -139,7 +154,7 @@ public:
       throw std::invalid_argument(
         "gravity: every actuated joint must be revolute, prismatic or helical (one degree of freedom, a constant "
         "axis) in a model without mimic joints");
-    kinematics(q, VectorXd::Zero(model_.nv), false);
+    kinematics(q, VectorXd::Zero(nv_), false);
     return actuated_gravity(q);
   }
 
@@ -147,38 +162,44 @@ public:
   // Each evaluation is kinematics(q, v, ·), then what reads it (actuated_gravity, for a
   // controller), then accel, terms or ie_velocity at the same (q, v): one kinematics pass serves
   // the controller's gravity term and the elements.
-  const Model & model() const { return model_; }
+  const Model & model() const { return full_model_; }
+  // The scene's model without the elastic joints' motors (the same as model() without them): its
+  // coordinates are the head of q and v, its joints and frames model()'s first — what a
+  // controller that reads the links only needs, cheaper to run through.
+  const Model & link_model() const { return model_; }
 
   // A pinocchio::Data of this kernel's model for a controller's own use, lent until the pointer
   // is destroyed and then kept for the next borrower: the loops that coopdyn.Simulator makes run
   // after run do not each build one (~25 µs on two Pandas). Every Pinocchio algorithm the
   // controllers call writes what it reads, so a lent Data computes what a fresh one would.
   using LentData = std::unique_ptr<Data, std::function<void(Data *)>>;
-  LentData lend_data() {
+  // With `links`, a Data of link_model().
+  LentData lend_data(bool links = false) {
+    auto & spare = links ? spare_link_data_ : spare_data_;
     std::unique_ptr<Data> data;
     {
       const std::lock_guard<std::mutex> lock(spare_mutex_);
-      if (!spare_data_.empty()) {
-        data = std::move(spare_data_.back());
-        spare_data_.pop_back();
+      if (!spare.empty()) {
+        data = std::move(spare.back());
+        spare.pop_back();
       }
     }
-    if (!data) data = std::make_unique<Data>(model_);
-    return LentData(data.release(), [this](Data * returned) {
+    if (!data) data = std::make_unique<Data>(links ? model_ : full_model_);
+    return LentData(data.release(), [this, &spare](Data * returned) {
       const std::lock_guard<std::mutex> lock(spare_mutex_);
-      spare_data_.emplace_back(returned);
+      spare.emplace_back(returned);
     });
   }
   const Eigen::VectorXi & actuated() const { return actuated_; }
   // Placements at q, and the joint velocities at v (for accel) or the joint Jacobians (for the
   // implicit terms).
   void kinematics(const RefVec & q, const RefVec & v, bool jacobians) {
-    check_size(q, model_.nq, "q");
-    check_size(v, model_.nv, "v");
+    check_size(q, nq_, "q");
+    check_size(v, nv_, "v");
     if (jacobians)
-      pinocchio::computeJointJacobians(model_, data_, q);
+      pinocchio::computeJointJacobians(model_, data_, q.head(nql_));
     else
-      pinocchio::forwardKinematics(model_, data_, q, v);
+      pinocchio::forwardKinematics(model_, data_, q.head(nql_), v.head(nvl_));
     kinematics_ = jacobians ? JACOBIANS : VELOCITIES;
     kinematics_q_ = q;
   }
@@ -195,6 +216,10 @@ public:
     const Eigen::Vector3d & o_g = model_.gravity.linear();
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
       const auto j = gravity_joint_[i];
+      if (j == 0) {  // a motor: a rotor on the world, no weight
+        g_act_[i] = 0.0;
+        continue;
+      }
       const Eigen::Vector3d j_g = data_.oMi[j].rotation().transpose() * o_g;
       const pinocchio::Motion & S = gravity_axis_[i];  // in joint j's frame, as data_.com[j]
       g_act_[i] = -(data_.mass[j] * S.linear().dot(j_g) + S.angular().dot(data_.com[j].cross(j_g)));
@@ -213,7 +238,7 @@ public:
     implicit_parts(q, v, tau, nullptr);
   }
   const VectorXd & f_terms() const { return tau_full_; }
-  const MatrixXd & mass() const { return data_.M; }
+  const MatrixXd & mass() const { return eliminate_ ? M_ : data_.M; }
   const MatrixXd & stiffness() const { return K_t_; }
   const MatrixXd & damping_matrix() const { return D_t_; }
   // k_v, k_q of the last factor() (see solve()).
@@ -227,7 +252,7 @@ public:
                    const VectorXd & kd, VectorXd & v_new) {
     check_kinematics_at(q, "ie_velocity");
     implicit_parts(q, v, tau, nullptr);
-    factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
+    factor(mass(), K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
     step_solve(rhs_, x_);
     v_new = v + h * x_;
@@ -235,7 +260,7 @@ public:
   // Kinetic + gravity + elastic energy at (q, v) [J], as Dynamics.energy.
   double total_energy(const VectorXd & q, const VectorXd & v, double * motion = nullptr) {
     kinematics_ = NONE;
-    const double kinetic = pinocchio::computeKineticEnergy(model_, data_, q, v);
+    const double kinetic = pinocchio::computeKineticEnergy(model_, data_, q.head(nql_), v.head(nvl_)) + motor_energy(v);
     const double potential = pinocchio::computePotentialEnergy(model_, data_);
     const double u = elastic_energies().sum() + springs_.energy(q);
     if (motion) *motion = kinetic + u;
@@ -247,7 +272,7 @@ public:
     const Vector6 w = object_wrench(wrench);
     kinematics(q, v, true);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
-    return bp::make_tuple(VectorXd(tau_full_), MatrixXd(data_.M), MatrixXd(K_t_), MatrixXd(D_t_));
+    return bp::make_tuple(VectorXd(tau_full_), MatrixXd(mass()), MatrixXd(K_t_), MatrixXd(D_t_));
   }
 
   // Factorise S = M + gh (D̃ + Kd) + gh2 (K̃ + Kp) from the last implicit_terms (or given matrices);
@@ -256,7 +281,7 @@ public:
               double gh2) {
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
-    const auto nv = model_.nv;
+    const auto nv = nv_;
     if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
       throw std::invalid_argument("factor: M, K and D must be nv x nv");
     Kg_ = K;
@@ -273,18 +298,14 @@ public:
     }
     eliminated_ = eliminate_ && motors_decoupled();
     if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
-      const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
-      S_a_.resize(na, na);
-      for (Eigen::Index c = 0; c < na; ++c)
-        for (Eigen::Index r = c; r < na; ++r) S_a_(r, c) = S_(links_active_[r], links_active_[c]);
+      S_a_ = S_.topLeftCorner(nvl_, nvl_);
       for (const auto & sp : springs_.springs) {
         const double d = S_(sp.motor_v, sp.motor_v);
         if (!(d > 0.0)) {
           factored_ = false;
           throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
         }
-        const Eigen::Index l = position_[sp.link_v];
-        S_a_(l, l) -= S_(sp.link_v, sp.motor_v) * S_(sp.motor_v, sp.link_v) / d;
+        S_a_(sp.link_v, sp.link_v) -= S_(sp.link_v, sp.motor_v) * S_(sp.motor_v, sp.link_v) / d;
       }
       llt_a_.compute(S_a_);
       if (llt_a_.info() != Eigen::Success) {
@@ -309,14 +330,12 @@ public:
       x = llt_.solve(b);
       return;
     }
-    const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
-    b_a_.resize(na);
-    for (Eigen::Index c = 0; c < na; ++c) b_a_[c] = b[links_active_[c]];
+    b_a_ = b.head(nvl_);
     for (const auto & sp : springs_.springs)
-      b_a_[position_[sp.link_v]] -= S_(sp.link_v, sp.motor_v) * b[sp.motor_v] / S_(sp.motor_v, sp.motor_v);
+      b_a_[sp.link_v] -= S_(sp.link_v, sp.motor_v) * b[sp.motor_v] / S_(sp.motor_v, sp.motor_v);
     llt_a_.solveInPlace(b_a_);
     x.resize(b.size());
-    for (Eigen::Index c = 0; c < na; ++c) x[links_active_[c]] = b_a_[c];
+    x.head(nvl_) = b_a_;
     for (const auto & sp : springs_.springs)
       x[sp.motor_v] = (b[sp.motor_v] - S_(sp.motor_v, sp.link_v) * x[sp.link_v]) / S_(sp.motor_v, sp.motor_v);
   }
@@ -324,8 +343,8 @@ public:
   // (k_q, k_v) of (I − γhJ) k = (f_q, f_v), given M f_v: S k_v = M f_v − γh K̃ f_q, k_q = f_q + γh k_v.
   bp::tuple solve(const RefVec & f_q, const RefVec & Mf_v) {
     if (!factored_) throw std::logic_error("solve before a successful factor");
-    check_size(f_q, model_.nv, "f_q");
-    check_size(Mf_v, model_.nv, "Mf_v");
+    check_size(f_q, nv_, "f_q");
+    check_size(Mf_v, nv_, "Mf_v");
     rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
     VectorXd k_v;
     step_solve(rhs_, k_v);
@@ -339,12 +358,19 @@ public:
     const Vector6 w = object_wrench(wrench);
     kinematics(q, v, true);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
-    factor(data_.M, K_t_, D_t_, h, kp, kd, h * h);
+    factor(mass(), K_t_, D_t_, h, kp, kd, h * h);
     rhs_.noalias() = tau_full_ - h * (Kg_ * v);
     step_solve(rhs_, x_);
     return v + h * x_;
   }
 
+  // ½ eᵀ K e of each link (n_links,) [J] at q (its own kinematics pass).
+  VectorXd elastic_energies_at(const RefVec & q) {
+    check_size(q, nq_, "q");
+    kinematics_ = NONE;
+    pinocchio::forwardKinematics(model_, data_, q.head(nql_));
+    return elastic_energies();
+  }
   // ½ eᵀ K e of each link (n_links,) [J] at the frame placements of the last kinematics pass.
   VectorXd elastic_energies() {
     VectorXd out(links_.size());
@@ -361,10 +387,10 @@ public:
 
   // Every element's evaluation at (q, v): a list of (energy, deformation, G_f_G, power, S_K, S_D, θ).
   bp::list element_states(const RefVec & q, const RefVec & v) {
-    check_size(q, model_.nq, "q");
-    check_size(v, model_.nv, "v");
+    check_size(q, nq_, "q");
+    check_size(v, nv_, "v");
     kinematics_ = NONE;
-    pinocchio::forwardKinematics(model_, data_, q, v);
+    pinocchio::forwardKinematics(model_, data_, q.head(nql_), v.head(nvl_));
     bp::list out;
     for (const Link & lk : links_) {
       relative(lk, ev_, true);
@@ -380,15 +406,15 @@ public:
   // through Element::tangent. Returns (q̈ (nv), ∂q̈/∂q, ∂q̈/∂v (nv, nv), ∂q̈/∂τ (nv, na),
   // W (L, 6), ∂W/∂q, ∂W/∂v (6L, nv), exact).
   bp::tuple derivatives(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
-    check_size(q, model_.nq, "q");
-    check_size(v, model_.nv, "v");
+    check_size(q, full_model_.nq, "q");
+    check_size(v, full_model_.nv, "v");
     check_size(tau, actuated_.size(), "tau");
     kinematics_ = NONE;
-    const Eigen::Index nv = model_.nv, L = static_cast<Eigen::Index>(links_.size()), na = actuated_.size();
-    pinocchio::computeForwardKinematicsDerivatives(model_, data_, q, v, VectorXd::Zero(nv));
-    pinocchio::computeJointJacobians(model_, data_, q);
-    pinocchio::updateFramePlacements(model_, data_);
-    ForceList fext(model_.njoints, pinocchio::Force::Zero());
+    const Eigen::Index nv = full_model_.nv, L = static_cast<Eigen::Index>(links_.size()), na = actuated_.size();
+    pinocchio::computeForwardKinematicsDerivatives(full_model_, full_data_, q, v, VectorXd::Zero(nv));
+    pinocchio::computeJointJacobians(full_model_, full_data_, q);
+    pinocchio::updateFramePlacements(full_model_, full_data_);
+    ForceList fext(full_model_.njoints, pinocchio::Force::Zero());
     MatrixXd dQ_dq = MatrixXd::Zero(nv, nv), dQ_dv = MatrixXd::Zero(nv, nv);
     dQ_dv.diagonal() = -damping_;
     MatrixXd W(L, 6), dW_dq(6 * L, nv), dW_dv(6 * L, nv);
@@ -396,26 +422,26 @@ public:
     Matrix6 F_d, F_x;
     bool exact = true;
     auto add_wrench = [&](FrameIndex frame, const Vector6 & f) {
-      const pinocchio::Frame & fr = model_.frames[frame];
+      const pinocchio::Frame & fr = full_model_.frames[frame];
       fext[fr.parentJoint] += fr.placement.act(pinocchio::Force(f));
     };
     for (Eigen::Index i = 0; i < L; ++i) {
       const Link & lk = links_[static_cast<std::size_t>(i)];
-      const SE3 X = data_.oMf[lk.tip].actInv(data_.oMf[lk.grasp]);
+      const SE3 X = full_data_.oMf[lk.tip].actInv(full_data_.oMf[lk.grasp]);
       J_G.setZero();
       J_T.setZero();
-      pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G);
-      pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T);
+      pinocchio::getFrameJacobian(full_model_, full_data_, lk.grasp, pinocchio::LOCAL, J_G);
+      pinocchio::getFrameJacobian(full_model_, full_data_, lk.tip, pinocchio::LOCAL, J_T);
       const Matrix6 Ad_inv = X.toActionMatrixInverse();
       const Matrix6x Jr = J_G - Ad_inv * J_T;
       dVG_dq.setZero();
       dVG_dv.setZero();
       dVT_dq.setZero();
       dVT_dv.setZero();
-      pinocchio::getFrameVelocityDerivatives(model_, data_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
-      pinocchio::getFrameVelocityDerivatives(model_, data_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
-      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, data_, lk.tip, pinocchio::LOCAL).toVector();
-      const Vector6 xi = pinocchio::getFrameVelocity(model_, data_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
+      pinocchio::getFrameVelocityDerivatives(full_model_, full_data_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
+      pinocchio::getFrameVelocityDerivatives(full_model_, full_data_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
+      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(full_model_, full_data_, lk.tip, pinocchio::LOCAL).toVector();
+      const Vector6 xi = pinocchio::getFrameVelocity(full_model_, full_data_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
       const Matrix6x dxi_dq = dVG_dq - motion_cross(V_T) * Jr - Ad_inv * dVT_dq;
       lk.element->evaluate(X, xi, false, ev_);
       exact = lk.element->tangent(X, xi, F_d, F_x) && exact;
@@ -432,11 +458,11 @@ public:
     }
     if (!wrench.is_none()) {  // constant in world axes: its body-axes value turns with the object
       const Vector6 w = object_wrench(wrench);
-      const coopdyn::Matrix3 & R = data_.oMf[object_frame_].rotation();
+      const coopdyn::Matrix3 & R = full_data_.oMf[object_frame_].rotation();
       Vector6 f_o;
       f_o << R.transpose() * w.head<3>(), R.transpose() * w.tail<3>();
       Matrix6x J_o = Matrix6x::Zero(6, nv);
-      pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_o);
+      pinocchio::getFrameJacobian(full_model_, full_data_, object_frame_, pinocchio::LOCAL, J_o);
       Matrix6 df = Matrix6::Zero();
       df.topRightCorner<3, 3>() = coopdyn::skew(f_o.head<3>());
       df.bottomRightCorner<3, 3>() = coopdyn::skew(f_o.tail<3>());
@@ -452,15 +478,15 @@ public:
       dQ_dq -= K_s;
       dQ_dv -= D_s;
     }
-    pinocchio::computeABADerivatives(model_, data_, q, v, tau_full, fext);
-    MatrixXd Minv = data_.Minv;
+    pinocchio::computeABADerivatives(full_model_, full_data_, q, v, tau_full, fext);
+    MatrixXd Minv = full_data_.Minv;
     Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
-    const MatrixXd da_dq = data_.ddq_dq + Minv * dQ_dq, da_dv = data_.ddq_dv + Minv * dQ_dv;
+    const MatrixXd da_dq = full_data_.ddq_dq + Minv * dQ_dq, da_dv = full_data_.ddq_dv + Minv * dQ_dv;
     MatrixXd da_dtau(nv, na);
     for (Eigen::Index i = 0; i < na; ++i) da_dtau.col(i) = Minv.col(actuated_[i]);
-    if (!da_dq.allFinite() || !da_dv.allFinite() || !data_.ddq.allFinite())
+    if (!da_dq.allFinite() || !da_dv.allFinite() || !full_data_.ddq.allFinite())
       throw std::runtime_error("the dynamics' derivatives are not finite at this state");
-    return bp::make_tuple(VectorXd(data_.ddq), da_dq, da_dv, da_dtau, W, dW_dq, dW_dv, exact);
+    return bp::make_tuple(VectorXd(full_data_.ddq), da_dq, da_dv, da_dtau, W, dW_dq, dW_dv, exact);
   }
 
   // ad(w) for a twist w = [v; ω] (derivatives.py: motion_cross).
@@ -484,14 +510,14 @@ public:
   // the object frame's position (n, 3), kinetic and gravity energy (n, 2).
   bp::tuple readouts(const RefMat & Q, const RefMat & V) {
     const Eigen::Index n = Q.rows(), L = static_cast<Eigen::Index>(links_.size());
-    if (Q.cols() != model_.nq || V.cols() != model_.nv || V.rows() != n)
+    if (Q.cols() != nq_ || V.cols() != nv_ || V.rows() != n)
       throw std::invalid_argument("readouts: Q must be (n, nq) and V (n, nv)");
     kinematics_ = NONE;
     MatrixXd E(n, 6 * L), U(n, L), P(n, L), WG(n, 6 * L), WT(n, 6 * L), PG(n, 3 * L), PT(n, 3 * L), PO(n, 3), KP(n, 2);
     for (Eigen::Index k = 0; k < n; ++k) {
       const VectorXd q = Q.row(k).transpose(), v = V.row(k).transpose();
-      pinocchio::forwardKinematics(model_, data_, q, v);
-      KP(k, 0) = pinocchio::computeKineticEnergy(model_, data_);
+      pinocchio::forwardKinematics(model_, data_, q.head(nql_), v.head(nvl_));
+      KP(k, 0) = pinocchio::computeKineticEnergy(model_, data_) + motor_energy(v);
       KP(k, 1) = pinocchio::computePotentialEnergy(model_, data_);
       PO.row(k) = pinocchio::updateFramePlacement(model_, data_, object_frame_).translation().transpose();
       for (Eigen::Index i = 0; i < L; ++i) {
@@ -531,12 +557,13 @@ public:
     link_wrenches();
     for (pinocchio::JointIndex j = model_.njoints - 1; j > 0; --j)
       ProjectForce::run(model_.joints[j], data_.joints[j], ProjectForce::ArgsType(model_, data_, fext_, Q_));
+    Q_.tail(nv_ - nvl_).setZero();  // (the motors: no interconnection reaches them)
     return Q_;
   }
 
 private:
   std::mutex spare_mutex_;
-  std::vector<std::unique_ptr<Data>> spare_data_;  // lent out by lend_data(), back when returned
+  std::vector<std::unique_ptr<Data>> spare_data_, spare_link_data_;  // lent out by lend_data(), back when returned
 
   static Vector6 object_wrench(bp::object wrench) {
     if (wrench.is_none()) return Vector6::Zero();
@@ -573,7 +600,11 @@ private:
     }
     tau_full_.setZero();
     joint_torques(v, tau, p_diss);
-    return aba_.accelerations(model_, data_, tau_full_, fext_);
+    if (!eliminate_) return aba_.accelerations(model_, data_, tau_full_, fext_);
+    tau_link_ = tau_full_.head(nvl_);
+    acc_.head(nvl_) = aba_.accelerations(model_, data_, tau_link_, fext_);
+    for (Eigen::Index i = nvl_; i < nv_; ++i) acc_[i] = tau_full_[i] / B_[i - nvl_];  // B θ̈ = τ_m − τ_s − d_m θ̇
+    return acc_;
   }
 
 private:
@@ -614,9 +645,13 @@ private:
   // upper one).
   void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
     generalized_force(v, tau, wrench, true);
-    tau_full_ -= pinocchio::nonLinearEffects(model_, data_, q, v);
-    pinocchio::crba(model_, data_, q);
+    tau_full_.head(nvl_) -= pinocchio::nonLinearEffects(model_, data_, q.head(nql_), v.head(nvl_));
+    pinocchio::crba(model_, data_, q.head(nql_));
     data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    if (eliminate_) {  // M = diag(M_links, B)
+      M_.topLeftCorner(nvl_, nvl_) = data_.M;
+      M_.diagonal().tail(nv_ - nvl_) = B_;
+    }
   }
 
   // After kinematics(q, v, true): tau_full_ = Sτ + Q − Bq̇ (+ the object wrench); with
@@ -642,27 +677,17 @@ private:
       pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
       pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
       J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // Jr; lazy: cheaper than GEMM at 6 × nv
-      const Vector6 xi = J_G_ * v;
+      const Vector6 xi = J_G_ * v.head(nvl_);
       lk.element->evaluate(T_M_G, xi, matrices, ev_);
-      Q_.noalias() += J_G_.transpose() * ev_.f;
+      Q_.head(nvl_).noalias() += J_G_.transpose() * ev_.f;
       p_diss += ev_.power;
       watch_rotation(i);
-      if (matrices && eliminate_) {  // Jr is zero in the motors' columns: the products over the others
-        const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
-        Ja_.resize(6, na);
-        for (Eigen::Index c = 0; c < na; ++c) Ja_.col(c) = J_G_.col(links_active_[c]);
-        SJa_ = ev_.SK.lazyProduct(Ja_);
-        add_active(Ja_.transpose().lazyProduct(SJa_), K_t_);
-        if (lk.element->damped()) {
-          SJa_ = ev_.SD.lazyProduct(Ja_);
-          add_active(Ja_.transpose().lazyProduct(SJa_), D_t_);
-        }
-      } else if (matrices) {
+      if (matrices) {  // (over the links' columns: Jr is zero in the motors')
         SJ_ = ev_.SK.lazyProduct(J_G_);
-        K_t_ += J_G_.transpose().lazyProduct(SJ_);
+        K_t_.topLeftCorner(nvl_, nvl_) += J_G_.transpose().lazyProduct(SJ_);
         if (lk.element->damped()) {
           SJ_ = ev_.SD.lazyProduct(J_G_);
-          D_t_ += J_G_.transpose().lazyProduct(SJ_);
+          D_t_.topLeftCorner(nvl_, nvl_) += J_G_.transpose().lazyProduct(SJ_);
         }
       }
     }
@@ -670,7 +695,7 @@ private:
       const Vector6 local = local_wrench(*wrench);
       J_G_.setZero();
       pinocchio::getFrameJacobian(model_, data_, object_frame_, pinocchio::LOCAL, J_G_);
-      Q_.noalias() += J_G_.transpose() * local;
+      Q_.head(nvl_).noalias() += J_G_.transpose() * local;
     }
     tau_full_ = Q_;
     joint_torques(v, tau, p_diss);
@@ -729,6 +754,11 @@ private:
     gravity_ok_ = model.mimicking_joints.empty();
     if (!gravity_ok_) return;
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
+      if (actuated_[i] >= nvl_) {  // a motor (after the links' model): no weight (actuated_gravity)
+        gravity_joint_.push_back(0);
+        gravity_axis_.emplace_back(Vector6::Zero());
+        continue;
+      }
       pinocchio::JointIndex joint = 0;
       for (pinocchio::JointIndex j = 1; j < model.joints.size(); ++j)
         if (model.joints[j].idx_v() <= actuated_[i] && actuated_[i] < model.joints[j].idx_v() + model.joints[j].nv())
@@ -746,10 +776,16 @@ private:
     }
   }
 
-  bp::object model_obj_, data_obj_;  // keep the Python objects alive
-  const Model & model_;
+  bp::object model_obj_, data_obj_, link_model_obj_;  // keep the Python objects alive
+  const Model & full_model_;  // the scene's (derivatives; the controllers' model())
+  Data & full_data_;
+  const Model & model_;  // the links' (every pass of the hot path: the head of q and v)
+  // Its Data: the scene's own (Dynamics.data: its readers see the state of the last evaluation)
+  // when there are no motors, else one of the kernel's (readers do their own kinematics pass)
+  std::unique_ptr<Data> own_data_;
   Data & data_;
   ArticulatedBody aba_;
+  Eigen::Index nq_, nv_, nql_, nvl_;  // the scene's sizes, the links' model's
   std::vector<Link> links_;
   VectorXd damping_;
   Eigen::VectorXi actuated_;
@@ -773,14 +809,14 @@ private:
   double gh_ = 0.0;
   bool factored_ = false;
   Eigen::LLT<MatrixXd> llt_;
-  // the motors' elimination (factor()): the v indices that are not motors, each one's place among
-  // them (−1 for a motor), whether the scene has motors and whether the last factor() used it
-  std::vector<Eigen::Index> links_active_, position_;
+  // the motors (the coordinates after the links' model's): whether the scene has any and whether
+  // the last factor() eliminated them; their inertias B; M = diag(M_links, B); q̈ and the links' τ
   bool eliminate_ = false, eliminated_ = false;
-  MatrixXd S_a_;
+  VectorXd B_;
+  MatrixXd M_, S_a_;
+  VectorXd acc_, tau_link_;
   Eigen::LLT<MatrixXd> llt_a_;
   VectorXd b_a_, x_;
-  Eigen::Matrix<double, 6, Eigen::Dynamic> Ja_, SJa_;
 
   // Whether every motor's row of S_ holds only its diagonal and its link (what the elimination
   // takes; true by construction — checked, not assumed).
@@ -790,12 +826,9 @@ private:
         if (j != sp.motor_v && j != sp.link_v && (S_(sp.motor_v, j) != 0.0 || S_(j, sp.motor_v) != 0.0)) return false;
     return true;
   }
-  // out(active, active) += A (na × na).
-  template <class Block>
-  void add_active(const Block & A, MatrixXd & out) const {
-    const Eigen::Index na = static_cast<Eigen::Index>(links_active_.size());
-    for (Eigen::Index c = 0; c < na; ++c)
-      for (Eigen::Index r = 0; r < na; ++r) out(links_active_[r], links_active_[c]) += A(r, c);
+  // ½ Σ B θ̇², the motors' kinetic energy [J] (the links' model leaves them out).
+  double motor_energy(const VectorXd & v) const {
+    return eliminate_ ? 0.5 * (B_.array() * v.tail(nv_ - nvl_).array().square()).sum() : 0.0;
   }
 };
 

@@ -46,18 +46,18 @@ struct MotorPD : Controller {
   VectorXd kp, kd, target, g_d;
   bool online;
   Eigen::VectorXi arm_joints;
-  MatrixXd elastic;  // rows (link q, link v, motor q, continuous, K⁻¹ g(q_d), 0)
+  MatrixXd elastic;  // rows (link q, link v, motor q, continuous, K⁻¹ g(q_d))
   VectorXd dq, q_bar, q_turned, bias;
 };
 
-// {kp, kd, g_d (n_actuated), target (nq), online, arm_joints (n_actuated), elastic (m, 6)}
+// {kp, kd, g_d (n_actuated), target (nq), online, arm_joints (n_actuated), elastic (m, 5)}
 inline std::unique_ptr<Controller> make_motor_pd(Settings & c, Kernel & k) {
   const Eigen::Index na = k.actuated().size(), nq = k.model().nq, nv = k.model().nv;
   const Eigen::VectorXi arm_joints = c.get<Eigen::VectorXi>("arm_joints");
   if (arm_joints.size() != na || (na && (arm_joints.minCoeff() < 0 || arm_joints.maxCoeff() >= nv)))
     throw std::invalid_argument("motor_pd: arm_joints must hold one v index per actuated joint");
   const MatrixXd elastic = c.get<MatrixXd>("elastic");
-  if (elastic.size() && elastic.cols() != 6) throw std::invalid_argument("motor_pd: elastic must be (m, 6)");
+  if (elastic.size() && elastic.cols() != 5) throw std::invalid_argument("motor_pd: elastic must be (m, 5)");
   for (Eigen::Index i = 0; i < elastic.rows(); ++i) {
     const Eigen::Index width = elastic(i, 3) != 0.0 ? 2 : 1;
     if (elastic(i, 0) < 0 || elastic(i, 2) < 0 || elastic(i, 0) + width > nq || elastic(i, 2) + width > nq ||

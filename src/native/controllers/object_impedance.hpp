@@ -74,7 +74,7 @@ struct ObjectImpedanceLaw : Controller {
                    std::vector<pinocchio::SE3> tip_offsets, Vector3 Ki, Vector3 Di, VectorXd transmissions)
     : model(model), lent(std::move(lent)), data(*this->lent), object_frame(object_frame), grasps(std::move(grasps)), task(std::move(task)),
       mass(mass), com(com), gravity(gravity), Kp(Kp), Kr(Kr), Dp(Dp), Dr(Dr), joint_damping(joint_damping),
-      null_k(null_k), null_d(null_d), q0(std::move(q0)), J6(6, model.nv), posture(model.nv), collocated(collocated), Ki(Ki), Di(Di),
+      null_k(null_k), null_d(null_d), q0(q0.head(model.nq)), J6(6, model.nv), posture(model.nv), collocated(collocated), Ki(Ki), Di(Di),
       transmissions(std::move(transmissions)) {
     for (const pinocchio::SE3 & o_M_T : tip_offsets) T_M_o.push_back(o_M_T.inverse());
   }
@@ -127,7 +127,11 @@ struct ObjectImpedanceLaw : Controller {
     }
   }
 
-  void torque(double t, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
+  // `model` is the kernel's link_model(): the links read the head of q and v (an elastic joint's
+  // motor only gets the fast term, at the end).
+  void torque(double t, const VectorXd & q_all, const VectorXd & v_all, VectorXd & tau) override {
+    const auto q = q_all.head(model.nq);
+    const auto v = v_all.head(model.nv);
     pinocchio::forwardKinematics(model, data, q, v);
     pinocchio::updateFramePlacements(model, data);
     // the object wrench (world axes, at the object frame origin)
@@ -213,8 +217,8 @@ struct ObjectImpedanceLaw : Controller {
     }
     for (Eigen::Index i = 0; i < transmissions.size(); i += 4) {  // Spong's fast term: K_v (q̇ − θ̇)
       const auto entry = static_cast<Eigen::Index>(transmissions[i]);
-      tau[entry] += transmissions[i + 3] * (v[static_cast<Eigen::Index>(transmissions[i + 1])] -
-                                            v[static_cast<Eigen::Index>(transmissions[i + 2])]);
+      tau[entry] += transmissions[i + 3] * (v_all[static_cast<Eigen::Index>(transmissions[i + 1])] -
+                                            v_all[static_cast<Eigen::Index>(transmissions[i + 2])]);
     }
   }
 
@@ -279,8 +283,8 @@ struct ObjectImpedanceLaw : Controller {
 // for GripLiftOscillate its timings}, object_frame, mass, com, gravity, Kp, Kr, Dp, Dr,
 // joint_damping, null_k, null_d, q0}
 inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & k) {
-  const Model & model = k.model();
-  const Eigen::Index nq = model.nq, nv = model.nv;
+  const Model & model = k.link_model();  // (the grasps' frames and the arms' joints are its)
+  const Eigen::Index nq = k.model().nq, nv = model.nv;
   std::vector<ObjectImpedanceLaw::Grasp> grasps;
   bp::list gl = c.get<bp::list>("grasps");
   for (bp::ssize_t i = 0; i < bp::len(gl); ++i) {
@@ -324,13 +328,14 @@ inline std::unique_ptr<Controller> make_object_impedance(Settings & c, Kernel & 
   if (object_frame >= model.frames.size()) throw std::invalid_argument("compiled loop: object frame out of range");
   const VectorXd transmissions = c.get<VectorXd>("transmissions");
   const Eigen::Index na = k.actuated().size();
+  const Eigen::Index nv_all = k.model().nv;  // (the motors come after the links' model's coordinates)
   for (Eigen::Index i = 0; i + 3 < transmissions.size(); i += 4)
     if (transmissions[i] < 0 || transmissions[i] >= na || transmissions[i + 1] < 0 || transmissions[i + 1] >= nv ||
-        transmissions[i + 2] < 0 || transmissions[i + 2] >= nv)
+        transmissions[i + 2] < nv || transmissions[i + 2] >= nv_all)
       throw std::invalid_argument("compiled loop: a transmission's index is out of range");
   if (transmissions.size() % 4) throw std::invalid_argument("compiled loop: transmissions are 4 values each");
   return std::make_unique<ObjectImpedanceLaw>(
-    model, k.lend_data(), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
+    k.link_model(), k.lend_data(true), object_frame, std::move(grasps), std::move(task), c.get<double>("mass"), c.vec("com", 3),
     c.vec("gravity", 3), c.vec("Kp", 3), c.vec("Kr", 3), c.vec("Dp", 3), c.vec("Dr", 3),
     c.get<double>("joint_damping"), c.get<double>("null_k"), c.get<double>("null_d"), c.vec("q0", nq),
     c.get<bool>("collocated"), offsets, c.vec("Ki", 3), c.vec("Di", 3), transmissions);
