@@ -67,6 +67,26 @@ def test_peer_comparison_on_the_panda_scene() -> None:
         assert "MuJoCo, Drake, Exudyn" in table or "MuJoCo, Drake" in table
 
 
+def test_peer_comparison_on_elastic_joints_is_mujoco_only() -> None:
+    """The task on arms with elastic joints against MuJoCo (motors as hinges with armature,
+    transmissions as tendons): the accelerations checked equal, MuJoCo's RK4 at a small step
+    as accurate as coopdyn's, and neither Drake nor Exudyn in the rows (they refuse elastic
+    joints)."""
+    import pytest
+
+    pytest.importorskip("mujoco")
+    from coopdyn.bench.cases import ELASTIC_JOINTS
+    from coopdyn.bench.panda_peers import compare
+
+    result = compare((1e5,), t_final=0.05, quick=True, rounds=1, progress=False, task=True, joints=ELASTIC_JOINTS)
+    assert result["checks"]["task k=1e+05, elastic joints (MuJoCo)"] < 1e-12
+    rows = {(r.method, r.setting): r for r in result["rows"]}
+    mine, theirs = rows["rk4", "dt=0.000625"], rows["mujoco RK4", "dt=0.000625"]
+    assert mine.stable and theirs.stable
+    assert theirs.wrench_error == pytest.approx(mine.wrench_error, rel=0.05, abs=1e-9)
+    assert not {r.method.split()[0] for r in result["rows"]} & {"drake", "exudyn"}
+
+
 def test_single_threaded_blas_limits_then_restores() -> None:
     """Inside ``single_threaded_blas`` (what the benchmarks time under) every BLAS library numpy and
     scipy loaded runs one thread (an idle pool's spinning would be charged to the next timed run);

@@ -13,7 +13,7 @@ from typing import Any
 
 from ..dynamics.backend import resolve
 from ..integrators import INTEGRATORS
-from .cases import Case, Row, linear_case, panda_case
+from .cases import ELASTIC_JOINTS, Case, Row, linear_case, panda_case
 from .measure import _implicit_cost, peer_rows, rhs_timing, single_threaded_blas, stability_sweep, work_precision
 from .report import (
     format_implicit_cost,
@@ -35,8 +35,10 @@ def run_peer_comparison(
     """coopdyn against MuJoCo (with coopdyn's law compiled, and with it in Python), and Drake and
     Exudyn when installed (:mod:`.panda_peers`): the perturbed benchmark on two Pandas, k = 1e4
     and 1e6 N/m, and one Panda (a 7-link chain holding the box), k = 1e4; and the demo's task,
-    damped, at k = 1e4 … 1e7 N/m (``"task"``). Writes ``peers.csv``/``peers.png`` and
-    ``task_peers.csv``/``task_peers.png`` (work–precision, every simulator on the same axes) and
+    damped, at k = 1e4 … 1e7 N/m (``"task"``), and on arms with elastic joints at k = 1e5 N/m
+    against MuJoCo (``"elastic_joints"``: the motors as hinges with armature, the transmissions as
+    tendons). Writes ``peers.csv``/``peers.png``, ``task_peers.csv``/``task_peers.png`` and
+    ``elastic_joints_peers.csv``/``.png`` (work–precision, every simulator on the same axes) and
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
 
     Raises:
@@ -59,11 +61,22 @@ def run_peer_comparison(
             progress=progress,
             task=True,
         )
+        elastic = compare(
+            (1e5,),
+            t_final=0.4 if quick else 1.25,
+            quick=quick,
+            rounds=rounds,
+            progress=progress,
+            task=True,
+            joints=ELASTIC_JOINTS,
+        )
     files = {
         "rows": write_csv(result["rows"], out_dir / "peers.csv"),
         "chart": plot_work_precision(result["rows"], out_dir / "peers.png"),
         "task_rows": write_csv(task["rows"], out_dir / "task_peers.csv"),
         "task_chart": plot_work_precision(task["rows"], out_dir / "task_peers.png"),
+        "elastic_rows": write_csv(elastic["rows"], out_dir / "elastic_joints_peers.csv"),
+        "elastic_chart": plot_work_precision(elastic["rows"], out_dir / "elastic_joints_peers.png"),
     }
     report = "\n\n".join(
         [
@@ -71,10 +84,12 @@ def run_peer_comparison(
             format_comparison(result),
             format_rows(task["rows"]),
             format_comparison(task),
+            format_rows(elastic["rows"]),
+            format_comparison(elastic),
             "\n".join(f"wrote {path}  ({name})" for name, path in files.items()),
         ]
     )
-    return {**result, "task": task, "files": files, "report": report}
+    return {**result, "task": task, "elastic_joints": elastic, "files": files, "report": report}
 
 
 def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:

@@ -11,6 +11,7 @@ import numpy as np
 from ..control import GravityCompensationPD, GripLiftOscillate, ObjectImpedance
 from ..errors import SimulationError
 from ..integrators import INTEGRATORS
+from ..model.elastic_joints import JointElasticity
 from ..model.scene import Scene
 from ..problems.facing_arms import facing_arms, object_start
 from ..problems.linear_book import BookParameters, Drive, book_task, drives_controller, linear_book, linear_book_exact
@@ -115,14 +116,24 @@ TASK_PACE = dict(squeeze=20.0, t_grip=0.2, t_lift=0.3, lift_duration=0.4, t_osc=
 TASK_DAMPING = 0.002
 
 
-def task_case(stiffness: float, t_final: float = 1.25, reference_rtol: float = 1e-11) -> Case:
+#: the elastic joints of the task benchmark's elastic variant (examples/elastic_joints.py's)
+ELASTIC_JOINTS = JointElasticity(stiffness=1e4, motor_inertia=0.5, damping=5.0)
+
+
+def task_case(
+    stiffness: float, t_final: float = 1.25, reference_rtol: float = 1e-11, joints: JointElasticity | None = None
+) -> Case:
     """The demo's task as a benchmark: two Pandas grip a 2 kg box (20 N squeeze), lift it 0.1 m
     and oscillate it one cycle at 2 Hz (:data:`TASK_PACE`, 1.2 s), damped interconnections
     (D = 0.002 s · K) at ``stiffness`` [N/m], ObjectImpedance, from rest at the scene's start:
     the realistic regime, where the spring modes are excited only weakly; reference:
-    Dormand–Prince at a tight tolerance."""
+    Dormand–Prince at a tight tolerance. ``joints``: every joint of both arms elastic
+    (:class:`coopdyn.JointElasticity`), the same task through the motors."""
     scene = facing_arms("panda", stiffness=stiffness, damping=TASK_DAMPING)
+    if joints is not None:
+        scene = Scene([a.replace(elasticity=joints) for a in scene.arm_specs], scene.object, scene.interconnection_specs)
     ctrl = ObjectImpedance(scene, GripLiftOscillate(start=object_start(scene), **TASK_PACE))
     v0 = np.zeros(scene.nv)
     reference = _tight_reference(scene, ctrl, t_final, v0, reference_rtol)
-    return Case(f"task k={stiffness:.0e}", scene, ctrl, t_final, v0, reference, f"dopri5 rtol={reference_rtol:g}")
+    name = f"task k={stiffness:.0e}" + (", elastic joints" if joints is not None else "")
+    return Case(name, scene, ctrl, t_final, v0, reference, f"dopri5 rtol={reference_rtol:g}")

@@ -10,9 +10,10 @@ passive forces — the MuJoCo peer of the benchmark's Panda scenes, two ways:
   controller's Python ``__call__``) — what a Python user writes first, and what MuJoCo's
   documentation warns is slow; kept as a labelled second row.
 
-What is carried over: every joint's placement, axis and inertia; gravity; joint damping; the
-initial state; the tip and grasp frames. What is not: geometry (collisions are off, as in
-coopdyn), joint limits and armature (coopdyn has neither). A MuJoCo weld is not a spring (it
+What is carried over: every joint's placement, axis and inertia; gravity; joint damping and
+armature; elastic joints (the motors' hinges, their transmissions as tendons); the initial
+state; the tip and grasp frames. What is not: geometry (collisions are off, as in coopdyn) and
+joint limits (coopdyn has none). A MuJoCo weld is not a spring (it
 sets a reference acceleration), so each interconnection's wrench is coopdyn's own element law.
 The controller runs in ``mjcb_control`` (at every stage of RK4). Before any timing,
 :meth:`MujocoScene.check` compares MuJoCo's accelerations with coopdyn's at random states.

@@ -168,7 +168,8 @@ def _exudyn_takes(case: Case) -> bool:
     in Exudyn's own kinematic tree (its PD vector), not the object impedance of the task."""
     from ..control import GravityCompensationPD
 
-    return case.controller is None or isinstance(case.controller, GravityCompensationPD)
+    rigid = not case.scene.joint_springs.size  # (nor elastic joints)
+    return rigid and (case.controller is None or isinstance(case.controller, GravityCompensationPD))
 
 
 def _check(checks: dict[str, float], case: Case, peer: str, difference: float) -> None:
@@ -190,10 +191,12 @@ def compare(
     progress: bool = True,
     chain: bool = True,
     task: bool = False,
+    joints: Any = None,
 ) -> dict[str, Any]:
     """Run the comparison on two Pandas at each stiffness and (``chain``) one Panda at the first
     (the perturbed benchmark: undamped, kicked by a random start), or with ``task`` on the demo's
-    task at each stiffness (:func:`.cases.task_case`: damped, grip–lift–oscillate); returns
+    task at each stiffness (:func:`.cases.task_case`: damped, grip–lift–oscillate; with ``joints``,
+    a :class:`coopdyn.JointElasticity`, on arms with elastic joints — MuJoCo only); returns
     ``rows`` (:class:`Row`, the peers' methods named ``"mujoco …"``, ``"drake …"``,
     ``"exudyn …"``) and ``checks`` (``"scene (MuJoCo)"`` / ``"scene (Drake)"`` → largest
     relative difference between that peer's accelerations and coopdyn's)."""
@@ -201,7 +204,7 @@ def compare(
     from .mujoco_scene import MujocoScene
 
     if task:
-        cases = [task_case(k, t_final) for k in stiffnesses]
+        cases = [task_case(k, t_final, joints=joints) for k in stiffnesses]
     else:
         cases = [panda_case(k, t_final) for k in stiffnesses]
         if chain:  # one Panda: a 7-link revolute chain holding the box by one spring
@@ -229,7 +232,7 @@ def compare(
                     (case, f"mujoco {mj}{PYTHON_CALLBACKS}", f"dt={dt:g}", dt, math.nan, _mujoco_point(case, mj, dt, False))
                     for dt in _steps(quick)
                 ]
-        if drake_available():
+        if drake_available() and not case.scene.joint_springs.size:  # (the Drake peer has no elastic joints)
             from .drake_scene import DrakeScene
 
             _check(checks, case, "Drake", DrakeScene(case.scene, case.controller).check())
