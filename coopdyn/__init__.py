@@ -41,6 +41,7 @@ from .model import (
     rigid_limit,
 )
 from .result import Result
+from .rollout import Rollouts, rollout
 from .simulate import simulate
 from .simulator import Simulator
 from .stability import Advice, advise
@@ -68,6 +69,7 @@ __all__ = [
     "OutputError",
     "Result",
     "RigidObject",
+    "Rollouts",
     "Scene",
     "SceneError",
     "SceneFileError",
@@ -95,6 +97,7 @@ __all__ = [
     "quasi_static",
     "reference",
     "rigid_limit",
+    "rollout",
     "scenes",
     "simulate",
     "sweep",

@@ -129,6 +129,13 @@ class GravityPDSpec(ControllerSpec):
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
+class TorqueSequenceSpec(ControllerSpec):
+    name: ClassVar[str] = "torque_sequence"
+    torques: np.ndarray  #: (N, n_actuated) [N·m or N], each held for one period
+    period: float  #: [s]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class MotorPDSpec(ControllerSpec):
     name: ClassVar[str] = "motor_pd"
     kp: np.ndarray  #: (n_actuated,) [N·m/rad or N/m]

@@ -77,9 +77,11 @@ def _native_loop(kernel: object, config: dict[str, object]) -> object:
 def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
     """The built-in controllers' compiled_spec() kinds (and "none" for no controller) are the
     kinds the kernel's controller registry (src/native/controllers/) holds, no more, no less."""
+    import numpy as np
+
     import coopdyn as cd
     from coopdyn import _native
-    from coopdyn.control import ComputedTorque, GravityCompensationPD, MotorPD
+    from coopdyn.control import ComputedTorque, GravityCompensationPD, MotorPD, TorqueSequence
     from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
     from coopdyn.scenes import object_start
 
@@ -93,6 +95,7 @@ def test_every_compiled_controller_is_one_registry_entry_on_each_side() -> None:
     built_in = [
         (GravityCompensationPD(pandas), pandas),
         (MotorPD(elastic), elastic),
+        (TorqueSequence(pandas, np.zeros((2, pandas.n_actuated)), 0.01), pandas),
         (ComputedTorque(pandas), pandas),
         (ObjectImpedance(pandas), pandas),
         (ObjectImpedance(pandas, GripLiftOscillate(start=object_start(pandas))), pandas),

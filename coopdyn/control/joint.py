@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from .. import _validate
-from .._spec import ComputedTorqueSpec, GravityPDSpec, MotorPDSpec
+from .._spec import ComputedTorqueSpec, GravityPDSpec, MotorPDSpec, TorqueSequenceSpec
 from ..errors import SceneError
 from ..model.elastic_joints import motors_at_links, q_entries, turned
 from ..model.scene import Scene
@@ -213,3 +214,36 @@ class MotorPD:
         q_bar[self._link_entries] = q[self._motor_entries]
         q_bar = turned(model, q_bar, self._springs.link_v, -self._bias)  # θ̄ = θ − K⁻¹ g(q_d), link coordinates
         return tau + pin.computeGeneralizedGravity(model, self._data, q_bar)[self._arm_joints]
+
+
+class TorqueSequence:
+    """Torques given in advance: ``torques[k]`` from ``k·period`` to ``(k + 1)·period`` (zero-order
+    hold), the last one held to the end — an open-loop input, as :func:`coopdyn.rollout` plays.
+
+    Args:
+        scene: the scene.
+        torques: (N, n_actuated) [N·m or N] (an elastic joint's: its motor's).
+        period: how long each row is held [s].
+    """
+
+    def __init__(self, scene: Scene, torques: Any, period: float) -> None:
+        n = _scene(scene, "TorqueSequence", elastic=True).n_actuated
+        self.scene = scene
+        self.torques = _validate.finite_array(torques, "TorqueSequence: torques [N·m or N]")
+        if self.torques.ndim != 2 or self.torques.shape[1] != n or self.torques.shape[0] < 1:
+            raise SceneError(
+                f"TorqueSequence: torques must be (N, {n}): one row of the {n} arm torques per period, got shape "
+                f"{self.torques.shape}"
+                f"{self.torques.shape}"
+            )
+        self.period = _validate.positive(period, "TorqueSequence: period", "s")
+
+    def compiled_spec(self, scene: Scene) -> TorqueSequenceSpec | None:
+        """This law for the compiled step loop (None: the scene is not this controller's)."""
+        if scene is not self.scene:
+            return None
+        return TorqueSequenceSpec(torques=self.torques.copy(), period=float(self.period))
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        k = math.floor(t / self.period)
+        return self.torques[min(max(k, 0), len(self.torques) - 1)].copy()
