@@ -234,14 +234,7 @@ class Result:
         [N] and mx, my, mz [N·m] about the grasp point, world axes); a CSV column is named by
         both, e.g. ``"q left/panda_joint1 [rad]"``, ``"v object.vx [m/s; body axes]"``,
         ``"wrench left.fz [N; world axes]"``."""
-        q_names, v_names = self.scene.coordinates()
-        tau = [v_names[i].replace("[rad/s]", "[N·m]").replace("[m/s]", "[N]") for i in self.scene.actuated]
-        wrench = [
-            f"{lk.name}.{c} [{'N; world axes' if c[0] == 'f' else 'N·m; world axes; about the grasp'}]"
-            for lk in self.scene.links
-            for c in ("fx", "fy", "fz", "mx", "my", "mz")
-        ]
-        return {"t": ["t [s]"], "q": q_names, "v": v_names, "tau": tau, "wrench": wrench}
+        return _columns(self.scene)
 
     def to_dataframe(self) -> Any:
         """The run as a pandas DataFrame, one row per sample, every column named with its unit
@@ -372,7 +365,7 @@ class Result:
                     f"{RESULT_FORMAT!r}: open it with the coopdyn that wrote it, or run the simulation again"
                 )
             meta.pop("coopdyn")
-            meta.pop("columns")
+            saved_columns = meta.pop("columns")
             _check_meta(meta)
             scene = build(meta.pop("scene"))
         except SimulationError:
@@ -382,6 +375,13 @@ class Result:
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise SimulationError(f"{path}: not a result coopdyn wrote, or damaged ({type(exc).__name__}: {exc})") from exc
         t = arrays["t"]
+        rebuilt = {key: names for key, names in _columns(scene).items() if key in ("q", "v", "tau")}
+        if any(saved_columns.get(key) != names for key, names in rebuilt.items()):
+            key = next(k for k, names in rebuilt.items() if saved_columns.get(k) != names)
+            raise SimulationError(
+                f"{path}: its {key} columns are not those its rebuilt scene has (saved by a coopdyn that ordered the "
+                f"coordinates otherwise, e.g. elastic joints' motors before the object); run the simulation again"
+            )
         if t.ndim != 1 or t.dtype.kind != "f":
             raise SimulationError(f"{path}: t must be a list of times [s], got {t.dtype} of shape {t.shape} (a damaged file?)")
         if np.any(np.diff(t) <= 0):
@@ -433,6 +433,18 @@ class Result:
     def object_position(self) -> np.ndarray:
         """World position of the object frame origin (n, 3) [m]."""
         return self.readouts.object_position
+
+
+def _columns(scene: Scene) -> dict[str, list[str]]:
+    """:meth:`Result.columns` of a scene's runs."""
+    q_names, v_names = scene.coordinates()
+    tau = [v_names[i].replace("[rad/s]", "[N·m]").replace("[m/s]", "[N]") for i in scene.actuated]
+    wrench = [
+        f"{lk.name}.{c} [{'N; world axes' if c[0] == 'f' else 'N·m; world axes; about the grasp'}]"
+        for lk in scene.links
+        for c in ("fx", "fy", "fz", "mx", "my", "mz")
+    ]
+    return {"t": ["t [s]"], "q": q_names, "v": v_names, "tau": tau, "wrench": wrench}
 
 
 def _write_csv(path: Path, names: list[str], columns: list[np.ndarray]) -> None:

@@ -418,7 +418,7 @@ def test_grip_lift_oscillate_on_elastic_arms_compiled_equals_python() -> None:
     assert np.all(kp[motors] == 0.0) and np.all(kd[motors] > 0.0)  # the fast term's −∂τ/∂θ̇, on the motors
 
 
-def test_infinite_stiffness_is_the_rigid_joint_with_the_motor_inertia_as_armature() -> None:
+def test_infinite_stiffness_is_the_rigid_joint_with_the_motor_inertia_as_armature(tmp_path: Path) -> None:
     """K = inf: no motor coordinate, B on the joint's diagonal of the mass matrix, the motor
     friction on the joint; it survives a scene file (TOML has inf)."""
     import math
@@ -435,7 +435,10 @@ def test_infinite_stiffness_is_the_rigid_joint_with_the_motor_inertia_as_armatur
     M, M_rigid = (pin.crba(s.model, s.model.createData(), s.q0) for s in (scene, rigid))
     link = arm.v_index[[0, 2]]
     np.testing.assert_allclose(np.diag(M)[link] - np.diag(M_rigid)[link], 0.05, rtol=1e-12)
-    assert describe(build(describe(scene)))["arms"][0]["elasticity"]["stiffness"] == [math.inf, 2000.0, math.inf]
+    assert describe(build(describe(scene)))["arms"][0]["elasticity"]["stiffness"] == ["inf", 2000.0, "inf"]  # (JSON-safe)
+    res = cd.simulate(scene, 0.01, None, "rk4", dt=1e-3)
+    res.save(tmp_path / "geared.npz")  # (a saved result's description is JSON)
+    assert cd.Result.load(tmp_path / "geared.npz").scene.arms[0].damping.tolist() == [0.3, 0.0, 0.3]
     for backend in ("python", "native"):
         e = cd.Dynamics(scene, backend).energy(q, np.ones(scene.nv))
         assert e.kinetic == pytest.approx(0.5 * np.ones(scene.nv) @ M @ np.ones(scene.nv), rel=1e-12)
@@ -567,3 +570,38 @@ def test_what_takes_rigid_joints_only_says_so() -> None:
         with pytest.raises(cd.errors.SimulationError, match="does not model elastic joints"):
             peer(elastic, None)
     assert scene.joint_springs.size == 0
+
+
+def test_an_elasticity_sub_table_s_bad_key_has_its_line(tmp_path: Path) -> None:
+    from coopdyn.io.scenefile import SceneFileError, load
+
+    text = (Path(__file__).resolve().parents[1] / "examples" / "scenes" / "two_ur5s_elastic_joints.toml").read_text()
+    first = (
+        "elasticity = { stiffness = 2e4, motor_inertia = 0.2, damping = 5.0 }   # [N·m/rad], [kg·m²] at the joint, [N·m·s/rad]\n"
+    )
+    assert first in text
+    head, tail = text.split(first)
+    second_arm = tail.index("[[arms]]")
+    sub = "[arms.elasticity]\nstiffness = 2e4\nmotor_inertia = 0.2\ndampin = 5.0\n\n"
+    path = tmp_path / "sub.toml"
+    path.write_text(head + tail[:second_arm] + sub + tail[second_arm:])
+    line = (head + tail[:second_arm] + sub).splitlines().index("dampin = 5.0") + 1
+    with pytest.raises(SceneFileError, match=rf"line {line}: \[\[arms\]\] #1 elasticity\.dampin: unknown key"):
+        load(path)
+
+
+def test_a_result_saved_with_other_columns_is_refused(tmp_path: Path) -> None:
+    """A saved result whose columns are not its rebuilt scene's (an older layout) is refused,
+    not read with its coordinates in the wrong places."""
+    import json
+
+    scene = free_arm_scene(cd.JointElasticity(2e3, 0.05))
+    res = cd.simulate(scene, 0.01, None, "rk4", dt=1e-3)
+    res.save(tmp_path / "run.npz")
+    arrays = dict(np.load(tmp_path / "run.npz"))
+    meta = json.loads(str(arrays["meta"]))
+    meta["columns"]["q"] = meta["columns"]["q"][::-1]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "old.npz", **arrays)
+    with pytest.raises(cd.errors.SimulationError, match="q columns are not those its rebuilt scene has"):
+        cd.Result.load(tmp_path / "old.npz")

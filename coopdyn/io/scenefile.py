@@ -96,14 +96,26 @@ class _File:
             start = hits[index or 0]
             if key is None:
                 return start + 1
-        first = (key or "").split(".")[0]  # ("elasticity.stiffness": the line of an inline table's key)
+        first, _, rest = (key or "").partition(".")  # ("elasticity.stiffness": a sub-table's key)
         pattern = re.compile(rf"^\s*{re.escape(first)}\s*=")
         for i in range(start + (1 if table else 0), len(self.lines)):
             if table is not None and i > start and re.match(r"^\s*\[", self.lines[i]):
+                if rest and re.match(rf"^\s*\[\s*{re.escape(table)}\.{re.escape(first)}\s*\]", self.lines[i]):
+                    return self._key_after(i, rest)  # (written as a [table.sub] table of its own)
+                break
+            if pattern.match(self.lines[i]):
+                return i + 1  # (an inline table: its line)
+        return None
+
+    def _key_after(self, header: int, key: str) -> int | None:
+        """1-based line of ``key`` in the table whose header is at ``header`` (0-based), or of the header."""
+        pattern = re.compile(rf"^\s*{re.escape(key)}\s*=")
+        for i in range(header + 1, len(self.lines)):
+            if re.match(r"^\s*\[", self.lines[i]):
                 break
             if pattern.match(self.lines[i]):
                 return i + 1
-        return None
+        return header + 1
 
     def error(self, message: str, table: str | None, key: str | None = None, index: int | None = None) -> SceneFileError:
         line = self.line(table, key, index)

@@ -55,7 +55,7 @@ KIND_SCHEMAS: dict[str, dict[str, Any]] = {
     "masses": {"type": "object", "additionalProperties": NUMBER},
     "parameters": {"type": "object", "additionalProperties": NUMBER},
     "paths": {"type": "array", "items": {"type": "string", "minLength": 1}},
-    "per_joint": {"oneOf": [NUMBER, NUMBERS]},
+    "per_joint": {"oneOf": [NUMBER, {"const": "inf"}, {"type": "array", "items": {"oneOf": [NUMBER, {"const": "inf"}]}}]},
     "joint_names": {"type": "array", "items": {"type": "string"}, "minItems": 1},
 }
 

@@ -59,7 +59,7 @@ KINDS = {
     "parameters": "a table: parameter name = number (the element's own parameters, with their units)",
     "paths": "a list of folder paths",
     "section": "a table: shape = 'rectangle' | 'circle' with its dimensions, or the section's properties",
-    "per_joint": "a number, or one number per elastic joint",
+    "per_joint": 'a number, or one number per elastic joint (a stiffness may be inf or "inf")',
     "joint_names": "a list of joint names",
     "elasticity": "a table: stiffness, motor_inertia (required), damping, gear_ratio, motor_damping, joints",
 }
@@ -214,9 +214,13 @@ def _describe_arm(arm: Arm) -> dict[str, Any]:
         out["elasticity"] = {
             key: numbers(getattr(el, key), f"{what}.{key}") for key in ("motor_inertia", "damping", "gear_ratio", "motor_damping")
         }
-        stiffness = np.asarray(el.stiffness, dtype=float)  # (+inf, a rigid transmission, is a TOML number)
-        finite = np.asarray(numbers(np.where(np.isposinf(stiffness), 1.0, stiffness), f"{what}.stiffness"))
-        out["elasticity"]["stiffness"] = np.where(np.isposinf(stiffness), np.inf, finite).tolist()
+        stiffness = np.asarray(el.stiffness, dtype=float)  # (+inf, a rigid transmission: "inf", which JSON can hold)
+        finite = numbers(np.where(np.isposinf(stiffness), 1.0, stiffness), f"{what}.stiffness")
+        rigid = np.isposinf(stiffness)
+        if stiffness.ndim == 0:
+            out["elasticity"]["stiffness"] = "inf" if rigid else finite
+        else:
+            out["elasticity"]["stiffness"] = ["inf" if r else x for r, x in zip(rigid, finite, strict=True)]
         if el.joints is not None:
             out["elasticity"]["joints"] = [str(j) for j in el.joints]
     return out
@@ -353,10 +357,15 @@ def _value(kind: str, value: Any, where: Location) -> Any:
         return _section(value, where)
     if kind == "elasticity":
         return _elasticity(value, where)
-    if kind == "per_joint":  # (JointElasticity checks the values; its stiffness may be +inf)
-        numeric = isinstance(value, int | float) and not isinstance(value, bool)
-        if numeric or (isinstance(value, list) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
-            return value
+    if kind == "per_joint":  # (JointElasticity checks the values; a stiffness may be +inf, "inf" in JSON)
+
+        def number(v: Any) -> bool:
+            return (isinstance(v, int | float) and not isinstance(v, bool)) or v == "inf"
+
+        if isinstance(value, list) and all(number(v) for v in value):
+            return [math.inf if v == "inf" else v for v in value]
+        if number(value):
+            return math.inf if value == "inf" else value
         raise bad()
     if kind == "joint_names":
         if isinstance(value, list) and value and all(isinstance(v, str) for v in value):

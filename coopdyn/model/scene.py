@@ -86,9 +86,11 @@ def available_memory() -> float | None:
 MEMORY_SHARE = 0.5  #: the part of the available memory a scene's Pinocchio data may take
 
 
-def check_memory(nv: int, obj: SceneObject) -> None:
-    """Refuse, before anything big is allocated, a model whose Pinocchio data would not fit."""
-    need = DATA_ALIVE * data_bytes(nv)
+def check_memory(nv: int, obj: SceneObject, links_nv: int | None = None) -> None:
+    """Refuse, before anything big is allocated, a model whose Pinocchio data would not fit
+    (``links_nv``: the links' model's, whose Data the compiled kernel holds too when the scene
+    has elastic joints' motors)."""
+    need = DATA_ALIVE * data_bytes(nv) + (data_bytes(links_nv) if links_nv is not None else 0.0)
     available = available_memory()
     if available is None:
         return
@@ -216,7 +218,8 @@ class Scene:
 
         arm_infos = tuple(_arm_info(model, la, None) for la in loaded)  # (the motors come last: below)
         q0 = np.concatenate([la.q0 for la in loaded] + [q_obj])
-        check_memory(model.nv + _motor_count(loaded), obj)
+        motor_count = _motor_count(loaded)
+        check_memory(model.nv + motor_count, obj, model.nv if motor_count else None)
         data = pin.Data(model)  # (createData() copies it once more: twice the peak)
         pin.framesForwardKinematics(model, data, q0)
         o_frame = model.getFrameId(obj.name)

@@ -120,11 +120,12 @@ public:
     // springs couple them to the links — every Pinocchio pass runs on the links' model, each
     // motor is solved beside it, and the step matrix eliminates them in O(m) (factor()).
     eliminate_ = !springs_.empty();
-    if (eliminate_) {
-      Data tmp(full_model_);
-      pinocchio::crba(full_model_, tmp, pinocchio::neutral(full_model_));
+    if (eliminate_) {  // each motor's B: its rotor's inertia about its axis (z), plus any armature
       B_.resize(nv_ - nvl_);
-      for (Eigen::Index i = nvl_; i < nv_; ++i) B_[i - nvl_] = tmp.M(i, i);
+      for (pinocchio::JointIndex j = model_.njoints; j < full_model_.njoints; ++j) {
+        const auto i = full_model_.joints[j].idx_v();
+        B_[i - nvl_] = full_model_.inertias[j].inertia().matrix()(2, 2) + full_model_.armature[i];
+      }
       M_.setZero(nv, nv);
       acc_.setZero(nv);
       tau_link_.setZero(nvl_);
