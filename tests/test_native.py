@@ -160,17 +160,7 @@ def test_gravity_and_external_forces_are_right_for_every_joint_kind() -> None:
     right-hand side with the element's wrench as ABA's external forces is M⁻¹ f of the implicit
     terms, which map the same wrench through the frame Jacobians (with an object wrench too)."""
     model, actuated, tip, grasp, frame = _every_joint_kind_arm()
-    K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
-    kernel = backend.kernel_module().Kernel(
-        model,
-        model.createData(),
-        [("se3", tip, grasp, {"K": K, "D": D})],
-        np.zeros(model.nv),
-        actuated,
-        frame,
-        np.zeros(0),
-        model,
-    )
+    kernel = _se3_kernel(model, actuated, tip, grasp, frame)
     rng, data = np.random.default_rng(1), model.createData()
     for _ in range(10):
         q = pin.integrate(model, pin.neutral(model), rng.normal(size=model.nv))
@@ -182,6 +172,15 @@ def test_gravity_and_external_forces_are_right_for_every_joint_kind() -> None:
             _close(kernel.acceleration(q, v, tau, w), np.linalg.solve(M, f))
 
 
+def _se3_kernel(model: pin.Model, actuated: np.ndarray, tip: int, grasp: int, frame: int) -> object:
+    """A kernel of ``model`` (no elastic joints) with one damped SE(3) spring between tip and grasp."""
+    K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
+    links = [("se3", tip, grasp, {"K": K, "D": D})]
+    return backend.kernel_module().Kernel(
+        model, model.createData(), links, np.zeros(model.nv), actuated, frame, np.zeros(0), model
+    )
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_the_articulated_body_pass_is_pinocchios_aba(seed: int) -> None:
     """The kernel's articulated-body pass, which starts from its kinematics pass instead of
@@ -189,17 +188,7 @@ def test_the_articulated_body_pass_is_pinocchios_aba(seed: int) -> None:
     (the element's wrench on the joints carrying G and T), on every joint kind, with rotor armature:
     the same operations in the same order, so the same bits."""
     model, actuated, tip, grasp, frame = _every_joint_kind_arm(multi_dof=True)
-    K, D = np.diag([300.0, 500.0, 700.0, 20.0, 30.0, 40.0]), np.diag([2.0, 3.0, 4.0, 0.1, 0.2, 0.3])
-    kernel = backend.kernel_module().Kernel(
-        model,
-        model.createData(),
-        [("se3", tip, grasp, {"K": K, "D": D})],
-        np.zeros(model.nv),
-        actuated,
-        frame,
-        np.zeros(0),
-        model,
-    )
+    kernel = _se3_kernel(model, actuated, tip, grasp, frame)
     rng, data = np.random.default_rng(seed), model.createData()
     G, T = model.frames[grasp], model.frames[tip]
     q = pin.integrate(model, pin.neutral(model), rng.normal(size=model.nv))
