@@ -13,7 +13,11 @@ For each method, interleaved run by run in one process (medians of ``--repeats``
     Dormand–Prince its rejected attempts and shortened landing steps included). The controller is
     not in this column (the loops include it).
 
-    .venv/bin/python benchmarks/step_cost.py [--repeats 5] [--seconds 2]
+    .venv/bin/python benchmarks/step_cost.py [--repeats 5] [--seconds 2] [--elastic-joints]
+
+``--elastic-joints``: the same scene with every arm joint elastic (K = 1e4 N·m/rad, B = 0.5 kg·m²,
+D = 5 N·m·s/rad) under ``MotorPD`` 50/5 instead (``benchmarks/elastic_joint_cost.py`` sets the two
+scenes side by side).
 """
 
 from __future__ import annotations
@@ -21,12 +25,13 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from typing import Any
 
 import numpy as np
 
 import coopdyn as cd
 from coopdyn.bench import single_threaded_blas
-from coopdyn.control import GravityCompensationPD
+from coopdyn.control import GravityCompensationPD, MotorPD
 
 METHODS = ("symplectic_euler", "rk4", "implicit_euler", "ros2", "trapezoid", "generalized_alpha", "dopri5")
 EXPLICIT = ("symplectic_euler", "rk4", "dopri5")
@@ -59,9 +64,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=2.0, help="simulated time per run [s]")
+    parser.add_argument("--elastic-joints", action="store_true", help="every arm joint elastic, under MotorPD")
     args = parser.parse_args()
     scene = cd.scenes.facing_arms("panda", stiffness=1e4)
-    ctrl = GravityCompensationPD(scene, 50.0, 5.0)
+    ctrl: Any = GravityCompensationPD(scene, 50.0, 5.0)
+    if args.elastic_joints:
+        joints = cd.JointElasticity(stiffness=1e4, motor_inertia=0.5, damping=5.0)
+        scene = cd.Scene([a.replace(elasticity=joints) for a in scene.arm_specs], scene.object, scene.interconnection_specs)
+        ctrl = MotorPD(scene, 50.0, 5.0)
     v0 = np.random.default_rng(0).normal(size=scene.nv) * 0.3
     dyn = cd.Dynamics(scene, "native")
     tau = ctrl(0.0, scene.q0, v0)
@@ -88,7 +98,8 @@ def main() -> None:
                         rhs_per_step[method] = res.n_rhs / res.n_steps  # incl. rejected attempts and short landing steps
                 work = _kernel_work(dyn, method, scene.q0, v0, tau, 2000, rhs_per_step[method])
                 times.setdefault((method, "kernel"), []).append(work)
-    print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; two Pandas + box, k = 1e4 N/m")
+    what = "two Pandas with elastic joints + box" if args.elastic_joints else "two Pandas + box"
+    print(f"CPU per step [µs], median of {args.repeats} interleaved runs of {args.seconds:g} s; {what}, k = 1e4 N/m")
     head = (
         f"{'method':18s} {'compiled':>9s} {'python':>9s} {'kernel':>9s} {'compiled/kernel':>16s} {'python/compiled':>16s}"
         f" {'RHS/step':>9s} {'compiled/RHS':>13s}"
