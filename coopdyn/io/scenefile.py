@@ -97,25 +97,22 @@ class _File:
             if key is None:
                 return start + 1
         first, _, rest = (key or "").partition(".")  # ("elasticity.stiffness": a sub-table's key)
-        pattern = re.compile(rf"^\s*{re.escape(first)}\s*=")
-        for i in range(start + (1 if table else 0), len(self.lines)):
-            if table is not None and i > start and re.match(r"^\s*\[", self.lines[i]):
-                if rest and re.match(rf"^\s*\[\s*{re.escape(table)}\.{re.escape(first)}\s*\]", self.lines[i]):
-                    return self._key_after(i, rest)  # (written as a [table.sub] table of its own)
-                break
-            if pattern.match(self.lines[i]):
-                return i + 1  # (an inline table: its line)
-        return None
+        found, end = self._key_line(start + (1 if table else 0), first, stop_at_table=table is not None)
+        if found is None and rest and end is not None:  # written as a [table.sub] table of its own
+            if re.match(rf"^\s*\[\s*{re.escape(table or '')}\.{re.escape(first)}\s*\]", self.lines[end]):
+                return self._key_line(end + 1, rest, stop_at_table=True)[0] or end + 1
+        return found
 
-    def _key_after(self, header: int, key: str) -> int | None:
-        """1-based line of ``key`` in the table whose header is at ``header`` (0-based), or of the header."""
+    def _key_line(self, start: int, key: str, stop_at_table: bool) -> tuple[int | None, int | None]:
+        """(1-based line of ``key = …`` from line ``start`` (0-based) on, or None; the 0-based line of
+        the next table header that stopped the search, or None)."""
         pattern = re.compile(rf"^\s*{re.escape(key)}\s*=")
-        for i in range(header + 1, len(self.lines)):
-            if re.match(r"^\s*\[", self.lines[i]):
-                break
+        for i in range(start, len(self.lines)):
+            if stop_at_table and re.match(r"^\s*\[", self.lines[i]):
+                return None, i
             if pattern.match(self.lines[i]):
-                return i + 1
-        return header + 1
+                return i + 1, None
+        return None, None
 
     def error(self, message: str, table: str | None, key: str | None = None, index: int | None = None) -> SceneFileError:
         line = self.line(table, key, index)

@@ -291,18 +291,22 @@ def _tables(value: Any, table: str) -> list[Mapping[str, Any]]:
     return list(value)
 
 
-def _keys(entry: Mapping[str, Any], fields: Mapping[str, Field], where: Location, extra: tuple[str, ...] = ()) -> None:
+def _keys(
+    entry: Mapping[str, Any], fields: Mapping[str, Field], where: Location, extra: tuple[str, ...] = (), prefix: str = ""
+) -> None:
+    """Refuse unknown and missing keys (``prefix``: a sub-table's name and a dot, in the location)."""
     for key in entry:
         if key not in fields and key not in extra:
             valid = sorted([*fields, *extra])
-            raise DescriptionError(f"unknown key; valid keys: {valid}.{did_you_mean(str(key), valid)}", where._replace(key=key))
+            message = f"unknown key; valid keys: {valid}.{did_you_mean(str(key), valid)}"
+            raise DescriptionError(message, where._replace(key=f"{prefix}{key}"))
     missing = [k for k, f in fields.items() if f.required and k not in entry]
     if missing:
         raise DescriptionError(f"missing required key(s) {missing}", where)
 
 
-def _values(entry: Mapping[str, Any], fields: Mapping[str, Field], where: Location) -> dict[str, Any]:
-    return {k: _value(fields[k].kind, v, where._replace(key=k)) for k, v in entry.items() if k in fields}
+def _values(entry: Mapping[str, Any], fields: Mapping[str, Field], where: Location, prefix: str = "") -> dict[str, Any]:
+    return {k: _value(fields[k].kind, v, where._replace(key=f"{prefix}{k}")) for k, v in entry.items() if k in fields}
 
 
 def _value(kind: str, value: Any, where: Location) -> Any:
@@ -445,15 +449,8 @@ def _section(value: Any, where: Location) -> Section:
 def _elasticity(value: Any, where: Location) -> JointElasticity:
     if not isinstance(value, Mapping):
         raise DescriptionError(f"must be {KINDS['elasticity']}, got {_validate._short(value)}", where)
-    for key in value:
-        if key not in ELASTICITY:
-            valid = sorted(ELASTICITY)
-            message = f"unknown key; valid keys: {valid}.{did_you_mean(str(key), valid)}"
-            raise DescriptionError(message, where._replace(key=f"elasticity.{key}"))
-    missing = [k for k, f in ELASTICITY.items() if f.required and k not in value]
-    if missing:
-        raise DescriptionError(f"missing required key(s) {missing}", where)
-    return JointElasticity(**{k: _value(ELASTICITY[k].kind, v, where._replace(key=f"elasticity.{k}")) for k, v in value.items()})
+    _keys(value, ELASTICITY, where, prefix="elasticity.")
+    return JointElasticity(**_values(value, ELASTICITY, where, prefix="elasticity."))
 
 
 def _build_arm(entry: Mapping[str, Any], folder: Path, k: int) -> Arm:
