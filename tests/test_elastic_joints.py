@@ -268,6 +268,7 @@ def test_rigid_joint_controllers_refuse_elastic_arms() -> None:
         (cd.JointElasticity(1000.0, 0.1, gear_ratio=0.5), "gear_ratio"),
         (cd.JointElasticity(float("nan"), 0.1), r"stiffness \[N·m/rad\] must be finite"),
         (cd.JointElasticity(True, 0.1), "stiffness .*must be numeric"),  # type: ignore[arg-type]
+        (cd.JointElasticity(1e308, 0.1), r"stiffness above 1e\+12 .*give math\.inf"),
         (cd.JointElasticity("stiff", 0.1), "stiffness"),  # type: ignore[arg-type]
         ({"stiffness": 1.0}, r"must be a coopdyn\.JointElasticity"),
     ],

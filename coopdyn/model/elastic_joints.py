@@ -86,6 +86,11 @@ def continuous(joint: pin.JointModel) -> bool | None:
     return _DRIVABLE.get(joint.shortname().removeprefix("JointModel"))
 
 
+#: a finite transmission stiffness above this [N·m/rad or N/m] is refused: its spring force would
+#: overflow or its mode outrun any step; math.inf is the rigid limit
+MAX_STIFFNESS = 1e12
+
+
 def resolve(spec: Any, model: pin.Model, what: str, locked: Sequence[str] = ()) -> ResolvedElasticity | None:
     """Check an arm's ``elasticity`` against its (reduced, unprefixed) model, whose ``locked``
     joints were removed."""
@@ -151,6 +156,11 @@ def resolve(spec: Any, model: pin.Model, what: str, locked: Sequence[str] = ()) 
         return np.where(rigid, np.inf, x)
 
     stiffness = per_joint(spec.stiffness, "stiffness", unit("N·m/rad", "N/m"), True, infinite=True)
+    if np.any(np.isfinite(stiffness) & (stiffness > MAX_STIFFNESS)):
+        raise SceneError(
+            f"{what}: elasticity.stiffness above {MAX_STIFFNESS:g} [{unit('N·m/rad', 'N/m')}], got {stiffness.tolist()}: "
+            "give math.inf for a rigid transmission (the motor inertia as the joint's armature)"
+        )
     inertia = per_joint(spec.motor_inertia, "motor_inertia", unit("kg·m²", "kg"), True)
     ratio = _validate.finite_array(spec.gear_ratio, f"{what}, elasticity.gear_ratio")
     ratio = np.full(n, float(ratio)) if ratio.ndim == 0 else ratio

@@ -152,7 +152,7 @@ BOOST_PYTHON_MODULE(_native) {
       bp::args("self", "model", "data", "links", "damping", "actuated", "object_frame", "joint_springs", "link_model")))
     .def("acceleration", &Kernel::acceleration, bp::args("self", "q", "v", "tau", "wrench"))
     .def("implicit_terms", &Kernel::implicit_terms, bp::args("self", "q", "v", "tau", "wrench"))
-    .def("factor", &Kernel::factor, bp::args("self", "M", "K", "D", "gh", "kp", "kd", "gh2"))
+    .def("factor", &Kernel::factor_given, bp::args("self", "M", "K", "D", "gh", "kp", "kd", "gh2"))
     .def("solve", &Kernel::solve, bp::args("self", "f_q", "Mf_v"))
     .def("implicit_euler_velocity", &Kernel::implicit_euler_velocity,
          bp::args("self", "q", "v", "tau", "h", "kp", "kd", "wrench"))

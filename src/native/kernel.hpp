@@ -276,10 +276,18 @@ public:
     return bp::make_tuple(VectorXd(tau_full_), MatrixXd(mass()), MatrixXd(K_t_), MatrixXd(D_t_));
   }
 
+  // factor() for matrices from Python, which need not have the motors' structure: checked, then
+  // eliminated or not.
+  void factor_given(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd,
+                    double gh2) {
+    factor(M, K, D, gh, kp, kd, gh2, true);
+  }
+
   // Factorise S = M + gh (D̃ + Kd) + gh2 (K̃ + Kp) from the last implicit_terms (or given matrices);
-  // gh2 = gh² but for generalized-α.
+  // gh2 = gh² but for generalized-α. The motors are eliminated: the kernel's own matrices have
+  // their structure by construction (`check`: matrices from elsewhere are checked first).
   void factor(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd,
-              double gh2) {
+              double gh2, bool check = false) {
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
     const auto nv = nv_;
@@ -297,7 +305,7 @@ public:
       factored_ = false;
       throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
     }
-    eliminated_ = eliminate_ && motors_decoupled();
+    eliminated_ = eliminate_ && (!check || motors_decoupled());
     if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
       S_a_ = S_.topLeftCorner(nvl_, nvl_);
       for (const auto & sp : springs_.springs) {
@@ -820,7 +828,7 @@ private:
   VectorXd b_a_, x_;
 
   // Whether every motor's row of S_ holds only its diagonal and its link (what the elimination
-  // takes; true by construction — checked, not assumed).
+  // takes; true of the kernel's own matrices by construction).
   bool motors_decoupled() const {
     for (const auto & sp : springs_.springs)
       for (Eigen::Index j = 0; j < S_.cols(); ++j)

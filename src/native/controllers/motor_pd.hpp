@@ -15,12 +15,13 @@ namespace coopdyn_native {
 struct MotorPD : Controller {
   MotorPD(Kernel & kernel, VectorXd kp, VectorXd kd, VectorXd target, VectorXd g_d, bool online,
           Eigen::VectorXi arm_joints, MatrixXd elastic)
-    : kernel(kernel), model(kernel.model()), act(kernel.actuated()), kp(std::move(kp)), kd(std::move(kd)),
-      target(std::move(target)), g_d(std::move(g_d)), online(online), arm_joints(std::move(arm_joints)),
-      elastic(std::move(elastic)), dq(model.nv), q_bar(model.nq), q_turned(model.nq), bias(VectorXd::Zero(model.nv)) {
+    : kernel(kernel), model(kernel.model()), links(kernel.link_model()), act(kernel.actuated()), kp(std::move(kp)),
+      kd(std::move(kd)), target(std::move(target)), g_d(std::move(g_d)), online(online),
+      arm_joints(std::move(arm_joints)), elastic(std::move(elastic)), dq(model.nv), q_bar(links.nq), q_turned(links.nq),
+      bias(VectorXd::Zero(links.nv)) {
     for (Eigen::Index i = 0; i < this->elastic.rows(); ++i)
       bias[static_cast<Eigen::Index>(this->elastic(i, 1))] = -this->elastic(i, 4);
-    if (online) data = kernel.lend_data();
+    if (online) data = kernel.lend_data(true);
   }
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
     pinocchio::difference(model, q, target, dq);
@@ -29,18 +30,18 @@ struct MotorPD : Controller {
       tau += g_d;
       return;
     }
-    q_bar = q;
+    q_bar = q.head(links.nq);  // (the gravity term reads the links: their model, the head of q)
     for (Eigen::Index i = 0; i < elastic.rows(); ++i) {  // the link at its motor's angle
       const auto link_q = static_cast<Eigen::Index>(elastic(i, 0)), motor_q = static_cast<Eigen::Index>(elastic(i, 2));
       const Eigen::Index width = elastic(i, 3) != 0.0 ? 2 : 1;
       q_bar.segment(link_q, width) = q.segment(motor_q, width);
     }
-    pinocchio::integrate(model, q_bar, bias, q_turned);  // θ̄ = θ − K⁻¹ g(q_d)
-    const VectorXd & g = pinocchio::computeGeneralizedGravity(model, *data, q_turned);
+    pinocchio::integrate(links, q_bar, bias, q_turned);  // θ̄ = θ − K⁻¹ g(q_d)
+    const VectorXd & g = pinocchio::computeGeneralizedGravity(links, *data, q_turned);
     for (Eigen::Index i = 0; i < act.size(); ++i) tau[i] += g[arm_joints[i]];
   }
   Kernel & kernel;
-  const Model & model;
+  const Model & model, & links;  // the scene's (the PD on the motors), the links' (the gravity term)
   Kernel::LentData data;
   Eigen::VectorXi act;
   VectorXd kp, kd, target, g_d;
@@ -54,14 +55,14 @@ struct MotorPD : Controller {
 inline std::unique_ptr<Controller> make_motor_pd(Settings & c, Kernel & k) {
   const Eigen::Index na = k.actuated().size(), nq = k.model().nq, nv = k.model().nv;
   const Eigen::VectorXi arm_joints = c.get<Eigen::VectorXi>("arm_joints");
-  if (arm_joints.size() != na || (na && (arm_joints.minCoeff() < 0 || arm_joints.maxCoeff() >= nv)))
+  if (arm_joints.size() != na || (na && (arm_joints.minCoeff() < 0 || arm_joints.maxCoeff() >= k.link_model().nv)))
     throw std::invalid_argument("motor_pd: arm_joints must hold one v index per actuated joint");
   const MatrixXd elastic = c.get<MatrixXd>("elastic");
   if (elastic.size() && elastic.cols() != 5) throw std::invalid_argument("motor_pd: elastic must be (m, 5)");
   for (Eigen::Index i = 0; i < elastic.rows(); ++i) {
     const Eigen::Index width = elastic(i, 3) != 0.0 ? 2 : 1;
-    if (elastic(i, 0) < 0 || elastic(i, 2) < 0 || elastic(i, 0) + width > nq || elastic(i, 2) + width > nq ||
-        elastic(i, 1) < 0 || elastic(i, 1) >= nv)
+    if (elastic(i, 0) < 0 || elastic(i, 2) < 0 || elastic(i, 0) + width > k.link_model().nq || elastic(i, 2) + width > nq ||
+        elastic(i, 1) < 0 || elastic(i, 1) >= k.link_model().nv)
       throw std::invalid_argument("motor_pd: an elastic joint's index is out of range");
   }
   return std::make_unique<MotorPD>(k, c.vec("kp", na), c.vec("kd", na), c.vec("target", nq), c.vec("g_d", na),
