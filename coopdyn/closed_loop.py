@@ -184,11 +184,28 @@ class System:
         v_seen.setflags(write=False)
         try:
             out = self.controller(t, q_seen, v_seen)
-        except (CoopdynError, KeyboardInterrupt):
-            raise
-        except Exception as exc:  # the user's code (or a reference it calls) failed: say where
-            hint = " (q and v are read-only: copy them to change them)" if "read-only" in str(exc) else ""
-            raise ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}{hint}") from exc
+        except BaseException as exc:
+            failure = self.controller_failure(t, exc)
+            if failure is exc:
+                raise
+            raise failure from exc
+        return self.checked_output(out, t, q, v)
+
+    def controller_failure(self, t: float, exc: BaseException) -> BaseException:
+        """What a run raises when the controller raised ``exc`` at t: coopdyn's own errors and what
+        is not an ``Exception`` (Ctrl-C) as they are, anything else as a :class:`ControllerError`
+        that names it and t (its ``__cause__``: ``exc``)."""
+        if isinstance(exc, CoopdynError) or not isinstance(exc, Exception):
+            return exc
+        hint = " (q and v are read-only: copy them to change them)" if "read-only" in str(exc) else ""
+        failure = ControllerError(f"the controller raised {type(exc).__name__} at t = {t:.6g} s: {exc}{hint}")
+        failure.__cause__ = exc
+        return failure
+
+    def checked_output(self, out: object, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The controller's output ``out`` at (t, q, v) as a new (n_actuated,) float array, or a
+        :class:`ControllerError` naming what is wrong with it (non-finite torques pass at a
+        runaway state, where they carry the state's overflow)."""
         if type(out) is np.ndarray and out.dtype == np.float64:  # not a subclass (masked arrays)
             tau = out.copy()  # (a controller may return the same buffer every call: the run keeps each output)
         else:  # lists, other dtypes, and what is not a torque vector at all

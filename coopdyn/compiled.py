@@ -57,18 +57,28 @@ def _own_spec(obj: Any, *args: Any, error: type[CoopdynError] = ControllerError)
 
 
 class PythonCallback:
-    """A Python controller as the compiled loop calls it: ``System.torque`` (read-only q and v,
-    the shape and finiteness checks and their messages), with what it raises kept in
-    :attr:`error` and None returned, so that the loop stops and :func:`coopdyn.simulate`
-    re-raises it (src/native/controllers/python_controller.hpp)."""
+    """A Python controller as the compiled loop calls it (src/native/controllers/python_controller.hpp).
+
+    The loop calls :attr:`controller` itself with read-only q and v and takes a finite float64
+    vector of the right size as it is; any other output goes through :meth:`check` (the
+    conversions and messages of ``System.torque``) and what the controller raises through
+    :meth:`raised`. Either keeps the error a run raises in :attr:`error` (None returned to the
+    loop), so that the loop stops and :func:`coopdyn.simulate` re-raises it."""
 
     def __init__(self, system: System) -> None:
         self.system = system
+        self.controller = system.controller
         self.error: BaseException | None = None
 
-    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+    def raised(self, t: float, exc: BaseException) -> None:
+        """The controller raised ``exc`` at t: keep what the run raises for it."""
+        self.error = self.system.controller_failure(t, exc)
+
+    def check(self, t: float, q: np.ndarray, v: np.ndarray, out: object) -> np.ndarray | None:
+        """The controller's output ``out`` at (t, q, v), converted and checked; None (the error
+        kept) when it is refused."""
         try:
-            return self.system.torque(t, q, v)
+            return self.system.checked_output(out, t, q, v)
         except BaseException as exc:  # Ctrl-C too: re-raised by simulate once the loop has stopped
             self.error = exc
             return None

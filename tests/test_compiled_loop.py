@@ -221,6 +221,53 @@ def test_a_python_controller_that_fails_in_the_compiled_loop_raises_as_in_python
         cd.simulate(pandas, 0.01, loop="fast")
 
 
+def test_a_python_controllers_output_of_any_kind_is_taken_as_in_the_python_loop(pandas: cd.Scene) -> None:
+    """The compiled loop takes a float64 vector as it is (also a strided view, or one buffer the
+    controller reuses each call) and converts lists and other dtypes as the Python loop does: the
+    same run; the controller's own exception is the ControllerError's cause; coopdyn's errors and
+    Ctrl-C pass through as they are."""
+    law = GravityCompensationPD(pandas)
+    buffer = np.zeros(pandas.n_actuated)
+    wide = np.zeros((pandas.n_actuated, 2))
+
+    def reused(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        buffer[:] = law(t, q, v)
+        return buffer
+
+    def strided(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        wide[:, 1] = law(t, q, v)
+        return wide[:, 1]
+
+    def as_list(t: float, q: np.ndarray, v: np.ndarray) -> list[float]:
+        return law(t, q, v).tolist()
+
+    def single(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return law(t, q, v).astype(np.float32)
+
+    reference = cd.simulate(pandas, 0.02, controller=law, integrator="rk4", dt=1e-3, loop="python", accuracy_check="off")
+    for ctrl in (reused, strided, as_list, single):
+        for loop in ("python", "compiled"):
+            res = cd.simulate(pandas, 0.02, controller=ctrl, integrator="rk4", dt=1e-3, loop=loop, accuracy_check="off")
+            assert res.loop == loop
+            tol = 1e-5 if ctrl is single else 1e-12  # float32 torques: a relative 6e-8 per sample
+            assert np.max(np.abs(res.q - reference.q)) < tol, (ctrl.__name__, loop)
+
+    def fails(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        raise ZeroDivisionError("from the law")
+
+    with pytest.raises(cd.errors.ControllerError, match="raised ZeroDivisionError at t = 0 s") as info:
+        cd.simulate(pandas, 0.01, controller=fails, integrator="rk4", dt=1e-3, loop="compiled")
+    assert isinstance(info.value.__cause__, ZeroDivisionError)
+    for error in (KeyboardInterrupt("stop"), cd.errors.SceneError("the user's own scene check")):
+
+        def passes(t: float, q: np.ndarray, v: np.ndarray, error: BaseException = error) -> np.ndarray:
+            raise error
+
+        with pytest.raises(type(error)) as caught:
+            cd.simulate(pandas, 0.01, controller=passes, integrator="rk4", dt=1e-3, loop="compiled", progress=False)
+        assert caught.value is error
+
+
 def test_a_divergence_in_the_compiled_loop_is_reported_like_in_python() -> None:
     """rk4 far above its stability limit: the same DivergenceError, time and partial result."""
     stiff = cd.scenes.facing_arms("panda", stiffness=1e6)
