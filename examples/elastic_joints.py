@@ -2,7 +2,8 @@
 
 Every joint gets K = 1e4 N·m/rad, B = 0.5 kg·m² reflected, D = 5 N·m·s/rad (assumed values of the
 order of a lightweight arm's harmonic drives, not a Panda identification). Prints both runs'
-figures; writes elastic_joints.png and .html.  Run: python examples/elastic_joints.py [OUT_FOLDER]
+figures; writes elastic_joints.png and .html (the elastic run; its blue ghost arms are the motor
+angles, the deflections magnified as its legend says).  Run: python examples/elastic_joints.py [OUT_FOLDER]
 """
 
 from __future__ import annotations

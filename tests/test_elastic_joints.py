@@ -606,3 +606,34 @@ def test_a_result_saved_with_other_columns_is_refused(tmp_path: Path) -> None:
     np.savez(tmp_path / "old.npz", **arrays)
     with pytest.raises(cd.errors.SimulationError, match="q columns are not those its rebuilt scene has"):
         cd.Result.load(tmp_path / "old.npz")
+
+
+def test_the_viewer_draws_the_arms_at_their_motor_angles(tmp_path: Path) -> None:
+    """The animation's ghost arms are the elastic arms at their motor angles θ: at ×1 each ghost
+    geometry sits where the arm's own does with its links turned to θ; by default the run's
+    largest deflection is drawn 0.15 rad, and the legend says by how much it is magnified. A
+    rigid scene has no ghost."""
+    from coopdyn.cooperative import GripLiftOscillate
+    from coopdyn.scenes import object_start
+    from coopdyn.viz import viewer
+
+    scene = elastic_pandas()
+    task = GripLiftOscillate(start=object_start(scene), squeeze=20.0)
+    res = cd.simulate(scene, 0.1, ObjectImpedance(scene, task), "trapezoid", dt=1e-3)
+    vis = viewer._meshcat().Visualizer(window=viewer.RecordingWindow())
+    animator = viewer._Animator(scene, vis, "collision", deflection=1.0)
+    q, wrenches = res.q[-1], res.wrenches()[-1]
+    at_motors = q.copy()  # (the Pandas' joints come first, one coordinate each: q index = v index)
+    at_motors[scene.joint_springs.link_v] = q[np.concatenate([info.motor_q_index for info in scene.arms])]
+    own = {name.removeprefix("coopdyn/"): T for name, T, _ in animator.poses(at_motors, wrenches) if "/visuals/" in name}
+    ghost = [(name, T) for name, T, _ in animator.poses(q, wrenches) if name.startswith("coopdyn/motors/")]
+    assert len(ghost) == sum(1 for name in own if name.startswith("visuals/") and "panda" in name) > 10
+    assert np.abs(res.joint_deflection()[-1]).max() > 1e-4  # the ghost is not the arm itself
+    for name, T in ghost:
+        assert np.allclose(T, own[name.removeprefix("coopdyn/motors/")], atol=1e-12), name
+    scale = viewer.deflection_scale(res)
+    assert np.isclose(scale * np.abs(res.joint_deflection()).max(), viewer.GHOST_DEFLECTION)
+    assert f"deflection θ − q drawn ×{scale:.3g}" in viewer._legend(0.01, 20.0, scale)
+    rigid = cd.simulate(cd.scenes.facing_arms("panda"), 0.01, integrator="rk4", dt=1e-3)
+    assert viewer.deflection_scale(rigid) == 1.0
+    assert not viewer._Animator(rigid.scene, vis, "collision").ghost_nodes

@@ -15,7 +15,7 @@ import os
 import re
 import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -143,16 +143,21 @@ var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 """
 
 
-def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
+def visual_model(
+    scene: Scene, meshes: str = "collision", *, arms: Collection[str] | None = None, with_object: bool = True
+) -> pin.GeometryModel:
     """Display geometry of the whole scene on ``scene.model``: every arm's URDF ``meshes``
     ("collision": compact, the default — an arm whose URDF has none shows its visual meshes;
     "visual": the full meshes, several MB of HTML per arm) and a box for the object
-    (its own boxes: ``SceneObject.shapes``)."""
+    (its own boxes: ``SceneObject.shapes``); only the arms named in ``arms`` when given, and no
+    object without ``with_object``."""
     import coal
 
     geom = pin.GeometryModel()
     model = scene.model
     for spec, info in zip(scene.arm_specs, scene.arms, strict=True):
+        if arms is not None and info.name not in arms:
+            continue
         la = load_arm(spec, meshes=meshes)
         if la.visual is not None and la.visual.ngeoms == 0 and meshes == "collision":  # a URDF with visual geometry only
             la = load_arm(spec, meshes="visual")
@@ -169,8 +174,7 @@ def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
                 copy.parentJoint = model.getJointId(joint_name)
             copy.parentFrame = model.getFrameId(frame_name) if model.existFrame(frame_name) else 0
             geom.addGeometryObject(copy)
-        del info
-    for shape in scene.object.shapes(model):  # the object draws itself (a beam: one box per node)
+    for shape in scene.object.shapes(model) if with_object else ():  # the object draws itself (a beam: one box per node)
         box = pin.GeometryObject(shape.name, shape.joint, shape.frame, shape.placement, coal.Box(*shape.size))
         box.meshColor = np.array([0.85, 0.55, 0.2, 1.0])
         geom.addGeometryObject(box)
@@ -178,6 +182,8 @@ def visual_model(scene: Scene, meshes: str = "collision") -> pin.GeometryModel:
 
 
 ARROW_LENGTH = 0.25  #: length of a result's largest force arrow [m]; the scale [m/N] follows from it
+GHOST_COLOR = (0.2, 0.45, 0.95, 0.35)  #: the motors' ghost arms (elastic joints): translucent blue
+GHOST_DEFLECTION = 0.15  #: [rad] a run's largest joint deflection θ − q as the ghost arms draw it
 HEAD_LENGTH, HEAD_RADIUS, SHAFT_RADIUS = 0.03, 0.013, 0.005  #: an arrow's head and shaft [m]
 
 _STL = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
@@ -228,10 +234,30 @@ def force_scale(result: Result) -> tuple[float, float]:
     return (ARROW_LENGTH / peak if peak > 0 else 0.01), peak
 
 
-class _Animator:
-    """Loads a scene into a meshcat visualizer and writes poses of one result frame."""
+def deflection_scale(result: Result) -> float:
+    """How many times the ghost arms magnify the elastic joints' deflections θ − q: the run's
+    largest is drawn :data:`GHOST_DEFLECTION` rad, never less than its true size (×1); 1 for a
+    run without elastic joints or without a deflection."""
+    if result.scene.joint_springs.size == 0:
+        return 1.0
+    peak = float(np.max(np.abs(result.joint_deflection()), initial=0.0))
+    return max(1.0, GHOST_DEFLECTION / peak) if peak > 0 else 1.0
 
-    def __init__(self, scene: Scene, viewer: Any, meshes: str = "collision", root: str = "coopdyn", scale: float = 0.01) -> None:
+
+class _Animator:
+    """Loads a scene into a meshcat visualizer and writes poses of one result frame. With elastic
+    joints, a translucent ghost of each elastic arm shows it at its motor angles θ (each
+    deflection θ − q magnified ``deflection`` times)."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        viewer: Any,
+        meshes: str = "collision",
+        root: str = "coopdyn",
+        scale: float = 0.01,
+        deflection: float = 1.0,
+    ) -> None:
         meshcat = _meshcat()
 
         self.scene = scene
@@ -256,6 +282,21 @@ class _Animator:
             (self.viz.getViewerNodeName(g, pin.GeometryType.VISUAL), i, g.meshScale)
             for i, g in enumerate(self.geom.geometryObjects)
         ]
+        self.springs, self.deflection = scene.joint_springs, deflection
+        self.ghost_nodes: list[tuple[str, int, np.ndarray]] = []
+        if self.springs.size:
+            elastic = {info.name for info in scene.arms if info.elastic.size}
+            self.ghost = visual_model(scene, meshes, arms=elastic, with_object=False)
+            for g in self.ghost.geometryObjects:
+                g.meshColor, g.overrideMaterial = np.array(GHOST_COLOR), True
+            ghost_viz = _visualizer_class()(scene.model, None, self.ghost)
+            ghost_viz.initViewer(viewer=viewer)
+            ghost_viz.loadViewerModel(rootNodeName=f"{root}/motors", visual_color=list(GHOST_COLOR))
+            self.ghost_data, self.ghost_gdata = scene.model.createData(), self.ghost.createData()
+            self.ghost_nodes = [
+                (ghost_viz.getViewerNodeName(g, pin.GeometryType.VISUAL), i, g.meshScale)
+                for i, g in enumerate(self.ghost.geometryObjects)
+            ]
 
     def poses(self, q: np.ndarray, wrenches: np.ndarray) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
         """(node, rigid 4x4 transform, scale (3,)) of every visual and force arrow at q.
@@ -271,6 +312,14 @@ class _Animator:
             vec = w[:3] * self.scale  # drawn ending at the grasp point: the push, from outside the object
             for part, (T, scale) in _arrow(data.oMf[lk.grasp_frame].translation - vec, vec).items():
                 yield f"{name}{part}", T, scale
+        if self.ghost_nodes:  # the elastic arms at their motor angles: q + deflection·(θ − q) on the links
+            turn = np.zeros(model.nv)
+            turn[self.springs.link_v] = self.deflection * self.springs.deflection(q)
+            at_motors = pin.integrate(model, q, turn)
+            pin.forwardKinematics(model, self.ghost_data, at_motors)
+            pin.updateGeometryPlacements(model, self.ghost_data, self.ghost, self.ghost_gdata)
+            for name, i, scale in self.ghost_nodes:
+                yield name, self.ghost_gdata.oMg[i].homogeneous, scale
 
     def box(self, qs: Any, wrenches: Any) -> tuple[np.ndarray, np.ndarray]:
         """The world box (lower, upper corners) [m] that every geometry and force arrow stays in
@@ -369,7 +418,8 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     atomically; ``meshes`` as in :func:`visual_model`. The camera frames the arms and the object
     over the whole run; red arrows, drawn over everything else and ending at the grasp they push
     on, show the interconnection forces on the object, the largest :data:`ARROW_LENGTH` long (the
-    scale is in the page's corner); a bar at the top has play / pause (also the space bar), the
+    scale is in the page's corner); with elastic joints, translucent blue ghost arms at the motor
+    angles show the joints' deflections, magnified as the corner says; a bar at the top has play / pause (also the space bar), the
     simulated time and a slider to seek."""
     meshcat = _meshcat()
     from meshcat.animation import Animation
@@ -378,7 +428,8 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     window = RecordingWindow()
     vis = meshcat.Visualizer(window=window)
     scale, peak = force_scale(result)
-    animator = _Animator(result.scene, vis, meshes, scale=scale)
+    deflection = deflection_scale(result)
+    animator = _Animator(result.scene, vis, meshes, scale=scale, deflection=deflection)
     idx = _frames(result, fps)
     wrenches = result.wrenches()
     for name, T, s in animator.poses(result.q[0], wrenches[0]):
@@ -396,16 +447,21 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     vis["/Cameras/default/rotated/<object>"].set_property("position", _yup(eye))
     x, y, z = _yup(target)  # meshcat has no command for the orbit target: set it in the page
     look = f"viewer.controls.target.set({x:.6g}, {y:.6g}, {z:.6g}); viewer.controls.update(); viewer.set_dirty();"
-    legend = _legend(scale, peak)
+    legend = _legend(scale, peak, deflection if animator.ghost_nodes else None)
     page = window.get_scene(look + _clock(float(result.t[-1])), f"{legend} · {result.integrator}, {result.t[-1]:g} s")
     return write_atomically(path, "the HTML animation", lambda tmp: tmp.write_text(page, encoding="utf-8"), {".html", ".htm"})
 
 
-def _legend(scale: float, peak: float) -> str:
-    """What the red arrows mean, at ``scale`` [m/N] for a run whose largest force is ``peak`` [N]."""
+def _legend(scale: float, peak: float, deflection: float | None = None) -> str:
+    """What the red arrows mean, at ``scale`` [m/N] for a run whose largest force is ``peak`` [N];
+    and with elastic joints what the ghost arms mean (``deflection``: their magnification)."""
     if peak <= 0:
-        return "no interconnection force in this run"
-    return f"red arrows: interconnection forces on the object, 1 cm = {0.01 / scale:.3g} N (peak {peak:.3g} N)"
+        text = "no interconnection force in this run"
+    else:
+        text = f"red arrows: interconnection forces on the object, 1 cm = {0.01 / scale:.3g} N (peak {peak:.3g} N)"
+    if deflection is not None:
+        text += f" · blue ghost: the arms at their motor angles, deflection θ − q drawn ×{deflection:.3g}"
+    return text
 
 
 def frame_live(vis: Any, lo: np.ndarray, hi: np.ndarray, legend: str) -> None:
@@ -516,11 +572,13 @@ def view(
         with sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
             scale, peak = force_scale(result)
-            animator = _Animator(result.scene, vis, meshes, scale=scale)
+            deflection = deflection_scale(result)
+            animator = _Animator(result.scene, vis, meshes, scale=scale, deflection=deflection)
             idx = _frames(result, fps)
             wrenches = result.wrenches()
             sampled = idx[:: max(1, len(idx) // 20)]
-            frame_live(vis, *animator.box(result.q[sampled], wrenches[sampled]), _legend(scale, peak))
+            legend = _legend(scale, peak, deflection if animator.ghost_nodes else None)
+            frame_live(vis, *animator.box(result.q[sampled], wrenches[sampled]), legend)
             url = server.web_url if server is not None else vis.url()
             _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
             n = 0
