@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import itertools
 import math
 import os
@@ -75,7 +76,8 @@ def simulate(
         t_final: duration [s], ≥ 0.
         controller: ``controller(t, q, v) -> τ``, one torque/force per arm joint in scene order
             (``scene.n_actuated``) [N·m or N]; ``None`` applies none.
-        integrator: a name from ``coopdyn.integrators.INTEGRATORS`` or an instance.
+        integrator: a name from ``coopdyn.integrators.INTEGRATORS`` or an instance; or, with
+            ``accuracy``, ``"auto"``: the method is chosen too (see ``accuracy``).
         dt: time step [s], > 0. The last step is shortened to end exactly at ``t_final``.
             Adaptive methods (``dopri5``, ``ros2_adaptive``) choose their own steps and land on
             the output grid ``k·dt·save_every``; ``dt`` is then also their first trial step.
@@ -138,7 +140,10 @@ def simulate(
             ``stream_to``; ``progress`` prints each try; a try that diverges or breaks the
             energy balance counts as a miss, and none takes more than ``max_steps``. The
             reference's own error (about 1e-10 of the peak force) bounds what can be asked:
-            below 1e-8 of it is refused.
+            below 1e-8 of it is refused. With ``integrator="auto"`` each method of
+            :data:`AUTO_METHODS` is searched that way from ``dt``, and dopri5 at rtol 1e-3,
+            1e-4, … 1e-8 (:data:`AUTO_RTOLS`), and the run that meets ``accuracy`` at the least
+            CPU time is returned (``integrator`` names it; dopri5's with its rtol).
 
     Returns:
         the saved trajectory, with readouts (wrenches, deformations, energies) and work counters.
@@ -172,6 +177,8 @@ def simulate(
     ):
         _checked_choice(name, value, valid)
     progress = _validate.flag(progress, "progress", SimulationError)
+    if isinstance(integrator, str) and integrator == "auto":
+        raise SimulationError('integrator="auto" chooses the method for a force accuracy: give accuracy= [N] too (e.g. 0.1)')
     method = get_integrator(integrator)
     check_integrator(scene, method)
     control_dt = _control_period(control_dt, dt, method)
@@ -360,34 +367,92 @@ ACCURACY_FLOOR = 1e-8
 ACCURACY_GROWTH = 100.0
 
 
+#: the methods ``integrator="auto"`` tries for an ``accuracy`` (each from dt, halving), then dopri5
+AUTO_METHODS = ("trapezoid", "rk4", "implicit_euler")
+#: dopri5's tolerances ``integrator="auto"`` tries, loosest first (rtol; atol = rtol·1e-3)
+AUTO_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+
+
+class _Miss(Exception):
+    """A method that did not reach the accuracy asked: why, in words."""
+
+
 def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -> Result:
-    """:func:`simulate` with its step chosen for a force error of ``accuracy`` [N] (see its
-    ``accuracy``): the method at dt, dt/2, … against one dopri5 reference on the same grid."""
+    """:func:`simulate` with its step — and with ``integrator="auto"`` its method — chosen for a
+    force error of ``accuracy`` [N] (see its ``accuracy``): each method at dt, dt/2, … (dopri5 at
+    tighter and tighter rtol) against one dopri5 reference on the same grid."""
     tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
-    method = get_integrator(settings.pop("integrator"))
-    check_integrator(scene, method)
+    auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
+    methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
+    del settings["integrator"]
+    for method in methods:
+        check_integrator(scene, method)
     _checked_choice("accuracy_check", settings.pop("accuracy_check"), ACCURACY_CHECKS)  # (not used: the search checks)
-    if method.adaptive or method.exact_discretisation:
+    method = methods[0]
+    if not auto and (method.adaptive or method.exact_discretisation):
         raise SimulationError(
             f"accuracy= chooses a fixed-step method's step; {method.name} "
             + ("controls its error itself (give its rtol)" if method.adaptive else "is exact: give its dt")
+            + ', or integrator="auto" chooses the method too'
         )
     if settings["stream_to"] is not None:
         raise SimulationError("accuracy= runs the scene several times: it cannot stream to files; drop stream_to")
     t_final = _checked_duration(t_final)
     dt, every, _ = _checked_steps(settings.pop("dt"), settings.pop("save_every"), settings["max_speed"])
-    progress, max_steps = settings.pop("progress"), settings.pop("max_steps")
     q, _ = scene.check_state(scene.q0 if settings["q0"] is None else settings["q0"], scene.v0)
     if not has_constraints(scene):
         _warn_if_soft(Dynamics(scene, settings["backend"]), q)  # (the tries run without the checks)
-    rtol, atol = ACCURACY_REFERENCE
     cpu0 = time.process_time()
+    forces = _accuracy_reference(scene, t_final, tolerance, dt * every, settings)
+    tries = [(m, functools.partial(_halving, m, dt, every)) for m in methods]
+    if auto:
+        tries.append((DormandPrince(), functools.partial(_tightening, dt * every)))
+    found: list[_Found] = []
+    misses = []
+    for method, search in tries:
+        cheapest = min((r.cpu_time for r, _, _ in found), default=math.inf)  # (a try that costs more cannot win)
+        try:
+            found.append(search(scene, t_final, tolerance, forces, {**settings, "cheapest": cheapest}))
+        except _Miss as miss:
+            misses.append((method.name, str(miss)))
+    if not found:
+        growth = _growth(forces)
+        hint = (
+            f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
+            "(coopdyn.linearize with the controller shows its modes)"
+            if growth > ACCURACY_GROWTH
+            else ": give a smaller dt to start from, another method, or a looser accuracy"
+        )
+        if not auto:
+            raise SimulationError(f"{misses[0][0]} did not reach a force error of {tolerance:g} N {misses[0][1]}{hint}")
+        tried = "; ".join(f"{name} {miss}" for name, miss in misses)
+        raise SimulationError(f"no method reached a force error of {tolerance:g} N ({tried}){hint}")
+    run, error, said = min(found, key=lambda f: f[0].cpu_time)  # the cheapest run that meets it
+    if auto and settings["progress"]:
+        costs = ", ".join(f"{_setting(r)}: {r.cpu_time * 1e3:.3g} ms" for r, _, _ in found)
+        print(f"accuracy {tolerance:g} N: chose {_setting(run)}, the cheapest run that meets it ({costs})", file=sys.stderr)
+    for w in said:
+        warnings.warn(w.message, w.category, stacklevel=3)
+    return _estimated(run, error, cpu_time=time.process_time() - cpu0)
+
+
+def _setting(run: Result) -> str:
+    """A run of an ``accuracy=`` search as the messages name it: its method and step (dopri5's
+    name carries its tolerance)."""
+    return run.integrator if run.integrator.startswith("dopri5") else f"{run.integrator} at dt = {run.dt:g} s"
+
+
+def _accuracy_reference(scene: Scene, t_final: float, tolerance: float, spacing: float, settings: dict[str, Any]) -> np.ndarray:
+    """The forces (n, links, 3) [N] of the reference run of ``accuracy=``: dopri5 at
+    :data:`ACCURACY_REFERENCE`, sampled every ``spacing`` seconds; refuses a tolerance below
+    what it resolves."""
+    rtol, atol = ACCURACY_REFERENCE
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             reference = simulate(
-                scene, t_final, integrator=DormandPrince(rtol=rtol, atol=atol), dt=dt * every,
-                max_steps=ACCURACY_REFERENCE_STEPS, accuracy_check="off", **{**settings, "energy_check": "off"},
+                scene, t_final, integrator=DormandPrince(rtol=rtol, atol=atol), dt=spacing, accuracy_check="off",
+                **{**_tries(settings), "energy_check": "off", "max_steps": ACCURACY_REFERENCE_STEPS},
             )  # fmt: skip
     except SimulationInterrupted:
         raise SimulationInterrupted("interrupted while running the reference of accuracy=") from None
@@ -409,44 +474,92 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
             f"accuracy = {tolerance:g} N is below what the reference resolves: about {ACCURACY_FLOOR:g} of the peak force "
             f"({peak:.3g} N), {ACCURACY_FLOOR * peak:.2g} N"
         )
-    error, why = math.inf, "every try diverged"
+    return forces
+
+
+def _tries(settings: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` as each run of an ``accuracy=`` search takes them (no progress bar of its own)."""
+    return {k: v for k, v in settings.items() if k not in ("progress", "cheapest")} | {"progress": False}
+
+
+def _force_error(run: Result, forces: np.ndarray) -> float:
+    """[N] the largest difference between a run's interconnection forces and the reference's."""
+    mine = run.wrenches()[..., :3]
+    if mine.shape != forces.shape:
+        raise SimulationError(f"accuracy=: the run's samples ({len(mine)}) are not the reference's ({len(forces)})")
+    return float(np.max(np.linalg.norm(mine - forces, axis=-1), initial=0.0))
+
+
+_Found = tuple[Result, float, list[warnings.WarningMessage]]  #: a search's run, its force error [N] and its warnings
+
+
+def _attempt(
+    scene: Scene, t_final: float, settings: dict[str, Any], **run: Any
+) -> tuple[Result | None, list[warnings.WarningMessage]]:
+    """One run of an ``accuracy=`` search, its warnings kept (shown for the run returned only);
+    None when it diverges or breaks the energy balance (past the method's stability limit)."""
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        try:
+            return simulate(scene, t_final, accuracy_check="off", **_tries(settings), **run), said
+        except SimulationInterrupted:
+            raise SimulationInterrupted(f"interrupted while trying {run['integrator']} for accuracy=") from None
+        except (DivergenceError, StepMatrixError, EnergyBalanceError, StepBudgetError):
+            return None, said
+
+
+def _halving(
+    method: Integrator,
+    dt: float,
+    every: int,
+    scene: Scene,
+    t_final: float,
+    tolerance: float,
+    forces: np.ndarray,
+    settings: dict[str, Any],
+) -> _Found:
+    """A fixed-step ``method`` at dt, dt/2, … (at most :data:`ACCURACY_HALVINGS` halvings, the
+    saved grid kept) until its forces are within ``tolerance`` of the reference's: (run, error,
+    its warnings); :class:`_Miss` if none is."""
+    error, why, max_steps = math.inf, "every try diverged", settings["max_steps"]
     for _ in range(ACCURACY_HALVINGS + 1):
         if max_steps is not None and step_count(t_final, dt) > max_steps:
             why = f"a smaller step would take more than max_steps = {max_steps} steps"
             break
-        with warnings.catch_warnings(record=True) as said:  # (shown for the run returned only)
-            warnings.simplefilter("always")
-            try:
-                run = simulate(
-                    scene, t_final, integrator=method, dt=dt, save_every=every, accuracy_check="off", max_steps=max_steps,
-                    **settings,
-                )  # fmt: skip
-            except SimulationInterrupted:
-                raise SimulationInterrupted(f"interrupted while trying dt = {dt:g} s for accuracy=") from None
-            except (DivergenceError, StepMatrixError, EnergyBalanceError):  # past the method's stability limit
-                run = None
+        run, said = _attempt(scene, t_final, settings, integrator=method, dt=dt, save_every=every)
         if run is not None:
-            mine = run.wrenches()[..., :3]
-            if mine.shape != forces.shape or not np.allclose(run.t, reference.t, rtol=0.0, atol=1e-9):
-                raise SimulationError(f"accuracy=: the run's samples ({len(run.t)}) are not the reference's ({len(reference.t)})")
-            error = float(np.max(np.linalg.norm(mine - forces, axis=-1), initial=0.0))
-            why = f"off by {error:.3g} N against dopri5 at rtol {rtol:g}"
-        if progress:
+            error = _force_error(run, forces)
+            why = f"off by {error:.3g} N against dopri5 at rtol {ACCURACY_REFERENCE[0]:g}"
+        if settings["progress"]:
             outcome = f"is off by {error:.3g} N" if run is not None else "diverges"
             print(f"accuracy {tolerance:g} N: {method.name} at dt = {dt:g} s {outcome}", file=sys.stderr)
         if run is not None and error <= tolerance:
-            for w in said:
-                warnings.warn(w.message, w.category, stacklevel=3)
-            return _estimated(run, error, cpu_time=time.process_time() - cpu0)
+            return run, error, said
+        if run is not None and run.cpu_time > settings["cheapest"]:  # the next try, at half the step, costs more still
+            raise _Miss(f"at dt = {dt:g} s was off by {error:.3g} N and cost more than a run that meets it")
         dt, every = dt / 2, every * 2
-    growth = _growth(forces)
-    hint = (
-        f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
-        "(coopdyn.linearize with the controller shows its modes)"
-        if growth > ACCURACY_GROWTH
-        else ": give a smaller dt to start from, another method, or a looser accuracy"
-    )
-    raise SimulationError(f"{method.name} did not reach a force error of {tolerance:g} N down to dt = {2 * dt:g} s ({why}){hint}")
+    raise _Miss(f"down to dt = {2 * dt:g} s ({why})")
+
+
+def _tightening(
+    spacing: float, scene: Scene, t_final: float, tolerance: float, forces: np.ndarray, settings: dict[str, Any]
+) -> _Found:
+    """dopri5 at each rtol of :data:`AUTO_RTOLS` until its forces (sampled every ``spacing``
+    seconds) are within ``tolerance`` of the reference's: (run, error, its warnings); :class:`_Miss`
+    if none is."""
+    why = "every try failed"
+    for rtol in AUTO_RTOLS:
+        run, said = _attempt(scene, t_final, settings, integrator=DormandPrince(rtol=rtol, atol=rtol * 1e-3), dt=spacing)
+        if run is not None:
+            error = _force_error(run, forces)
+            why = f"off by {error:.3g} N at rtol {rtol:g}"
+            if settings["progress"]:
+                print(f"accuracy {tolerance:g} N: dopri5 at rtol {rtol:g} is off by {error:.3g} N", file=sys.stderr)
+            if error <= tolerance:  # (named with its tolerance: its dt is the samples' spacing)
+                return _estimated(run, error, integrator=f"dopri5 (rtol {rtol:g})"), error, said
+            if run.cpu_time > settings["cheapest"]:  # a tighter rtol costs more still
+                raise _Miss(f"at rtol {rtol:g} was off by {error:.3g} N and cost more than a run that meets it")
+    raise _Miss(f"down to rtol {AUTO_RTOLS[-1]:g} ({why})")
 
 
 #: the fraction of the object's size beyond which its sag on its grasps under gravity warns

@@ -261,8 +261,12 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     duration = _check_type(f, "simulation", "duration", sim["duration"], float)
     dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)
     integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "rk4"), str)
-    if integrator not in INTEGRATORS:
-        raise f.error(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)}", "simulation", "integrator")
+    if integrator not in INTEGRATORS and integrator != "auto":
+        valid = [*sorted(INTEGRATORS), "auto (with accuracy)"]
+        raise f.error(f"unknown integrator {integrator!r}; valid: {valid}", "simulation", "integrator")
+    if integrator == "auto" and "accuracy" not in sim:
+        why = "'auto' chooses the method for a force accuracy: give accuracy [N] too (e.g. 0.1)"
+        raise f.error(why, "simulation", "integrator")
     if not dt >= 1e-12:
         raise f.error(f"must be >= 1e-12 [s], got {dt:g}", "simulation", "dt")
     save_every = _check_type(f, "simulation", "save_every", sim.get("save_every", max(1, round(0.01 / dt))), int)
@@ -279,7 +283,8 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         from ..simulate import _control_period  # (the run's own check: a fixed-step method's steps land on every sample)
 
         try:
-            control_dt = _control_period(control_dt, dt, get_integrator(integrator))
+            fixed = "trapezoid" if integrator == "auto" else integrator  # ("auto": dt, dt/2, … or dopri5, which lands on samples)
+            control_dt = _control_period(control_dt, dt, get_integrator(fixed))
         except SimulationError as exc:
             raise f.error(str(exc), "simulation", "control_dt") from None
 
@@ -288,8 +293,8 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         accuracy = _check_type(f, "simulation", "accuracy", sim["accuracy"], float)
         if not 0.0 < accuracy < math.inf:
             raise f.error(f"the force error the run may have must be > 0 [N], got {accuracy:g}", "simulation", "accuracy")
-        chosen = INTEGRATORS[integrator]
-        if chosen.adaptive or chosen.exact_discretisation:
+        chosen = INTEGRATORS.get(integrator)  # (None: "auto")
+        if chosen is not None and (chosen.adaptive or chosen.exact_discretisation):
             what = "controls its own error (give its rtol in Python)" if chosen.adaptive else "is exact at any dt"
             raise f.error(
                 f"chooses a fixed-step method's step; {integrator} {what}: use a fixed-step method or drop accuracy",
@@ -492,7 +497,8 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     done = write_outputs(out, [("trajectory", trajectory)], optional)
     written = list(done.files)
     summary = [
-        f"{loaded.path}: {loaded.duration:g} s with {res.integrator} at dt = {res.dt:g} s"
+        f"{loaded.path}: {loaded.duration:g} s with "
+        + (res.integrator if res.integrator.startswith("dopri5 (") else f"{res.integrator} at dt = {res.dt:g} s")
         + (
             f" (chosen for a force error <= {loaded.accuracy:g} N: {res.force_error_estimate:.3g} N against dopri5)"
             if loaded.accuracy is not None

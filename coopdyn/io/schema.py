@@ -225,7 +225,7 @@ def scene_file_schema() -> dict[str, Any]:
                 "type": "object",
                 "properties": {
                     **{k: simple[t] for k, t in scenefile.SIMULATION_KEYS.items()},
-                    "integrator": {"enum": sorted(INTEGRATORS)},
+                    "integrator": {"enum": [*sorted(INTEGRATORS), "auto"]},
                 },
                 "required": ["duration"],
                 "additionalProperties": False,
