@@ -655,7 +655,7 @@ private:
   void implicit_parts(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench) {
     generalized_force(v, tau, wrench, true);
     tau_full_.head(nvl_) -= pinocchio::nonLinearEffects(model_, data_, q.head(nql_), v.head(nvl_));
-    pinocchio::crba(model_, data_, q.head(nql_));
+    pinocchio::crba(model_, data_, RefVec(q.head(nql_)));  // (a Ref: the type Pinocchio's compiled crba takes)
     data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
     if (eliminate_) {  // M = diag(M_links, B)
       M_.topLeftCorner(nvl_, nvl_) = data_.M;

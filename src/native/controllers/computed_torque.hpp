@@ -15,7 +15,7 @@ struct ComputedTorqueHold : Controller {
     : model(model), lent(std::move(lent)), data(*this->lent), act(act), q_index(q_index), kp(std::move(kp)), kd(std::move(kd)), q_d(std::move(q_d)),
       e(act.size()), M(act.size(), act.size()) {}
   void torque(double, const VectorXd & q, const VectorXd & v, VectorXd & tau) override {
-    pinocchio::crba(model, data, q);
+    pinocchio::crba(model, data, RefVec(q));  // (a Ref: the type Pinocchio's compiled crba takes)
     data.M.triangularView<Eigen::StrictlyLower>() = data.M.transpose().triangularView<Eigen::StrictlyLower>();
     const VectorXd & h = pinocchio::nonLinearEffects(model, data, q, v);
     const Eigen::Index n = act.size();

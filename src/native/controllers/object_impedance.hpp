@@ -185,7 +185,8 @@ struct ObjectImpedanceLaw : Controller {
     // joint torques
     pinocchio::computeJointJacobians(model, data, q);
     const VectorXd & nle = pinocchio::nonLinearEffects(model, data, q, v);  // data.nle, untouched below
-    pinocchio::difference(model, q, q0, posture);
+    q_links = q;  // (a vector: the type Pinocchio's compiled difference takes)
+    pinocchio::difference(model, q_links, q0, posture);
     Eigen::Index offset = 0;
     for (std::size_t i = 0; i < n; ++i) {
       const Grasp & gr = grasps[i];
@@ -264,7 +265,7 @@ struct ObjectImpedanceLaw : Controller {
   double joint_damping, null_k, null_d;
   VectorXd q0;
   Eigen::Matrix<double, 6, Eigen::Dynamic> J6;
-  VectorXd posture;
+  VectorXd posture, q_links;
   Eigen::Matrix<double, Eigen::Dynamic, 6> f, inward_, internal_;
   Eigen::Matrix<double, Eigen::Dynamic, 3> r_;
   MatrixXd J_;
