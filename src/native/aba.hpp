@@ -24,7 +24,7 @@ namespace coopdyn_native {
 using Matrix6List = std::vector<pinocchio::Data::Matrix6, Eigen::aligned_allocator<pinocchio::Data::Matrix6>>;
 // The type Pinocchio's compiled algorithms take (computeABADerivatives with fext): a vector with
 // another allocator made the compiler instantiate them here, ~50 s of the kernel's build.
-using ForceList = PINOCCHIO_ALIGNED_STD_VECTOR(pinocchio::Force);
+using ForceList = std::vector<pinocchio::Force>;
 
 namespace aba_detail {
 

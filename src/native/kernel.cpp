@@ -19,7 +19,7 @@
 #include "kernel.hpp"
 #include "loop.hpp"
 #include "mujoco_bridge.hpp"
-#include "registered.hpp"  // every header of controllers/, elements/ and methods/ (CMakeLists.txt)
+#include "registered_elements.hpp"  // every header of elements/ (CMakeLists.txt; controllers/ and methods/: registered.cpp)
 
 namespace {
 
