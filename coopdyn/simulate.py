@@ -385,6 +385,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
     methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
     del settings["integrator"]
+    if auto and has_constraints(scene):  # (rigid grasps: explicit methods only)
+        methods = [m for m in methods if not (m.a_stable or m.exact_discretisation)]
     for method in methods:
         check_integrator(scene, method)
     _checked_choice("accuracy_check", settings.pop("accuracy_check"), ACCURACY_CHECKS)  # (not used: the search checks)

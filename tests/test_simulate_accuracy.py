@@ -190,3 +190,33 @@ def test_a_scene_file_asks_for_auto_with_an_accuracy(tmp_path: Path) -> None:
     assert report.result.force_error_estimate <= 1.0
     assert f"with {report.result.integrator} at dt = " in report.summary[0] or "with dopri5 (rtol " in report.summary[0]
     assert "(chosen for a force error <= 1 N:" in report.summary[0]
+
+
+def test_a_scene_file_without_an_integrator_is_accurate_by_default(tmp_path: Path) -> None:
+    """No integrator named: `coopdyn simulate` chooses the method and step for a force error of
+    0.1 N (DEFAULT_ACCURACY) from dt = 5 ms, and the run is within it of a dopri5 run at rtol
+    1e-11 it did not use; a sweep of the same file runs its cases with rk4 at 1 ms instead (no
+    search per case); an integrator named keeps its own step, unchecked by a search."""
+    from coopdyn.io.scenefile import DEFAULT_ACCURACY, load, run
+    from coopdyn.sweeps.spec import Settings, SpecJob, load_spec
+
+    text = (EXAMPLES / "two_pandas.toml").read_text()
+    lines = [ln for ln in text.splitlines() if not ln.startswith(("integrator", "dt ", "dt=", "save_every"))]
+    text = "\n".join(lines).replace("duration = 5.0", "duration = 0.5") + "\n"
+    path = tmp_path / "plain.toml"
+    path.write_text(text)
+    loaded = load(path)
+    assert (loaded.integrator, loaded.accuracy, loaded.dt, DEFAULT_ACCURACY) == ("auto", 0.1, 5e-3, 0.1)
+    report = run(loaded, folder=tmp_path / "out", progress=False)
+    truth = cd.simulate(
+        loaded.scene, 0.5, controller=loaded.controller, integrator=DormandPrince(rtol=1e-11, atol=1e-14), dt=1e-2,
+        accuracy_check="off", energy_check="off",
+    )  # fmt: skip
+    error = float(np.max(np.linalg.norm(report.result.wrenches()[..., :3] - truth.wrenches()[..., :3], axis=-1)))
+    assert error <= 0.1 and "(chosen for a force error <= 0.1 N:" in report.summary[0]
+    path.write_text(text + '\n[sweep]\nfolder = "out"\n[sweep.grid]\n"scene.stiffness" = [1e4, 2e4]\n')
+    spec = load_spec(path)
+    case = SpecJob(spec.text, str(path), Settings()).case(spec.items[0])
+    assert (case.integrator, case.dt, case.save_every) == ("rk4", 1e-3, 10)
+    named = load(EXAMPLES / "two_pandas.toml")
+    assert (named.integrator, named.accuracy) == ("trapezoid", None)

@@ -57,6 +57,10 @@ TASKS: dict[str, Any] = {"grip_lift_oscillate": GripLiftOscillate, "hold": None}
 TABLES = ("scene", "arms", "object", "interconnections", "controller", "task", "simulation", "output", "sweep")
 DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe a scene without a builder
 SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int, "control_dt": float, "accuracy": float}
+#: [N] the force error a run may have when its file names no integrator (the method and step are then chosen for it)
+DEFAULT_ACCURACY = 0.1
+#: [s] the step that choice starts from (halving), when the file gives no dt
+DEFAULT_AUTO_DT = 5e-3
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
 
 
@@ -75,6 +79,9 @@ class Run:
     output: dict[str, Any] = field(default_factory=dict)
     control_dt: float | None = None  #: the controller's sample period [s] (None: every evaluation)
     accuracy: float | None = None  #: [N] the force error the run may have: dt is the step to start from (simulate's accuracy)
+    #: (integrator, dt [s], save_every) a sweep's cases take when the file names no integrator (each
+    #: run of a sweep does not search for its own method and step): rk4 at the file's dt or 1 ms
+    sweep_method: tuple[str, float, int] | None = None
 
 
 class _File:
@@ -259,12 +266,13 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     if "duration" not in sim:
         raise f.error("missing required key 'duration' [s]", "simulation")
     duration = _check_type(f, "simulation", "duration", sim["duration"], float)
-    dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)
-    integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "rk4"), str)
+    chosen_for_it = "integrator" not in sim  # the method and step chosen for an accuracy (DEFAULT_ACCURACY)
+    dt = _check_type(f, "simulation", "dt", sim.get("dt", DEFAULT_AUTO_DT if chosen_for_it else 1e-3), float)
+    integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "auto"), str)
     if integrator not in INTEGRATORS and integrator != "auto":
         valid = [*sorted(INTEGRATORS), "auto (with accuracy)"]
         raise f.error(f"unknown integrator {integrator!r}; valid: {valid}", "simulation", "integrator")
-    if integrator == "auto" and "accuracy" not in sim:
+    if integrator == "auto" and "accuracy" not in sim and not chosen_for_it:
         why = "'auto' chooses the method for a force accuracy: give accuracy [N] too (e.g. 0.1)"
         raise f.error(why, "simulation", "integrator")
     if not dt >= 1e-12:
@@ -288,7 +296,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         except SimulationError as exc:
             raise f.error(str(exc), "simulation", "control_dt") from None
 
-    accuracy = None
+    accuracy = DEFAULT_ACCURACY if chosen_for_it else None
     if "accuracy" in sim:
         accuracy = _check_type(f, "simulation", "accuracy", sim["accuracy"], float)
         if not 0.0 < accuracy < math.inf:
@@ -316,7 +324,12 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     except SceneFileError as exc:
         raise f.error(str(exc), "output", "folder") from None
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
-    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy)
+    sweep_method = None
+    if chosen_for_it:
+        sweep_dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)
+        sweep_method = ("rk4", sweep_dt, int(sim.get("save_every", max(1, round(0.01 / sweep_dt)))))
+    run = Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy, sweep_method)
+    return run
 
 
 def _scene(f: _File, doc: dict[str, Any]) -> tuple[Scene, str | None, dict[str, Any]]:

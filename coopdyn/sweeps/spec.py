@@ -113,6 +113,9 @@ class SpecJob:
         for name, value in item.params.items():
             put(doc, name, value)
         run = scenefile.from_document(doc, f)
+        if run.sweep_method is not None:  # (no integrator named: the cases run rk4 at dt, not a search each)
+            integrator, dt, save_every = run.sweep_method
+            return Case(run.scene, run.controller, run.task, run.duration, integrator, dt, save_every, run.control_dt)
         if run.accuracy is not None:
             raise SweepError("[simulation] accuracy is not taken by sweeps yet (each run would choose its own step): give dt")
         return Case(run.scene, run.controller, run.task, run.duration, run.integrator, run.dt, run.save_every, run.control_dt)
