@@ -246,7 +246,10 @@ class Result:
           Rx(roll)) and as a quaternion ``object.qx/qy/qz/qw [1; world]``;
         * its velocity in world axes at its origin: ``object.vx/vy/vz [m/s; world axes]``,
           ``object.wx/wy/wz [rad/s; world axes]``;
-        * each grasp's squeeze ``{link}.squeeze [N; + = compression]``;
+        * each grasp's squeeze ``{link}.squeeze [N; + = compression]`` and its wrench split
+          (:meth:`wrench_split`) into the part that moves the object and the internal part,
+          ``{link}.moving.fx … mz`` and ``{link}.internal.fx … mz`` [N; world axes] and
+          [N·m; world axes; about the grasp], as the wrench columns;
         * every saved column of :meth:`columns` (q, v — a free flyer's in its body axes —, τ and
           the wrenches), named ``"q …"``, ``"v …"``, ``"tau …"``, ``"wrench …"`` as in the CSV.
         """
@@ -278,6 +281,12 @@ class Result:
             squeeze = self.squeeze()
             for i, lk in enumerate(self.scene.links):
                 table[f"{lk.name}.squeeze [N; + = compression]"] = squeeze[:, i]
+            moving, internal = self.wrench_split()
+            for part, values in (("moving", moving), ("internal", internal)):
+                for i, lk in enumerate(self.scene.links):
+                    for j, c in enumerate(("fx", "fy", "fz", "mx", "my", "mz")):
+                        unit = "N; world axes" if c[0] == "f" else "N·m; world axes; about the grasp"
+                        table[f"{lk.name}.{part}.{c} [{unit}]"] = values[:, i, j]
         W = self.wrenches().reshape(n, -1)
         saved = {"q": self.q, "v": self.v, "tau": self.tau, "wrench": W}
         for key, names in self.columns().items():
@@ -355,8 +364,10 @@ class Result:
                 f"{path} has no description of its scene (saved by an older coopdyn, or not by coopdyn); "
                 "run the simulation again to save a result that reloads"
             )
+        writer = None  # the coopdyn version that wrote the file, once known
         try:
             meta = json.loads(str(arrays["meta"]))
+            writer = meta.get("coopdyn") if isinstance(meta, dict) else None
             written = meta.pop("format", None)
             if written != RESULT_FORMAT:
                 by = meta.get("coopdyn", "an unknown version")
@@ -373,7 +384,10 @@ class Result:
         except CoopdynError as exc:
             raise SimulationError(f"{path}: its scene cannot be rebuilt: {exc}") from exc
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise SimulationError(f"{path}: not a result coopdyn wrote, or damaged ({type(exc).__name__}: {exc})") from exc
+            by = f"written by coopdyn {writer}, " if writer is not None else ""
+            raise SimulationError(
+                f"{path}: not a result coopdyn wrote, or damaged ({by}read by coopdyn {__version__}; {type(exc).__name__}: {exc})"
+            ) from exc
         t = arrays["t"]
         rebuilt = {key: names for key, names in _columns(scene).items() if key in ("q", "v", "tau")}
         if any(saved_columns.get(key) != names for key, names in rebuilt.items()):

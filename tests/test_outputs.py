@@ -238,6 +238,17 @@ def test_a_result_as_a_dataframe_names_its_units_and_frames(tmp_path: Path) -> N
     w_world = df.loc[k, [f"object.{c} [rad/s; world axes]" for c in ("wx", "wy", "wz")]].to_numpy(dtype=float)
     assert np.allclose(v_world, R @ v_body[:3], atol=1e-12) and np.allclose(w_world, R @ v_body[3:], atol=1e-12)
     assert np.allclose(df["left.squeeze [N; + = compression]"], res.squeeze()[:, 0])
+    # the wrench split: moving + internal = the wrench; the internal parts put no net wrench on the object
+    from coopdyn.grasp import grasp_matrix
+
+    parts = {
+        part: np.array([[df.loc[k, f"{lk.name}.{part}.{c} [{unit}]"] for c, unit in zip(("fx", "fy", "fz", "mx", "my", "mz"),
+                        ["N; world axes"] * 3 + ["N·m; world axes; about the grasp"] * 3, strict=True)] for lk in scene.links])
+        for part in ("moving", "internal")
+    }  # fmt: skip
+    assert np.allclose(parts["moving"] + parts["internal"], res.wrenches()[k], atol=1e-9)
+    assert np.abs(grasp_matrix(res.grasp_points()[k]) @ parts["internal"].reshape(-1)).max() < 1e-9
+    assert np.abs(parts["internal"]).max() > 1e-3  # (a squeeze to split off)
     csv = pd.read_csv(res.save(tmp_path / "run.csv"))
     shared = [c for c in csv.columns if c in df.columns]
     assert len(shared) == len(csv.columns)  # (every CSV column is in the frame, under its name)

@@ -197,6 +197,10 @@ def test_loading_what_is_not_a_result_says_so(tmp_path: Path, book: cd.Scene) ->
             {"meta": {**meta, "format": "coopdyn.result/2", "coopdyn": "9.0"}},
             r"is in format 'coopdyn.result/2', written by coopdyn 9.0; this coopdyn \(.+\) reads 'coopdyn.result/1'",
         ),
+        (  # the format's tag, but not its contents: the versions that wrote and read it
+            {"meta": {k: v for k, v in meta.items() if k != "scene"} | {"coopdyn": "0.0.9"}},
+            r"not a result coopdyn wrote, or damaged \(written by coopdyn 0\.0\.9, read by coopdyn .+; KeyError: 'scene'\)",
+        ),
     ):
         bad = {**arrays, "meta": np.array(json.dumps(change.pop("meta", meta)))} | change
         np.savez(tmp_path / "damaged.npz", **{k: v for k, v in bad.items() if v is not None})

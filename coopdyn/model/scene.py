@@ -427,7 +427,7 @@ def _warn_far_grasps(
         gap = min(float(np.linalg.norm(np.maximum(np.abs(M.actInv(p)) - half, 0.0))) for M, half in boxes)
         if gap > size:
             fix = (
-                f"arm {arm!r}'s tool frame starts there and the grasp defaults to it: place the arm at the object "
+                f"the tool frame of arm {arm!r} starts there and the grasp defaults to it: place the arm at the object "
                 "(its q0, cd.place_arm, or tool_pose in a scene file) or give the grasp"
                 if arm is not None
                 else "its grasp is given there: give a grasp on the object"
