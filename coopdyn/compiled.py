@@ -71,8 +71,12 @@ class PythonCallback:
         self.error: BaseException | None = None
 
     def raised(self, t: float, exc: BaseException) -> None:
-        """The controller raised ``exc`` at t: keep what the run raises for it."""
-        self.error = self.system.controller_failure(t, exc)
+        """The controller raised ``exc`` at t: keep what the run raises for it (what naming it
+        raises, when it does: as in the Python loop)."""
+        try:
+            self.error = self.system.controller_failure(t, exc)
+        except BaseException as failure:  # e.g. an exception whose str() raises
+            self.error = failure
 
     def check(self, t: float, q: np.ndarray, v: np.ndarray, out: object) -> np.ndarray | None:
         """The controller's output ``out`` at (t, q, v), converted and checked; None (the error

@@ -374,7 +374,12 @@ AUTO_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 
 
 class _Miss(Exception):
-    """A method that did not reach the accuracy asked: why, in words."""
+    """A method that did not reach the accuracy asked: why, in words; ``budget``: for want of steps
+    (max_steps)."""
+
+    def __init__(self, why: str, budget: bool = False) -> None:
+        super().__init__(why)
+        self.budget = budget
 
 
 def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -> Result:
@@ -416,18 +421,21 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         try:
             found.append(search(scene, t_final, tolerance, forces, {**settings, "cheapest": cheapest}))
         except _Miss as miss:
-            misses.append((method.name, str(miss)))
+            misses.append((method.name, str(miss), miss.budget))
     if not found:
         growth = _growth(forces)
-        hint = (
-            f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
-            "(coopdyn.linearize with the controller shows its modes)"
-            if growth > ACCURACY_GROWTH
-            else ": give a smaller dt to start from, another method, or a looser accuracy"
-        )
+        if growth > ACCURACY_GROWTH:
+            hint = (
+                f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
+                "(coopdyn.linearize with the controller shows its modes)"
+            )
+        elif all(budget for _, _, budget in misses):
+            hint = ": give a larger max_steps, or a looser accuracy"
+        else:
+            hint = ": give a smaller dt to start from, another method, or a looser accuracy"
         if not auto:
             raise SimulationError(f"{misses[0][0]} did not reach a force error of {tolerance:g} N {misses[0][1]}{hint}")
-        tried = "; ".join(f"{name} {miss}" for name, miss in misses)
+        tried = "; ".join(f"{name} {miss}" for name, miss, _ in misses)
         raise SimulationError(f"no method reached a force error of {tolerance:g} N ({tried}){hint}")
     run, error, said = min(found, key=lambda f: f[0].cpu_time)  # the cheapest run that meets it
     if auto and settings["progress"]:
@@ -497,17 +505,20 @@ _Found = tuple[Result, float, list[warnings.WarningMessage]]  #: a search's run,
 
 def _attempt(
     scene: Scene, t_final: float, settings: dict[str, Any], **run: Any
-) -> tuple[Result | None, list[warnings.WarningMessage]]:
-    """One run of an ``accuracy=`` search, its warnings kept (shown for the run returned only);
-    None when it diverges or breaks the energy balance (past the method's stability limit)."""
+) -> tuple[Result | None, list[warnings.WarningMessage], str]:
+    """One run of an ``accuracy=`` search, its warnings kept (shown for the run returned only),
+    and what became of it: None and why when it diverges or breaks the energy balance (past the
+    method's stability limit) or runs out of its step budget."""
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         try:
-            return simulate(scene, t_final, accuracy_check="off", **_tries(settings), **run), said
+            return simulate(scene, t_final, accuracy_check="off", **_tries(settings), **run), said, "completed"
         except SimulationInterrupted:
             raise SimulationInterrupted(f"interrupted while trying {run['integrator']} for accuracy=") from None
-        except (DivergenceError, StepMatrixError, EnergyBalanceError, StepBudgetError):
-            return None, said
+        except StepBudgetError:
+            return None, said, f"ran out of its step budget (max_steps = {settings['max_steps']})"
+        except (DivergenceError, StepMatrixError, EnergyBalanceError):
+            return None, said, "diverged"
 
 
 def _halving(
@@ -524,11 +535,17 @@ def _halving(
     saved grid kept) until its forces are within ``tolerance`` of the reference's: (run, error,
     its warnings); :class:`_Miss` if none is."""
     error, why, max_steps = math.inf, "every try diverged", settings["max_steps"]
+    try:  # (a controller's sample period must be whole steps of a fixed-step method: dt/2 … keep that)
+        _control_period(settings["control_dt"], dt, method)
+    except SimulationError as exc:
+        raise _Miss(str(exc)) from None
+    if max_steps is not None and step_count(t_final, dt) > max_steps:
+        raise _Miss(f"at dt = {dt:g} s already takes more than max_steps = {max_steps} steps", budget=True)
     for _ in range(ACCURACY_HALVINGS + 1):
         if max_steps is not None and step_count(t_final, dt) > max_steps:
             why = f"a smaller step would take more than max_steps = {max_steps} steps"
             break
-        run, said = _attempt(scene, t_final, settings, integrator=method, dt=dt, save_every=every)
+        run, said, _ = _attempt(scene, t_final, settings, integrator=method, dt=dt, save_every=every)
         if run is not None:
             error = _force_error(run, forces)
             why = f"off by {error:.3g} N against dopri5 at rtol {ACCURACY_REFERENCE[0]:g}"
@@ -549,10 +566,17 @@ def _tightening(
     """dopri5 at each rtol of :data:`AUTO_RTOLS` until its forces (sampled every ``spacing``
     seconds) are within ``tolerance`` of the reference's: (run, error, its warnings); :class:`_Miss`
     if none is."""
-    why = "every try failed"
+    why, budget = "every try failed", False
+    max_steps = settings["max_steps"]
+    if max_steps is not None and step_count(t_final, spacing) > max_steps:  # (it lands a step on every sample)
+        raise _Miss(f"at its samples, {spacing:g} s apart, already takes more than max_steps = {max_steps} steps", budget=True)
     for rtol in AUTO_RTOLS:
-        run, said = _attempt(scene, t_final, settings, integrator=DormandPrince(rtol=rtol, atol=rtol * 1e-3), dt=spacing)
-        if run is not None:
+        run, said, became = _attempt(scene, t_final, settings, integrator=DormandPrince(rtol=rtol, atol=rtol * 1e-3), dt=spacing)
+        if run is None:
+            why, budget = f"at rtol {rtol:g} it {became}", became.startswith("ran out")
+            if budget:  # (a tighter rtol takes more steps still)
+                break
+        else:
             error = _force_error(run, forces)
             why = f"off by {error:.3g} N at rtol {rtol:g}"
             if settings["progress"]:
@@ -561,7 +585,7 @@ def _tightening(
                 return _estimated(run, error, integrator=f"dopri5 (rtol {rtol:g})"), error, said
             if run.cpu_time > settings["cheapest"]:  # a tighter rtol costs more still
                 raise _Miss(f"at rtol {rtol:g} was off by {error:.3g} N and cost more than a run that meets it")
-    raise _Miss(f"down to rtol {AUTO_RTOLS[-1]:g} ({why})")
+    raise _Miss(f"down to rtol {AUTO_RTOLS[-1]:g} ({why})", budget=budget)
 
 
 #: the fraction of the object's size beyond which its sag on its grasps under gravity warns
@@ -956,7 +980,8 @@ def _compiled_loop(
     if status == compiled.CONTROLLER:
         callback = config["controller"].get("callback")
         if callback is not None and callback.error is not None:  # a Python controller raised: its own error
-            raise callback.error
+            error, callback.error = callback.error, None  # (kept, it would make a cycle through the C++ loop: a leak)
+            raise error
         raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {message})")
     if status == compiled.SCENE:
         raise SceneError(f"{message} (at t = {t:.6g} s)")

@@ -252,12 +252,43 @@ def test_a_python_controllers_output_of_any_kind_is_taken_as_in_the_python_loop(
             tol = 1e-5 if ctrl is single else 1e-12  # float32 torques: a relative 6e-8 per sample
             assert np.max(np.abs(res.q - reference.q)) < tol, (ctrl.__name__, loop)
 
+    def swapped(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:  # big-endian doubles: converted, not read raw
+        return law(t, q, v).astype(">f8")
+
+    for loop in ("python", "compiled"):
+        res = cd.simulate(pandas, 0.02, controller=swapped, integrator="rk4", dt=1e-3, loop=loop, accuracy_check="off")
+        assert np.max(np.abs(res.q - reference.q)) < 1e-12, loop
+
+    class Unprintable(Exception):
+        def __str__(self) -> str:
+            raise RuntimeError("its str() failed")
+
+    def unprintable(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        raise Unprintable()
+
+    for loop in ("python", "compiled"):  # what naming the error raises, as in the Python loop
+        with pytest.raises(RuntimeError, match="its str\\(\\) failed"):
+            cd.simulate(pandas, 0.01, controller=unprintable, integrator="rk4", dt=1e-3, loop=loop)
+
     def fails(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         raise ZeroDivisionError("from the law")
 
     with pytest.raises(cd.errors.ControllerError, match="raised ZeroDivisionError at t = 0 s") as info:
         cd.simulate(pandas, 0.01, controller=fails, integrator="rk4", dt=1e-3, loop="compiled")
     assert isinstance(info.value.__cause__, ZeroDivisionError)
+    # a failed run's error does not keep its loop alive through a cycle the collector cannot see
+    import gc
+    import weakref
+
+    alive = []
+    for _ in range(3):
+        try:
+            cd.simulate(pandas, 0.01, controller=fails, integrator="rk4", dt=1e-3, loop="compiled")
+        except cd.errors.ControllerError as exc:
+            alive.append(weakref.ref(exc))
+    del info
+    gc.collect()
+    assert not any(ref() is not None for ref in alive)
     for error in (KeyboardInterrupt("stop"), cd.errors.SceneError("the user's own scene check")):
 
         def passes(t: float, q: np.ndarray, v: np.ndarray, error: BaseException = error) -> np.ndarray:

@@ -194,9 +194,10 @@ def test_a_scene_file_asks_for_auto_with_an_accuracy(tmp_path: Path) -> None:
 
 def test_a_scene_file_without_an_integrator_is_accurate_by_default(tmp_path: Path) -> None:
     """No integrator named: `coopdyn simulate` chooses the method and step for a force error of
-    0.1 N (DEFAULT_ACCURACY) from dt = 5 ms, and the run is within it of a dopri5 run at rtol
-    1e-11 it did not use; a sweep of the same file runs its cases with rk4 at 1 ms instead (no
-    search per case); an integrator named keeps its own step, unchecked by a search."""
+    0.1 N (DEFAULT_ACCURACY) halving from dt = 1 ms, and the run is within it of a dopri5 run at
+    rtol 1e-11 it did not use; a sweep of the same file runs its cases with rk4 at 1 ms instead
+    (no search per case), and refuses an accuracy written; an integrator named keeps its own
+    step; a controller period and max_steps work with the search as with a named method."""
     from coopdyn.io.scenefile import DEFAULT_ACCURACY, load, run
     from coopdyn.sweeps.spec import Settings, SpecJob, load_spec
 
@@ -206,7 +207,7 @@ def test_a_scene_file_without_an_integrator_is_accurate_by_default(tmp_path: Pat
     path = tmp_path / "plain.toml"
     path.write_text(text)
     loaded = load(path)
-    assert (loaded.integrator, loaded.accuracy, loaded.dt, DEFAULT_ACCURACY) == ("auto", 0.1, 5e-3, 0.1)
+    assert (loaded.integrator, loaded.accuracy, loaded.dt, DEFAULT_ACCURACY) == ("auto", 0.1, 1e-3, 0.1)
     report = run(loaded, folder=tmp_path / "out", progress=False)
     truth = cd.simulate(
         loaded.scene, 0.5, controller=loaded.controller, integrator=DormandPrince(rtol=1e-11, atol=1e-14), dt=1e-2,
@@ -220,3 +221,23 @@ def test_a_scene_file_without_an_integrator_is_accurate_by_default(tmp_path: Pat
     assert (case.integrator, case.dt, case.save_every) == ("rk4", 1e-3, 10)
     named = load(EXAMPLES / "two_pandas.toml")
     assert (named.integrator, named.accuracy) == ("trapezoid", None)
+    path.write_text(text + '\n[sweep]\nfolder = "out"\n[sweep.grid]\n"scene.stiffness" = [1e4, 2e4]\n')
+    path.write_text(path.read_text().replace("duration = 0.5", "duration = 0.5\naccuracy = 0.01"))
+    with pytest.raises(cd.SweepError, match="accuracy is not taken by sweeps yet"):
+        load_spec(path)
+    # a controller's period (1 kHz) works as with a named method: whole steps of 1 ms, halved
+    path.write_text(text.replace("duration = 0.5", "duration = 0.2\ncontrol_dt = 1e-3"))
+    loaded = load(path)
+    assert run(loaded, folder=tmp_path / "held", progress=False).result.force_error_estimate <= 0.1
+
+
+def test_what_auto_cannot_do_within_max_steps_says_so(demo: tuple[cd.Scene, ObjectImpedance]) -> None:
+    """When even the first step asked for takes more than max_steps, the message says so and
+    points to max_steps, not to a smaller step."""
+    scene, controller = demo
+    with pytest.raises(SimulationError) as info:
+        cd.simulate(scene, 0.4, controller=controller, integrator="auto", dt=1e-2, accuracy=1e-6, max_steps=39)
+    message = str(info.value)
+    assert "trapezoid at dt = 0.01 s already takes more than max_steps = 39 steps" in message
+    assert "dopri5 at its samples, 0.01 s apart, already takes more than max_steps = 39 steps" in message
+    assert message.endswith(": give a larger max_steps, or a looser accuracy")

@@ -59,8 +59,6 @@ DESCRIBED = ("arms", "object", "interconnections")  #: the tables that describe 
 SIMULATION_KEYS = {"duration": float, "integrator": str, "dt": float, "save_every": int, "control_dt": float, "accuracy": float}
 #: [N] the force error a run may have when its file names no integrator (the method and step are then chosen for it)
 DEFAULT_ACCURACY = 0.1
-#: [s] the step that choice starts from (halving), when the file gives no dt
-DEFAULT_AUTO_DT = 5e-3
 OUTPUT_KEYS = {"folder": str, "plot": bool, "html": bool, "npz": bool, "csv": bool}
 
 
@@ -79,8 +77,8 @@ class Run:
     output: dict[str, Any] = field(default_factory=dict)
     control_dt: float | None = None  #: the controller's sample period [s] (None: every evaluation)
     accuracy: float | None = None  #: [N] the force error the run may have: dt is the step to start from (simulate's accuracy)
-    #: (integrator, dt [s], save_every) a sweep's cases take when the file names no integrator (each
-    #: run of a sweep does not search for its own method and step): rk4 at the file's dt or 1 ms
+    #: (integrator, dt [s], save_every) a sweep's cases take when the file names neither an
+    #: integrator nor an accuracy (a sweep's runs do not search for their method and step): rk4 at dt
     sweep_method: tuple[str, float, int] | None = None
 
 
@@ -267,7 +265,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         raise f.error("missing required key 'duration' [s]", "simulation")
     duration = _check_type(f, "simulation", "duration", sim["duration"], float)
     chosen_for_it = "integrator" not in sim  # the method and step chosen for an accuracy (DEFAULT_ACCURACY)
-    dt = _check_type(f, "simulation", "dt", sim.get("dt", DEFAULT_AUTO_DT if chosen_for_it else 1e-3), float)
+    dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)  # (with "auto": the step the search starts from)
     integrator = _check_type(f, "simulation", "integrator", sim.get("integrator", "auto"), str)
     if integrator not in INTEGRATORS and integrator != "auto":
         valid = [*sorted(INTEGRATORS), "auto (with accuracy)"]
@@ -324,10 +322,8 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     except SceneFileError as exc:
         raise f.error(str(exc), "output", "folder") from None
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
-    sweep_method = None
-    if chosen_for_it:
-        sweep_dt = _check_type(f, "simulation", "dt", sim.get("dt", 1e-3), float)
-        sweep_method = ("rk4", sweep_dt, int(sim.get("save_every", max(1, round(0.01 / sweep_dt)))))
+    # a sweep of a file that asks for nothing runs rk4 at dt (an accuracy written is refused there)
+    sweep_method = ("rk4", dt, save_every) if chosen_for_it and "accuracy" not in sim else None
     run = Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy, sweep_method)
     return run
 
@@ -517,8 +513,13 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
             if loaded.accuracy is not None
             else ""
         ),
-        f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), {res.n_rhs} RHS; "
-        f"wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}",
+        (
+            f"  CPU {res.cpu_time:.2f} s for the search (its reference run and every try; the run kept: {res.n_rhs} RHS); "
+            f"wall {wall:.2f} s"
+            if loaded.accuracy is not None
+            else f"  CPU {res.cpu_time:.2f} s ({res.cpu_time / max(loaded.duration, 1e-300):.3f} CPU s per simulated s), "
+            f"{res.n_rhs} RHS; wall {wall:.2f} s: real-time factor {loaded.duration / max(wall, 1e-300):.3g}"
+        ),
     ]
     metrics, notes = run_metrics(res, loaded.task)  # the names the demo and sweep tables use
     summary += metric_lines(metrics, commanded_squeeze=getattr(loaded.task, "squeeze", None))

@@ -65,13 +65,14 @@ private:
     return bp::object(bp::handle<>(array));
   }
 
-  // Copies out into tau when it is a float64 ndarray (not a subclass) of shape (na,); false when it
-  // is not, or (if `finite`) when an entry is not finite.
+  // Copies out into tau when it is a float64 ndarray in this machine's byte order (not a subclass)
+  // of shape (na,); false when it is not, or (if `finite`) when an entry is not finite.
   bool take(const bp::object & out, VectorXd & tau, bool finite) const {
     PyObject * p = out.ptr();
     if (!PyArray_CheckExact(p)) return false;
     auto * a = reinterpret_cast<PyArrayObject *>(p);
-    if (PyArray_TYPE(a) != NPY_DOUBLE || PyArray_NDIM(a) != 1 || PyArray_DIM(a, 0) != na_) return false;
+    if (PyArray_TYPE(a) != NPY_DOUBLE || !PyArray_ISNOTSWAPPED(a) || PyArray_NDIM(a) != 1 || PyArray_DIM(a, 0) != na_)
+      return false;  // (a '>f8' array has NPY_DOUBLE's type number too: its bytes are swapped)
     const char * data = static_cast<const char *>(PyArray_DATA(a));
     const npy_intp stride = PyArray_STRIDE(a, 0);
     tau.resize(na_);
