@@ -534,7 +534,7 @@ def _halving(
     """A fixed-step ``method`` at dt, dt/2, … (at most :data:`ACCURACY_HALVINGS` halvings, the
     saved grid kept) until its forces are within ``tolerance`` of the reference's: (run, error,
     its warnings); :class:`_Miss` if none is."""
-    error, why, max_steps = math.inf, "every try diverged", settings["max_steps"]
+    error, why, max_steps, budget = math.inf, "every try diverged", settings["max_steps"], False
     try:  # (a controller's sample period must be whole steps of a fixed-step method: dt/2 … keep that)
         _control_period(settings["control_dt"], dt, method)
     except SimulationError as exc:
@@ -543,7 +543,7 @@ def _halving(
         raise _Miss(f"at dt = {dt:g} s already takes more than max_steps = {max_steps} steps", budget=True)
     for _ in range(ACCURACY_HALVINGS + 1):
         if max_steps is not None and step_count(t_final, dt) > max_steps:
-            why = f"a smaller step would take more than max_steps = {max_steps} steps"
+            why, budget = f"a smaller step would take more than max_steps = {max_steps} steps", True
             break
         run, said, _ = _attempt(scene, t_final, settings, integrator=method, dt=dt, save_every=every)
         if run is not None:
@@ -557,7 +557,7 @@ def _halving(
         if run is not None and run.cpu_time > settings["cheapest"]:  # the next try, at half the step, costs more still
             raise _Miss(f"at dt = {dt:g} s was off by {error:.3g} N and cost more than a run that meets it")
         dt, every = dt / 2, every * 2
-    raise _Miss(f"down to dt = {2 * dt:g} s ({why})")
+    raise _Miss(f"down to dt = {2 * dt:g} s ({why})", budget=budget)
 
 
 def _tightening(

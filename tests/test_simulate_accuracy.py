@@ -241,3 +241,10 @@ def test_what_auto_cannot_do_within_max_steps_says_so(demo: tuple[cd.Scene, Obje
     assert "trapezoid at dt = 0.01 s already takes more than max_steps = 39 steps" in message
     assert "dopri5 at its samples, 0.01 s apart, already takes more than max_steps = 39 steps" in message
     assert message.endswith(": give a larger max_steps, or a looser accuracy")
+    # room for the samples but not for the steps: each method says what stopped it
+    with pytest.raises(SimulationError) as info:
+        cd.simulate(scene, 0.4, controller=controller, integrator="auto", dt=1e-2, accuracy=1e-6, max_steps=45)
+    message = str(info.value)
+    assert "trapezoid down to dt = 0.01 s (a smaller step would take more than max_steps = 45 steps)" in message
+    assert "dopri5 down to rtol 1e-08 (at rtol 0.001 it ran out of its step budget (max_steps = 45))" in message
+    assert message.endswith(": give a larger max_steps, or a looser accuracy")
