@@ -390,8 +390,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
     methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
     del settings["integrator"]
-    if auto and has_constraints(scene):  # (rigid grasps: explicit methods only)
-        methods = [m for m in methods if not (m.a_stable or m.exact_discretisation)]
+    if auto:  # the methods the scene takes (rigid grasps: the explicit ones)
+        methods = [m for m in methods if _takes(scene, m)]
     for method in methods:
         check_integrator(scene, method)
     _checked_choice("accuracy_check", settings.pop("accuracy_check"), ACCURACY_CHECKS)  # (not used: the search checks)
@@ -410,7 +410,7 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     if not has_constraints(scene):
         _warn_if_soft(Dynamics(scene, settings["backend"]), q)  # (the tries run without the checks)
     cpu0 = time.process_time()
-    forces = _accuracy_reference(scene, t_final, tolerance, dt * every, settings)
+    reference = _accuracy_reference(scene, t_final, tolerance, dt * every, settings)
     tries = [(m, functools.partial(_halving, m, dt, every)) for m in methods]
     if auto:
         tries.append((DormandPrince(), functools.partial(_tightening, dt * every)))
@@ -419,11 +419,11 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     for method, search in tries:
         cheapest = min((r.cpu_time for r, _, _ in found), default=math.inf)  # (a try that costs more cannot win)
         try:
-            found.append(search(scene, t_final, tolerance, forces, {**settings, "cheapest": cheapest}))
+            found.append(search(scene, t_final, tolerance, reference, {**settings, "cheapest": cheapest}))
         except _Miss as miss:
             misses.append((method.name, str(miss), miss.budget))
     if not found:
-        growth = _growth(forces)
+        growth = _growth(reference.wrenches()[..., :3])
         if growth > ACCURACY_GROWTH:
             hint = (
                 f"; the reference's forces grow {growth:.3g}× over the run: the closed loop itself may be unstable "
@@ -446,16 +446,24 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     return _estimated(run, error, cpu_time=time.process_time() - cpu0)
 
 
+def _takes(scene: Scene, method: Integrator) -> bool:
+    """Whether ``scene`` can run under ``method`` (:func:`check_integrator`)."""
+    try:
+        check_integrator(scene, method)
+    except SimulationError:
+        return False
+    return True
+
+
 def _setting(run: Result) -> str:
-    """A run of an ``accuracy=`` search as the messages name it: its method and step (dopri5's
-    name carries its tolerance)."""
-    return run.integrator if run.integrator.startswith("dopri5") else f"{run.integrator} at dt = {run.dt:g} s"
+    """A run as the messages and `coopdyn simulate`'s summary name it: its method and step (a
+    dopri5 run an ``accuracy=`` search chose is named with its tolerance)."""
+    return run.integrator if run.integrator.startswith("dopri5 (") else f"{run.integrator} at dt = {run.dt:g} s"
 
 
-def _accuracy_reference(scene: Scene, t_final: float, tolerance: float, spacing: float, settings: dict[str, Any]) -> np.ndarray:
-    """The forces (n, links, 3) [N] of the reference run of ``accuracy=``: dopri5 at
-    :data:`ACCURACY_REFERENCE`, sampled every ``spacing`` seconds; refuses a tolerance below
-    what it resolves."""
+def _accuracy_reference(scene: Scene, t_final: float, tolerance: float, spacing: float, settings: dict[str, Any]) -> Result:
+    """The reference run of ``accuracy=``: dopri5 at :data:`ACCURACY_REFERENCE`, sampled every
+    ``spacing`` seconds; refuses a tolerance below what it resolves."""
     rtol, atol = ACCURACY_REFERENCE
     try:
         with warnings.catch_warnings():
@@ -484,7 +492,7 @@ def _accuracy_reference(scene: Scene, t_final: float, tolerance: float, spacing:
             f"accuracy = {tolerance:g} N is below what the reference resolves: about {ACCURACY_FLOOR:g} of the peak force "
             f"({peak:.3g} N), {ACCURACY_FLOOR * peak:.2g} N"
         )
-    return forces
+    return reference
 
 
 def _tries(settings: dict[str, Any]) -> dict[str, Any]:
@@ -492,11 +500,12 @@ def _tries(settings: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in settings.items() if k not in ("progress", "cheapest")} | {"progress": False}
 
 
-def _force_error(run: Result, forces: np.ndarray) -> float:
-    """[N] the largest difference between a run's interconnection forces and the reference's."""
-    mine = run.wrenches()[..., :3]
-    if mine.shape != forces.shape:
-        raise SimulationError(f"accuracy=: the run's samples ({len(mine)}) are not the reference's ({len(forces)})")
+def _force_error(run: Result, reference: Result) -> float:
+    """[N] the largest difference between a run's interconnection forces and the reference's,
+    sample by sample (the same instants)."""
+    mine, forces = run.wrenches()[..., :3], reference.wrenches()[..., :3]
+    if mine.shape != forces.shape or not np.allclose(run.t, reference.t, rtol=0.0, atol=1e-9):
+        raise SimulationError(f"accuracy=: the run's samples ({len(run.t)}) are not the reference's ({len(reference.t)})")
     return float(np.max(np.linalg.norm(mine - forces, axis=-1), initial=0.0))
 
 
@@ -507,8 +516,8 @@ def _attempt(
     scene: Scene, t_final: float, settings: dict[str, Any], **run: Any
 ) -> tuple[Result | None, list[warnings.WarningMessage], str]:
     """One run of an ``accuracy=`` search, its warnings kept (shown for the run returned only),
-    and what became of it: None and why when it diverges or breaks the energy balance (past the
-    method's stability limit) or runs out of its step budget."""
+    and what became of it: the run and "completed", or None and "diverged" (it diverged or broke
+    the energy balance: past the method's stability limit) or "out of steps" (max_steps)."""
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         try:
@@ -516,7 +525,7 @@ def _attempt(
         except SimulationInterrupted:
             raise SimulationInterrupted(f"interrupted while trying {run['integrator']} for accuracy=") from None
         except StepBudgetError:
-            return None, said, f"ran out of its step budget (max_steps = {settings['max_steps']})"
+            return None, said, "out of steps"
         except (DivergenceError, StepMatrixError, EnergyBalanceError):
             return None, said, "diverged"
 
@@ -528,7 +537,7 @@ def _halving(
     scene: Scene,
     t_final: float,
     tolerance: float,
-    forces: np.ndarray,
+    reference: Result,
     settings: dict[str, Any],
 ) -> _Found:
     """A fixed-step ``method`` at dt, dt/2, … (at most :data:`ACCURACY_HALVINGS` halvings, the
@@ -547,7 +556,7 @@ def _halving(
             break
         run, said, _ = _attempt(scene, t_final, settings, integrator=method, dt=dt, save_every=every)
         if run is not None:
-            error = _force_error(run, forces)
+            error = _force_error(run, reference)
             why = f"off by {error:.3g} N against dopri5 at rtol {ACCURACY_REFERENCE[0]:g}"
         if settings["progress"]:
             outcome = f"is off by {error:.3g} N" if run is not None else "diverges"
@@ -561,7 +570,7 @@ def _halving(
 
 
 def _tightening(
-    spacing: float, scene: Scene, t_final: float, tolerance: float, forces: np.ndarray, settings: dict[str, Any]
+    spacing: float, scene: Scene, t_final: float, tolerance: float, reference: Result, settings: dict[str, Any]
 ) -> _Found:
     """dopri5 at each rtol of :data:`AUTO_RTOLS` until its forces (sampled every ``spacing``
     seconds) are within ``tolerance`` of the reference's: (run, error, its warnings); :class:`_Miss`
@@ -573,11 +582,15 @@ def _tightening(
     for rtol in AUTO_RTOLS:
         run, said, became = _attempt(scene, t_final, settings, integrator=DormandPrince(rtol=rtol, atol=rtol * 1e-3), dt=spacing)
         if run is None:
-            why, budget = f"at rtol {rtol:g} it {became}", became.startswith("ran out")
+            budget = became == "out of steps"
+            what = f"ran out of its step budget (max_steps = {max_steps})" if budget else became
+            why = f"at rtol {rtol:g} it {what}"
+            if settings["progress"]:
+                print(f"accuracy {tolerance:g} N: dopri5 at rtol {rtol:g} {what}", file=sys.stderr)
             if budget:  # (a tighter rtol takes more steps still)
                 break
         else:
-            error = _force_error(run, forces)
+            error = _force_error(run, reference)
             why = f"off by {error:.3g} N at rtol {rtol:g}"
             if settings["progress"]:
                 print(f"accuracy {tolerance:g} N: dopri5 at rtol {rtol:g} is off by {error:.3g} N", file=sys.stderr)

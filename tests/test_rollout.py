@@ -77,5 +77,7 @@ def test_bad_input_is_named(pandas: cd.Scene, kwargs: dict, message: str) -> Non
 
 
 def test_the_torque_sequence_refuses_a_wrong_table(pandas: cd.Scene) -> None:
-    with pytest.raises(SceneError, match=r"torques must be \(N, 14\)"):
+    with pytest.raises(
+        SceneError, match=r"torques must be \(N, 14\): one row of the 14 arm torques per period, got shape \(3, 2\)$"
+    ):
         TorqueSequence(pandas, np.zeros((3, 2)), 0.01)

@@ -234,7 +234,6 @@ class TorqueSequence:
             raise SceneError(
                 f"TorqueSequence: torques must be (N, {n}): one row of the {n} arm torques per period, got shape "
                 f"{self.torques.shape}"
-                f"{self.torques.shape}"
             )
         self.period = _validate.positive(period, "TorqueSequence: period", "s")
 

@@ -324,8 +324,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
     output["folder"] = str(folder if folder.is_absolute() else (path.parent / folder).resolve())  # the file's own folder
     # a sweep of a file that asks for nothing runs rk4 at dt (an accuracy written is refused there)
     sweep_method = ("rk4", dt, save_every) if chosen_for_it and "accuracy" not in sim else None
-    run = Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy, sweep_method)
-    return run
+    return Run(path, scene, controller, task, duration, integrator, dt, save_every, output, control_dt, accuracy, sweep_method)
 
 
 def _scene(f: _File, doc: dict[str, Any]) -> tuple[Scene, str | None, dict[str, Any]]:
@@ -459,7 +458,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
 
     from ..errors import DivergenceError, SimulationInterrupted, StepBudgetError
     from ..outputs import check_folder, save_partial, write_outputs
-    from ..simulate import simulate
+    from ..simulate import _setting, simulate
     from ..viz.plotting import result_figure
 
     out = check_folder(folder or loaded.output["folder"])  # before the run: a refusal costs nothing yet
@@ -507,7 +506,7 @@ def run(loaded: Run, *, folder: str | Path | None = None, progress: bool = True,
     written = list(done.files)
     summary = [
         f"{loaded.path}: {loaded.duration:g} s with "
-        + (res.integrator if res.integrator.startswith("dopri5 (") else f"{res.integrator} at dt = {res.dt:g} s")
+        + _setting(res)
         + (
             f" (chosen for a force error <= {loaded.accuracy:g} N: {res.force_error_estimate:.3g} N against dopri5)"
             if loaded.accuracy is not None

@@ -427,9 +427,7 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     fps = _fps(fps)
     window = RecordingWindow()
     vis = meshcat.Visualizer(window=window)
-    scale, peak = force_scale(result)
-    deflection = deflection_scale(result)
-    animator = _Animator(result.scene, vis, meshes, scale=scale, deflection=deflection)
+    animator, legend = _loaded(result, vis, meshes)
     idx = _frames(result, fps)
     wrenches = result.wrenches()
     for name, T, s in animator.poses(result.q[0], wrenches[0]):
@@ -447,9 +445,17 @@ def export_html(result: Result, path: str | os.PathLike[str], *, fps: float = 30
     vis["/Cameras/default/rotated/<object>"].set_property("position", _yup(eye))
     x, y, z = _yup(target)  # meshcat has no command for the orbit target: set it in the page
     look = f"viewer.controls.target.set({x:.6g}, {y:.6g}, {z:.6g}); viewer.controls.update(); viewer.set_dirty();"
-    legend = _legend(scale, peak, deflection if animator.ghost_nodes else None)
     page = window.get_scene(look + _clock(float(result.t[-1])), f"{legend} · {result.integrator}, {result.t[-1]:g} s")
     return write_atomically(path, "the HTML animation", lambda tmp: tmp.write_text(page, encoding="utf-8"), {".html", ".htm"})
+
+
+def _loaded(result: Result, vis: Any, meshes: str) -> tuple[_Animator, str]:
+    """``result``'s scene loaded into ``vis``, its force arrows and (elastic joints) its ghost arms
+    scaled for the run, and the legend that says both scales."""
+    scale, peak = force_scale(result)
+    deflection = deflection_scale(result)
+    animator = _Animator(result.scene, vis, meshes, scale=scale, deflection=deflection)
+    return animator, _legend(scale, peak, deflection if animator.ghost_nodes else None)
 
 
 def _legend(scale: float, peak: float, deflection: float | None = None) -> str:
@@ -571,13 +577,10 @@ def view(
             zmq_url = server.zmq_url
         with sigterm_as_interrupt():
             vis = meshcat.Visualizer(zmq_url=zmq_url)
-            scale, peak = force_scale(result)
-            deflection = deflection_scale(result)
-            animator = _Animator(result.scene, vis, meshes, scale=scale, deflection=deflection)
+            animator, legend = _loaded(result, vis, meshes)
             idx = _frames(result, fps)
             wrenches = result.wrenches()
             sampled = idx[:: max(1, len(idx) // 20)]
-            legend = _legend(scale, peak, deflection if animator.ghost_nodes else None)
             frame_live(vis, *animator.box(result.q[sampled], wrenches[sampled]), legend)
             url = server.web_url if server is not None else vis.url()
             _log.info("meshcat viewer at %s (Ctrl-C to stop)", url)
