@@ -388,7 +388,10 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     tighter and tighter rtol) against one dopri5 reference on the same grid."""
     tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
     auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
-    methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
+    try:
+        methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
+    except SimulationError as exc:  # (with an accuracy, "auto" is a choice too)
+        raise SimulationError(f'{exc}, or "auto" (the method chosen for the accuracy too)') from None
     del settings["integrator"]
     if auto:  # the methods the scene takes (rigid grasps: the explicit ones)
         methods = [m for m in methods if _takes(scene, m)]

@@ -170,6 +170,8 @@ def test_auto_chooses_the_method_too(demo: tuple[cd.Scene, ObjectImpedance], cap
             assert res.integrator in ("trapezoid", "rk4", "implicit_euler")
     with pytest.raises(SimulationError, match=r'integrator="auto" chooses the method for a force accuracy: give accuracy='):
         cd.simulate(scene, 0.1, controller=controller, integrator="auto")
+    with pytest.raises(SimulationError, match=r"unknown integrator 'AUTO'; valid: .+, or \"auto\" \(the method chosen"):
+        cd.simulate(scene, 0.1, controller=controller, integrator="AUTO", accuracy=0.1)
     with pytest.raises(SimulationError, match=r"no method reached a force error of 1e-05 N \(trapezoid down to dt = "):
         cd.simulate(scene, 0.05, controller=controller, integrator="auto", dt=1e-2, accuracy=1e-5, max_steps=40)
 

@@ -303,7 +303,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         if chosen is not None and (chosen.adaptive or chosen.exact_discretisation):
             what = "controls its own error (give its rtol in Python)" if chosen.adaptive else "is exact at any dt"
             raise f.error(
-                f"chooses a fixed-step method's step; {integrator} {what}: use a fixed-step method or drop accuracy",
+                f'chooses a fixed-step method\'s step; {integrator} {what}: use a fixed-step method, "auto", or drop accuracy',
                 "simulation",
                 "accuracy",
             )
