@@ -90,7 +90,9 @@ def rollout(
     def one(b: int) -> None:
         if not hasattr(local, "simulator"):  # one simulator (its kernel, its loop) per thread
             local.sequence = TorqueSequence(scene, U[b], period)
-            local.simulator = Simulator(scene, local.sequence, integrator, dt, save_every=per, max_speed=max_speed)
+            local.simulator = Simulator(  # (sampled once per period: every stage of its steps sees that row)
+                scene, local.sequence, integrator, dt, save_every=per, max_speed=max_speed, control_dt=period
+            )
         local.sequence.torques = U[b]
         try:
             res = local.simulator.run(t_final, starts[0][b], starts[1][b])

@@ -33,7 +33,7 @@ def test_each_rollout_is_its_own_serial_run_and_threads_change_nothing(pandas: c
     assert one.status == ("done",) * 4 and one.t.shape == (21,) and one.q.shape == (4, 21, pandas.nq)
     for b in (0, 3):
         run = cd.simulate(
-            pandas, 0.2, TorqueSequence(pandas, U[b], 0.01), "implicit_euler", dt=1e-3, save_every=10, v0=v0[b],
+            pandas, 0.2, TorqueSequence(pandas, U[b], 0.01), "implicit_euler", dt=1e-3, save_every=10, v0=v0[b], control_dt=0.01,
             energy_check="off", accuracy_check="off",
         )  # fmt: skip
         np.testing.assert_array_equal(one.q[b], run.q)
@@ -48,6 +48,25 @@ def test_the_torque_sequence_holds_each_row_for_its_period_in_both_loops(pandas:
     runs = [cd.simulate(pandas, 0.05, seq, "rk4", dt=1e-3, loop=loop, accuracy_check="off") for loop in ("python", "compiled")]
     np.testing.assert_array_equal(runs[0].tau, runs[1].tau)
     np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-13)
+
+
+def test_a_rollout_holds_each_row_over_every_stage_of_its_period(pandas: cd.Scene) -> None:
+    # rk4's last stage sits on the period's end: it must still read row k, not row k + 1
+    U = torques(pandas, 1, 2)[0]
+    U[1] += 50.0
+    both = cd.rollout(pandas, U[None], period=1e-3, integrator="rk4", threads=1)
+    first = cd.rollout(pandas, U[None, [0, 0]], period=1e-3, integrator="rk4", threads=1)
+    np.testing.assert_array_equal(both.q[0, 1], first.q[0, 1])
+    np.testing.assert_array_equal(both.v[0, 1], first.v[0, 1])
+    assert not np.array_equal(both.v[0, 2], first.v[0, 2])  # (row 1 does act on the next period)
+
+
+def test_an_instant_a_rounding_short_of_a_boundary_is_the_next_period(pandas: cd.Scene) -> None:
+    U = torques(pandas, 1, 10)[0]
+    seq = TorqueSequence(pandas, U, 0.1)
+    assert 0.7 / 0.1 < 7.0  # (6.999999999999999)
+    assert np.array_equal(seq(0.7, pandas.q0, pandas.v0), U[7])
+    assert np.array_equal(seq(0.7 - 1e-6, pandas.q0, pandas.v0), U[6])
 
 
 @pytest.mark.filterwarnings("ignore::coopdyn.errors.LogMapWarning")  # (the kicked trajectory twists its grasp)

@@ -220,6 +220,11 @@ class TorqueSequence:
     """Torques given in advance: ``torques[k]`` from ``k·period`` to ``(k + 1)·period`` (zero-order
     hold), the last one held to the end — an open-loop input, as :func:`coopdyn.rollout` plays.
 
+    An instant within 1e-9·period of a boundary counts as the next period's. Called at every
+    stage, a method's stage at the end of a period's last step (rk4's, implicit Euler's) reads the
+    next row; ``simulate(..., control_dt=period)`` samples it once per period instead, so every
+    stage of the period's steps sees row k — what :func:`coopdyn.rollout` does.
+
     Args:
         scene: the scene.
         torques: (N, n_actuated) [N·m or N] (an elastic joint's: its motor's).
@@ -244,5 +249,5 @@ class TorqueSequence:
         return TorqueSequenceSpec(torques=self.torques.copy(), period=float(self.period))
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        k = math.floor(t / self.period)
+        k = math.floor(t / self.period + 1e-9)  # (the compiled twin's and the loop's samples' tolerance)
         return self.torques[min(max(k, 0), len(self.torques) - 1)].copy()

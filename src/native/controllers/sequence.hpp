@@ -9,11 +9,12 @@
 
 namespace coopdyn_native {
 
-// τ(t) = torques[k], k = ⌊t / period⌋ clamped to the rows (the same floor as the Python twin).
+// τ(t) = torques[k], k = ⌊t / period + 1e-9⌋ clamped to the rows (the same floor as the Python
+// twin: an instant within 1e-9 period of a boundary is the next period's, as the loop's samples are).
 struct TorqueSequence : Controller {
   TorqueSequence(MatrixXd torques, double period) : torques(std::move(torques)), period(period) {}
   void torque(double t, const VectorXd &, const VectorXd &, VectorXd & tau) override {
-    const double k = std::floor(t / period);
+    const double k = std::floor(t / period + 1e-9);
     const Eigen::Index row =
       k <= 0.0 ? 0 : std::min<Eigen::Index>(torques.rows() - 1, static_cast<Eigen::Index>(std::min(k, 1e15)));
     tau = torques.row(row).transpose();
