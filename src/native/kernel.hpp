@@ -164,6 +164,8 @@ public:
   // controller), then accel, terms or ie_velocity at the same (q, v): one kinematics pass serves
   // the controller's gravity term and the elements.
   const Model & model() const { return full_model_; }
+  Data & full_data() { return full_data_; }  // (the scene's Data: what compute_derivatives leaves)
+  const std::vector<Link> & links() const { return links_; }
   // The scene's model without the elastic joints' motors (the same as model() without them): its
   // coordinates are the head of q and v, its joints and frames model()'s first — what a
   // controller that reads the links only needs, cheaper to run through.
@@ -409,6 +411,13 @@ public:
     return out;
   }
 
+  // What derivatives() computes (see there); Minv is the whole M⁻¹ (symmetric).
+  struct Derivatives {
+    VectorXd a;
+    MatrixXd da_dq, da_dv, da_dtau, Minv, W, dW_dq, dW_dv;
+    bool exact = true;
+  };
+
   // Exact ∂q̈/∂(q, v, τ) and every element's wrench G_f_G with its derivatives at (q, v, τ): the
   // twin of coopdyn/dynamics/derivatives.py, same equations (see there): the elements' wrenches as
   // body-fixed external forces of Pinocchio's ABA derivatives, plus M⁻¹ times their own variation
@@ -418,6 +427,17 @@ public:
     check_size(q, full_model_.nq, "q");
     check_size(v, full_model_.nv, "v");
     check_size(tau, actuated_.size(), "tau");
+    Vector6 w = Vector6::Zero();
+    if (!wrench.is_none()) w = object_wrench(wrench);
+    compute_derivatives(q, v, tau, wrench.is_none() ? nullptr : &w, derivatives_);
+    const Derivatives & d = derivatives_;
+    return bp::make_tuple(d.a, d.da_dq, d.da_dv, d.da_dtau, d.W, d.dW_dq, d.dW_dv, d.exact);
+  }
+
+  // derivatives() into `out`, for C++ callers (sensitivity.hpp); `wrench`: the object's external
+  // wrench in world axes, or null. After it, full_data() holds the frames' placements and the
+  // joint Jacobians at q.
+  void compute_derivatives(const RefVec & q, const RefVec & v, const RefVec & tau, const Vector6 * wrench, Derivatives & out) {
     kinematics_ = NONE;
     const Eigen::Index nv = full_model_.nv, L = static_cast<Eigen::Index>(links_.size()), na = actuated_.size();
     pinocchio::computeForwardKinematicsDerivatives(full_model_, full_data_, q, v, VectorXd::Zero(nv));
@@ -426,7 +446,12 @@ public:
     ForceList fext(full_model_.njoints, pinocchio::Force::Zero());
     MatrixXd dQ_dq = MatrixXd::Zero(nv, nv), dQ_dv = MatrixXd::Zero(nv, nv);
     dQ_dv.diagonal() = -damping_;
-    MatrixXd W(L, 6), dW_dq(6 * L, nv), dW_dv(6 * L, nv);
+    MatrixXd & W = out.W;
+    MatrixXd & dW_dq = out.dW_dq;
+    MatrixXd & dW_dv = out.dW_dv;
+    W.resize(L, 6);
+    dW_dq.resize(6 * L, nv);
+    dW_dv.resize(6 * L, nv);
     Matrix6x J_G(6, nv), J_T(6, nv), dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
     Matrix6 F_d, F_x;
     bool exact = true;
@@ -465,8 +490,8 @@ public:
       dW_dq.middleRows(6 * i, 6) = df_dq;
       dW_dv.middleRows(6 * i, 6) = df_dv;
     }
-    if (!wrench.is_none()) {  // constant in world axes: its body-axes value turns with the object
-      const Vector6 w = object_wrench(wrench);
+    if (wrench != nullptr) {  // constant in world axes: its body-axes value turns with the object
+      const Vector6 & w = *wrench;
       const coopdyn::Matrix3 & R = full_data_.oMf[object_frame_].rotation();
       Vector6 f_o;
       f_o << R.transpose() * w.head<3>(), R.transpose() * w.tail<3>();
@@ -488,14 +513,17 @@ public:
       dQ_dv -= D_s;
     }
     pinocchio::computeABADerivatives(full_model_, full_data_, q, v, tau_full, fext);
-    MatrixXd Minv = full_data_.Minv;
+    MatrixXd & Minv = out.Minv;
+    Minv = full_data_.Minv;
     Minv.triangularView<Eigen::StrictlyLower>() = Minv.transpose().triangularView<Eigen::StrictlyLower>();
-    const MatrixXd da_dq = full_data_.ddq_dq + Minv * dQ_dq, da_dv = full_data_.ddq_dv + Minv * dQ_dv;
-    MatrixXd da_dtau(nv, na);
-    for (Eigen::Index i = 0; i < na; ++i) da_dtau.col(i) = Minv.col(actuated_[i]);
-    if (!da_dq.allFinite() || !da_dv.allFinite() || !full_data_.ddq.allFinite())
+    out.da_dq = full_data_.ddq_dq + Minv * dQ_dq;
+    out.da_dv = full_data_.ddq_dv + Minv * dQ_dv;
+    out.da_dtau.resize(nv, na);
+    for (Eigen::Index i = 0; i < na; ++i) out.da_dtau.col(i) = Minv.col(actuated_[i]);
+    if (!out.da_dq.allFinite() || !out.da_dv.allFinite() || !full_data_.ddq.allFinite())
       throw std::runtime_error("the dynamics' derivatives are not finite at this state");
-    return bp::make_tuple(VectorXd(full_data_.ddq), da_dq, da_dv, da_dtau, W, dW_dq, dW_dv, exact);
+    out.a = full_data_.ddq;
+    out.exact = exact;
   }
 
   // ad(w) for a twist w = [v; ω] (derivatives.py: motion_cross).
@@ -812,6 +840,7 @@ private:
   std::vector<pinocchio::Motion> gravity_axis_;
   VectorXd g_act_;
   ElementEval ev_;
+  Derivatives derivatives_;
   Matrix6x J_G_, J_T_, SJ_;
   VectorXd Q_, tau_full_, rhs_;
   MatrixXd K_t_, D_t_, S_, Kg_;
