@@ -42,6 +42,14 @@ from .model import (
 )
 from .result import Result
 from .rollout import Rollouts, rollout
+from .sensitivity import (
+    Sensitivity,
+    StepSensitivity,
+    TrajectorySensitivity,
+    step_sensitivity,
+    trajectory_sensitivity,
+    with_parameters,
+)
 from .simulate import simulate
 from .simulator import Simulator
 from .stability import Advice, advise
@@ -75,12 +83,15 @@ __all__ = [
     "SceneFileError",
     "SceneWarning",
     "Section",
+    "Sensitivity",
     "SimulationError",
     "SimulationInterrupted",
     "Simulator",
     "StepBudgetError",
+    "StepSensitivity",
     "SweepError",
     "SweepInterrupted",
+    "TrajectorySensitivity",
     "ViewerError",
     "__version__",
     "advise",
@@ -100,5 +111,8 @@ __all__ = [
     "rollout",
     "scenes",
     "simulate",
+    "step_sensitivity",
     "sweep",
+    "trajectory_sensitivity",
+    "with_parameters",
 ]

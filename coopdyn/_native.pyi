@@ -53,6 +53,33 @@ class Kernel:
     @property
     def rotation_alarm_angle(self) -> float: ...
 
+class Sensitivity:
+    """Exact sensitivities of open-loop explicit steps (src/native/sensitivity.hpp); see coopdyn.sensitivity."""
+
+    def __init__(
+        self,
+        kernel: Kernel,
+        A: list[list[float]],
+        b: list[float],
+        symplectic: bool,
+        charts: list[tuple[int, int]],
+        parameters: list[Any],
+    ) -> None: ...
+    def run(
+        self,
+        q0: np.ndarray,
+        v0: np.ndarray,
+        U: np.ndarray,
+        per: int,
+        h: float,
+        dq0: np.ndarray,
+        dv0: np.ndarray,
+        dU: np.ndarray,
+        dP: np.ndarray,
+        end_wrench: bool,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool, np.ndarray]: ...
+    def set_controller(self, kernel: Kernel, controller: dict[str, Any]) -> None: ...
+
 class Loop:
     """A compiled simulation run (src/native/loop.hpp); see coopdyn.compiled."""
 

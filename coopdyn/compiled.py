@@ -173,11 +173,43 @@ def same(a: Any, b: Any) -> bool:
 def controller_settings(scene: Scene, system: System) -> dict[str, Any]:
     """The controller's part of the configuration: its compiled twin's settings, or a callback
     (a controller without a compiled version for this run — Python code, a Python reference or
-    drive, or one built for another scene — is called back from the compiled loop)."""
-    spec = NoControllerSpec() if system.controller is None else _own_spec(system.controller, scene)
+    drive, or one built for a scene of other arms or frames — is called back from the compiled
+    loop). A built-in controller built for a twin of the scene (:func:`twin_scenes`: the same arms,
+    joints and frames, other interconnection or object parameters) runs compiled with its own
+    settings, as its Python law would: it keeps its own model of the object."""
+    controller = system.controller
+    spec = NoControllerSpec() if controller is None else _own_spec(controller, scene)
+    own = getattr(controller, "scene", None)
+    if spec is None and isinstance(own, Scene) and own is not scene and twin_scenes(own, scene):
+        spec = _own_spec(controller, own)
     if spec is None:
         spec = PythonControllerSpec(callback=PythonCallback(system))
     return spec.fields()
+
+
+def twin_scenes(a: Scene, b: Scene) -> bool:
+    """Whether two scenes differ only in their interconnections' laws and the object's inertia:
+    the same joints, frames (placements to 1e-12 m) and arm bodies — what a controller's kinematics
+    and arm model read."""
+    ma, mb = a.model, b.model
+    if (ma.nq, ma.nv, ma.njoints, ma.nframes) != (mb.nq, mb.nv, mb.njoints, mb.nframes) or list(ma.names) != list(mb.names):
+        return False
+    if any(fa.name != fb.name or fa.parentJoint != fb.parentJoint for fa, fb in zip(ma.frames, mb.frames, strict=True)):
+        return False
+    if any(
+        not np.allclose(fa.placement.homogeneous, fb.placement.homogeneous, rtol=0, atol=1e-12)
+        for fa, fb in zip(ma.frames, mb.frames, strict=True)
+    ):
+        return False
+    skip = a.object_joint
+    return (
+        all(
+            j == skip or np.array_equal(ia.toDynamicParameters(), ib.toDynamicParameters())
+            for j, (ia, ib) in enumerate(zip(ma.inertias, mb.inertias, strict=True))
+        )
+        and np.array_equal(ma.armature, mb.armature)
+        and np.array_equal(a.gravity, b.gravity)
+    )
 
 
 def next_chunk(steps: int, seconds: float) -> int:

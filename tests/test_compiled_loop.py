@@ -80,6 +80,28 @@ def test_object_impedance_on_a_strip_runs_compiled_with_the_same_result(measure:
     _assert_same(py, co)
 
 
+def test_a_controller_built_for_a_twin_scene_runs_compiled_with_its_own_model(damped: cd.Scene) -> None:
+    """The demo's controller built on the nominal scene, run on a twin with other grasps and a
+    heavier box (what identification does): compiled, equal to the Python loop, where the
+    controller keeps its own model; a scene with other frames leaves it to Python."""
+    from coopdyn.compiled import twin_scenes
+    from coopdyn.sensitivity import with_parameters
+
+    ctrl = ObjectImpedance(damped, GripLiftOscillate(start=object_start(damped), squeeze=20.0))
+    twin = with_parameters(damped, {"left.k_linear": 1.3e4, "right.d_angular": 0.5, "object.mass": 2.6})
+    from coopdyn.closed_loop import System
+    from coopdyn.compiled import controller_settings
+
+    assert twin_scenes(damped, twin) and twin_scenes(twin, damped)
+    assert controller_settings(twin, System(cd.Dynamics(twin), ctrl))["kind"] == "object_impedance"  # (not a callback)
+    py, co = _both(twin, 0.3, controller=ctrl, integrator="rk4", dt=1e-3, save_every=10)
+    _assert_same(py, co)
+    moved = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002, box_size=(0.2, 0.22, 0.2))
+    assert not twin_scenes(damped, moved)  # (other grasp frames)
+    assert controller_settings(moved, System(cd.Dynamics(moved), ctrl))["kind"] == "python"
+    assert not twin_scenes(damped, cd.scenes.facing_arms("panda", stiffness=1e4, gravity=(0.0, 0.0, -9.0)))
+
+
 def test_object_impedance_holding_computed_torque_and_no_controller(damped: cd.Scene) -> None:
     for ctrl in (ObjectImpedance(damped), ComputedTorque(damped), None):
         py, co = _both(damped, 0.2, controller=ctrl, integrator="implicit_euler", dt=1e-3)

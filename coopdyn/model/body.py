@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -144,6 +145,10 @@ class RigidObject(SceneObject):
 
     def mass_and_com(self) -> tuple[float, np.ndarray]:
         return self.mass, np.asarray(self.com, dtype=float)
+
+    def with_mass(self, mass: float) -> RigidObject:
+        m = _validate.positive(mass, f"{self.name}: mass", "kg")
+        return dataclasses.replace(self, mass=m, inertia=np.asarray(self.inertia, dtype=float) * (m / self.mass))
 
     def describe(self) -> dict[str, Any]:
         out = {"type": "rigid", "mass": float(self.mass), "inertia": numbers(self.inertia, "object inertia")}

@@ -82,6 +82,12 @@ class SceneObject(ABC):
     def mass_and_com(self) -> tuple[float, np.ndarray]:
         """Its mass [kg] and centre of mass in the object frame (3,) [m] (at rest)."""
 
+    def with_mass(self, mass: float) -> SceneObject | None:
+        """This object with its mass set to ``mass`` [kg] and its inertia scaled with it (the same
+        shape, another density) — what identifying a mass changes — or None when it is not one
+        body on one joint (an elastic object: its mass is spread over nodes)."""
+        return None
+
     @abstractmethod
     def spatial_inertia(self) -> pin.Inertia:
         """Its mass [kg], centre of mass (3,) [m] in the object frame and rotational inertia about

@@ -19,6 +19,7 @@
 #include "kernel.hpp"
 #include "loop.hpp"
 #include "mujoco_bridge.hpp"
+#include "sensitivity.hpp"
 #include "registered_elements.hpp"  // every header of elements/ (CMakeLists.txt; controllers/ and methods/: registered.cpp)
 
 namespace {
@@ -122,6 +123,11 @@ bp::tuple evaluate_element(const std::string & kind, const bp::dict & parameters
                         ev.theta);
 }
 
+// The closed loop's controller for a Sensitivity (its compiled twin's settings, or a callback).
+void sensitivity_controller(cn::Sensitivity & sensitivity, bp::object kernel_object, const bp::dict & controller) {
+  sensitivity.set_controller(make_controller(bp::extract<Kernel &>(kernel_object), controller));
+}
+
 bp::object step_matrix_error_type;
 
 void translate_step_matrix_error(const StepMatrixError & e) {
@@ -166,6 +172,12 @@ BOOST_PYTHON_MODULE(_native) {
     .add_property("last_dissipation", &Kernel::last_dissipation)
     .add_property("rotation_alarm", &Kernel::rotation_alarm)
     .add_property("rotation_alarm_angle", &Kernel::rotation_alarm_angle);
+  bp::class_<cn::Sensitivity, boost::noncopyable>(
+    "Sensitivity", "Exact sensitivities of open-loop explicit steps (see coopdyn.sensitivity).",
+    bp::init<bp::object, bp::list, bp::list, bool, bp::list, bp::list>(
+      bp::args("self", "kernel", "A", "b", "symplectic", "charts", "parameters")))
+    .def("run", &cn::Sensitivity::run, bp::args("self", "q0", "v0", "U", "per", "h", "dq0", "dv0", "dU", "dP", "end_wrench"))
+    .def("set_controller", &sensitivity_controller, bp::args("self", "kernel", "controller"));
   bp::class_<Loop, std::shared_ptr<Loop>, boost::noncopyable>(
     "Loop", "A compiled simulation run (see coopdyn.compiled).", bp::no_init)
     .def("advance", &Loop::advance, bp::args("self", "budget"))

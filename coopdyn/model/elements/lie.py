@@ -125,3 +125,61 @@ def jlog6_of_log(e: np.ndarray) -> np.ndarray:
     W = _skew(w)
     p = rho + b * (W @ rho) + c * (W @ (W @ rho))  # the translation of M
     return _jlog6(w, p, t2, a, beta, beta_dot, np.result_type(e, complex) if np.iscomplexobj(e) else float)
+
+
+def _skews(x: np.ndarray) -> np.ndarray:
+    """[x]^ of each row of x (n, 3) → (n, 3, 3) (real or complex)."""
+    out = np.zeros((*x.shape[:-1], 3, 3), dtype=x.dtype)
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -x[..., 2], x[..., 1], -x[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = x[..., 2], -x[..., 1], x[..., 0]
+    return out
+
+
+def jlog6_of_logs(E: np.ndarray) -> np.ndarray:
+    """:func:`jlog6_of_log` of every row of E (n, 6) at once → (n, 6, 6). The rows must share
+    their angle's real part (a complex step's perturbations of one logarithm): one branch of the
+    series serves all of them."""
+    rho, w = E[:, :3], E[:, 3:]
+    t2 = np.einsum("ni,ni->n", w, w)  # no conjugate: analytic
+    a, beta, beta_dot, b, c = _coefficients_batch(t2)
+    W = _skews(w)
+    Wr = np.einsum("nij,nj->ni", W, rho)
+    p = rho + b[:, None] * Wr + c[:, None] * np.einsum("nij,nj->ni", W, Wr)
+    eye = np.eye(3)
+    A = beta[:, None, None] * (w[:, :, None] * w[:, None, :]) + 0.5 * W + a[:, None, None] * eye
+    wTp = np.einsum("ni,ni->n", w, p)
+    v = (beta_dot * wTp)[:, None] * w - (t2 * beta_dot + 2.0 * beta)[:, None] * p
+    C = v[:, :, None] * w[:, None, :] + beta[:, None, None] * (w[:, :, None] * p[:, None, :]) + 0.5 * _skews(p)
+    C = C + (wTp * beta)[:, None, None] * eye
+    J = np.zeros((E.shape[0], 6, 6), dtype=np.result_type(E, float))
+    J[:, :3, :3] = A
+    J[:, 3:, 3:] = A
+    J[:, :3, 3:] = C @ A
+    return J
+
+
+def _coefficients_batch(t2: Any) -> tuple[np.ndarray, ...]:
+    """(a, β, β'/θ, b, c) of :func:`_coefficients_t2` for an array of θ² sharing one real part."""
+    if abs(t2[0].real) < SERIES_BELOW * SERIES_BELOW:
+        return _poly(_A, t2), _poly(_BETA, t2), _poly(_BETA_DOT, t2), _poly(_B, t2), _poly(_C, t2)
+    theta = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
+    st, ct = np.sin(theta), np.cos(theta)
+    a = 0.5 * theta * st / (1.0 - ct)
+    inv_2_2ct = 1.0 / (2.0 * (1.0 - ct))
+    beta = 1.0 / t2 - st / theta * inv_2_2ct
+    beta_dot = -2.0 / (t2 * t2) + (1.0 + st / theta) / t2 * inv_2_2ct
+    return a, beta, beta_dot, (1.0 - ct) / t2, (theta - st) / (t2 * theta)
+
+
+def dexp_inv_rate(delta: np.ndarray, v: np.ndarray, step: float = 1e-30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a free-flyer's (6,) or a spherical joint's (3,) chart coordinate δ and velocity v:
+    ``(r, ∂r/∂v, ∂r/∂δ)`` with ``r = dexp⁻¹(δ) v = Jlog6(exp6 δ) v`` (the chart rate; for 3
+    coordinates the rotation block), the δ derivative by complex step of ``step`` (exact to
+    round-off: no difference is taken)."""
+    n = delta.size
+    E = np.zeros((n + 1, 6), dtype=complex)
+    E[:, 6 - n :] = delta
+    E[np.arange(1, n + 1), np.arange(6 - n, 6)] += 1j * step
+    J = jlog6_of_logs(E)[:, 6 - n :, 6 - n :] if n == 3 else jlog6_of_logs(E)
+    C = J[0].real
+    return C @ v, C, np.einsum("kij,j->ik", J[1:].imag, v) / step

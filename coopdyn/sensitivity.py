@@ -1,0 +1,683 @@
+"""Exact sensitivities of an open-loop step and of a whole open-loop trajectory: ∂x⁺/∂(x, u, p).
+
+The state is ``x = (δq, v)`` as in :func:`coopdyn.linearize` (δq Pinocchio's tangent coordinates:
+``q ⊕ δq = pin.integrate(model, q, δq)``; after a step, about the new configuration); the input
+``u`` is the actuated joints' torque, held over the step [N·m or N]; ``p`` are named physical
+parameters of the scene (:func:`parameters`).
+
+The derivative is that of the discrete map the method computes, not of the continuous flow: an
+explicit Runge–Kutta step takes its stages in the chart around q (``q_i = q ⊕ δ_i``, the chart
+rates ``δ̇_i = dexp⁻¹(δ_i) v_i``), and every stage is differentiated exactly —
+
+* ``∂q̈/∂(q, v, τ)`` from the dynamics' exact derivatives (:meth:`coopdyn.Dynamics.derivatives`:
+  Pinocchio's ABA derivatives, the elements' geometric stiffness);
+* ``∂(q ⊕ δ)`` by Pinocchio's ``dIntegrate`` with respect to q and δ;
+* ``∂(dexp⁻¹(δ) v)/∂δ`` on a free-flyer's or spherical joint's block by complex step of the
+  closed-form ``Jlog6(exp6 δ)`` (:func:`coopdyn.model.elements.lie.dexp_inv_rate`): exact to
+  round-off, no difference is taken;
+* ``∂q̈/∂p`` = M⁻¹ ∂Q/∂p: a stiffness or damping entry enters the element's wrench linearly, so
+  ∂Q/∂p is the generalized force of the same law with those entries alone at 1; the object's
+  mass scales its whole inertia (uniform density), so ∂(M q̈ + h)/∂m is the object's columns of
+  Pinocchio's joint-torque regressor times its inertial parameters / m.
+
+The implicit methods are not covered: they are linearly implicit with a Gauss–Newton Jacobian,
+so the exact derivative of their step needs the derivative of that Jacobian (the dynamics'
+second derivatives), which coopdyn does not have. ``tests/test_sensitivity.py`` checks every
+sensitivity against central finite differences of the step and of the compiled loop's rollout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import cho_factor, cho_solve
+
+from . import _validate
+from .closed_loop import Controller, System
+from .compiled import controller_settings
+from .dynamics import Dynamics
+from .dynamics.backend import kernel_module
+from .errors import KernelError, SceneError, SimulationError
+from .integrators import DormandPrince, ExplicitRungeKutta, Integrator, SymplecticEuler, get_integrator
+from .linearize import controller_gain
+from .model.elements import lookup
+from .model.elements.ball_spring import BallSpring
+from .model.elements.beam import BeamElement
+from .model.elements.lie import dexp_inv_rate, jlog6, log6
+from .model.elements.se3_spring import SE3Spring
+from .model.scene import Scene
+
+__all__ = [
+    "Parameter",
+    "StepSensitivity",
+    "TrajectorySensitivity",
+    "parameters",
+    "step_sensitivity",
+    "trajectory_sensitivity",
+    "with_parameters",
+]
+
+LOCAL = pin.ReferenceFrame.LOCAL
+#: complex step [m, rad] of the chart-rate derivative (far below round-off: no truncation error)
+_COMPLEX_STEP = 1e-30
+_AXES = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _kinds() -> dict[str, tuple[str, tuple[int, ...], str, str]]:
+    """A parameter's kind → (the element's matrix, its diagonal indices, unit, what it is)."""
+    out: dict[str, tuple[str, tuple[int, ...], str, str]] = {}
+    for m, matrix, units in (("k", "stiffness", ("N/m", "N·m/rad")), ("d", "damping", ("N·s/m", "N·m·s/rad"))):
+        out[f"{m}_linear"] = (matrix, (0, 1, 2), units[0], f"translational {matrix} (x, y, z alike)")
+        out[f"{m}_angular"] = (matrix, (3, 4, 5), units[1], f"rotational {matrix} (rx, ry, rz alike)")
+        for j, axis in enumerate(_AXES):
+            out[f"{m}_{axis}"] = (matrix, (j,), units[j // 3], f"{matrix} along {axis}")
+    return out
+
+
+#: a parameter's kind → (the element's matrix, its diagonal indices, unit, what it is)
+_KINDS = _kinds()
+#: the element laws whose wrench is linear in K and in D (the hardening spring's κ term has no K)
+_LINEAR_IN_KD = (SE3Spring, BallSpring)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A named physical parameter of a scene (see :func:`parameters`)."""
+
+    name: str  #: e.g. ``"left.k_linear"`` or ``"object.mass"``
+    value: float  #: its value in the scene [unit]
+    unit: str  #: e.g. ``"N/m"``
+    link: int | None  #: the interconnection's index in ``scene.links``; None for the object's mass
+    kind: str  #: ``k_linear``, ``k_angular``, ``d_linear``, ``d_angular`` or ``mass``
+
+
+def _names_help(scene: Scene) -> str:
+    links = ", ".join(f"'{lk.name}.<kind>'" for lk in scene.links)
+    return f"{links} (kinds: {', '.join(_KINDS)}), 'object.mass'"
+
+
+def _entries(element: Any, kind: str) -> np.ndarray:
+    """The sub-block of the element's K or D that the kind names."""
+    matrix, idx, _, _ = _KINDS[kind]
+    return np.asarray(element.K if matrix == "stiffness" else element.D)[np.ix_(idx, idx)]
+
+
+def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
+    """The scene's parameters named ``"<interconnection>.<kind>"`` or ``"object.mass"``, checked.
+
+    A kind names diagonal entries of the element's K or D (its own axes: :class:`coopdyn.Interconnection`):
+    ``k_x``, ``k_y``, ``k_z`` [N/m], ``k_rx``, ``k_ry``, ``k_rz`` [N·m/rad], and ``d_…`` alike
+    [N·s/m, N·m·s/rad], one entry each; or ``k_linear``, ``k_angular``, ``d_linear``,
+    ``d_angular``: one value for the three entries of a block, which must then be k·I₃ (isotropic).
+    The other entries stay as they are. A ball spring has the translational ones only.
+    ``object.mass`` [kg] is a rigid object's mass, its rotational inertia scaled with it (the same
+    shape, a different density).
+
+    Raises:
+        SceneError: an unknown name, a repeated one, an element whose law is not linear in K and D
+            (a beam, a user's law), or a block that is not isotropic.
+    """
+    if not isinstance(scene, Scene):
+        raise SceneError(f"parameters: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+    if isinstance(names, str) or not isinstance(names, Sequence) or not names:
+        raise SceneError(f"parameters must be a non-empty list of names such as {_names_help(scene)}, got {names!r}")
+    out = []
+    links = {lk.name: i for i, lk in enumerate(scene.links)}
+    for name in names:
+        if not isinstance(name, str) or name.count(".") != 1:
+            raise SceneError(f"parameter {name!r}: a name is '<interconnection>.<kind>' or 'object.mass': {_names_help(scene)}")
+        owner, kind = name.split(".")
+        if name == "object.mass":
+            if scene.object.with_mass(1.0) is None:
+                raise SceneError(
+                    f"parameter 'object.mass': the object is a {type(scene.object).__name__}, not one body on one joint "
+                    "(a RigidObject): its mass is not one parameter"
+                )
+            out.append(Parameter(name, float(scene.object.mass_and_com()[0]), "kg", None, "mass"))
+            continue
+        if owner not in links or kind not in _KINDS:
+            raise SceneError(f"unknown parameter {name!r}; this scene has {_names_help(scene)}")
+        i = links[owner]
+        element = scene.links[i].element
+        if not isinstance(element, _LINEAR_IN_KD) or isinstance(element, BeamElement):
+            raise SceneError(
+                f"parameter {name!r}: the {type(element).__name__} law is not known to be linear in its stiffness and damping; "
+                "parameters are offered for the se3, ball and hardening elements"
+            )
+        if isinstance(element, BallSpring) and max(_KINDS[kind][1]) > 2:
+            raise SceneError(f"parameter {name!r}: a ball spring has no rotational stiffness or damping")
+        B = _entries(element, kind)
+        k = float(B[0, 0])
+        if np.max(np.abs(B - k * np.eye(len(B)))) > 1e-12 * max(abs(k), 1e-300):
+            raise SceneError(
+                f"parameter {name!r}: the {_KINDS[kind][3]} block of {owner!r} is not isotropic (k·I₃): "
+                f"diagonal {np.diag(B).tolist()}; fit its entries one by one ({kind[0]}_x, {kind[0]}_y, …) instead"
+            )
+        out.append(Parameter(name, k, _KINDS[kind][2], i, kind))
+    if len({p.name for p in out}) != len(out):
+        raise SceneError(f"parameters: a name is repeated in {list(names)}")
+    return tuple(out)
+
+
+_parameters = parameters
+
+
+def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
+    """A new scene, equal to ``scene`` but for the named parameters' values (see :func:`parameters`).
+
+    The grasps, the start state and everything else are kept; a grasp that was placed at an arm's
+    tool (``grasp=None``) is kept where it was.
+    """
+    names = list(values)
+    params = parameters(scene, names)
+    specs = list(scene.interconnection_specs)
+    obj = scene.object
+    matrices: dict[int, dict[str, np.ndarray]] = {}  # link → its new K and D
+    for p in params:
+        if p.kind == "mass":
+            changed = obj.with_mass(_validate.positive(values[p.name], "parameter 'object.mass'", "kg"))
+            assert changed is not None  # (parameters() checked it)
+            obj = changed
+            continue
+        assert p.link is not None
+        value = _validate.non_negative(values[p.name], f"parameter {p.name!r}", p.unit)
+        element: Any = scene.links[p.link].element
+        current = matrices.setdefault(p.link, {"stiffness": np.array(element.K, float), "damping": np.array(element.D, float)})
+        matrix, idx, _, _ = _KINDS[p.kind]
+        current[matrix][np.ix_(idx, idx)] = value * np.eye(len(idx))
+    for i, new in matrices.items():
+        spec = specs[i]
+        grasp = spec.grasp if spec.grasp is not None else _grasp_pose(scene, i)
+        specs[i] = dataclasses.replace(spec, grasp=grasp, stiffness=new["stiffness"], damping=new["damping"])
+    return Scene(list(scene.arm_specs), obj, specs, scene.gravity)
+
+
+def _grasp_pose(scene: Scene, link: int) -> pin.SE3:
+    """The pose of link's grasp frame in the object frame (as the scene placed it)."""
+    frames = scene.model.frames
+    g = frames[scene.links[link].grasp_frame]
+    o = frames[scene.object_frame]
+    if g.parentJoint != o.parentJoint:
+        raise SceneError("with_parameters: the grasp is not on the object's body (an elastic object)")
+    return o.placement.actInv(g.placement)
+
+
+@dataclass(frozen=True)
+class StepSensitivity:
+    """One open-loop step and its exact derivatives (see the module docstring for the state)."""
+
+    q: np.ndarray  #: the configuration after the step (nq,)
+    v: np.ndarray  #: the velocities after the step (nv,) [m/s, rad/s]
+    dx_dx: np.ndarray  #: ∂x⁺/∂x (2nv, 2nv), x⁺'s δq about the new q, x's about the start
+    dx_du: np.ndarray  #: ∂x⁺/∂u (2nv, n_actuated) [per N·m or N]
+    dx_dp: np.ndarray  #: ∂x⁺/∂p (2nv, n_parameters) [per the parameter's unit]
+    parameters: tuple[Parameter, ...]  #: the parameters of dx_dp's columns
+    exact: bool  #: False when an element's tangent is finite differences (a user's law)
+
+
+@dataclass(frozen=True)
+class TrajectorySensitivity:
+    """A trajectory sampled at every period and the derivatives of its samples."""
+
+    t: np.ndarray  #: (N + 1,) [s]
+    q: np.ndarray  #: (N + 1, nq)
+    v: np.ndarray  #: (N + 1, nv) [m/s, rad/s]
+    wrench: np.ndarray  #: (N + 1, L, 6) each interconnection's wrench on G at G, G axes [N, N·m]
+    tau: np.ndarray  #: (N, n_actuated) the torques applied over each period [N·m or N]
+    dx_dp: np.ndarray  #: (N + 1, 2nv, n_parameters): ∂x_k/∂p, δq about q_k
+    dwrench_dp: np.ndarray  #: (N + 1, L, 6, n_parameters)
+    dx_dx0: np.ndarray | None  #: (N + 1, 2nv, 2nv): ∂x_k/∂x₀, when asked for
+    parameters: tuple[Parameter, ...]
+    exact: bool
+
+
+class Sensitivity:
+    """A scene's differentiated steps — open loop, or closed under a sampled controller — set up
+    once (the dynamics, the kernel's twin, the parameters' unit laws) for many calls: an MPC's
+    knots, an identification's iterations.
+
+    Args:
+        scene: an elastic scene (rigid grasps are refused).
+        integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` (a step of its
+            fifth-order solution at the h given) or an explicit
+            :class:`~coopdyn.integrators.ExplicitRungeKutta`.
+        parameters: names as :func:`parameters` takes them (e.g. ``["left.k_linear"]``).
+        backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
+            whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
+            round-off.
+        controller: a closed loop's controller ``controller(t, q, v) -> τ``, sampled at every
+            period's start and held over it (a digital controller; :meth:`trajectory` only). A
+            built-in one built for a twin of the scene (the nominal one: same arms and frames,
+            other interconnection or object parameters; :func:`coopdyn.compiled.twin_scenes`)
+            runs compiled and keeps its own model of the object, as on a real robot. Its
+            derivative along the sensitivities' columns comes from central differences (2 calls
+            per column and period; 4·nv when there are 2·nv columns or more), so the result's
+            ``exact`` is then False.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        integrator: Any = "rk4",
+        parameters: Sequence[str] = (),
+        backend: str | None = None,
+        controller: Controller | None = None,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise SceneError(f"sensitivities: scene must be a coopdyn.Scene, got {type(scene).__name__}")
+        if controller is not None and not callable(controller):
+            raise SceneError(
+                f"sensitivities: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}"
+            )
+        params = _parameters(scene, parameters) if len(parameters) else ()
+        if scene.constraints:
+            raise SceneError(
+                "sensitivities: the scene has rigid grasps (constraints); differentiate the elastic scene they stand for"
+            )
+        method = get_integrator(integrator)
+        if isinstance(method, ExplicitRungeKutta | DormandPrince):
+            tab = method.tableau
+            self.tableau: tuple[Any, ...] | None = (tab.A, tab.b)
+        elif type(method) is SymplecticEuler:
+            self.tableau = None
+        else:
+            why = (
+                "an implicit method is linearly implicit with a Gauss–Newton Jacobian, whose own derivative coopdyn does not have"
+                if method.a_stable or "implicit" in type(method).__name__.lower()
+                else "only the explicit Runge–Kutta methods and symplectic Euler are"
+            )
+            raise SimulationError(
+                f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', "
+                "'symplectic_euler' or an explicit tableau (ExplicitRungeKutta)"
+            )
+        self.scene, self.params = scene, params
+        self.dynamics = Dynamics(scene, backend)
+        self.model = scene.model
+        self.data = pin.Data(self.model)
+        nv = scene.nv
+        self.charts: list[tuple[int, int]] = []
+        for joint in self.model.joints[1:]:
+            kind = joint.shortname().removeprefix("JointModel")
+            if kind == "FreeFlyer":
+                self.charts.append((joint.idx_v, 6))
+            elif kind == "Spherical":
+                self.charts.append((joint.idx_v, 3))
+            elif joint.nq != joint.nv or joint.nv > 1:
+                if kind not in ("RUBX", "RUBY", "RUBZ", "RevoluteUnboundedUnaligned"):
+                    raise SceneError(
+                        f"sensitivities: joint type {kind} ({self.model.names[joint.id]}) is not differentiated here; supported: "
+                        "free-flyer, spherical, continuous and every joint whose configuration is its coordinates"
+                    )
+        self.nv = nv
+        self.n_act = scene.n_actuated
+        self.units = [self._unit_law(p) for p in params]
+        self.exact = True
+        if any(p.kind == "mass" for p in params):
+            j = scene.object_joint
+            self.object_columns = slice(10 * (j - 1), 10 * j)
+            self.object_pi = self.model.inertias[j].toDynamicParameters() / scene.object.mass_and_com()[0]
+        self.native = None  # the kernel's twin (src/native/sensitivity.hpp), on the native backend
+        kernel = getattr(self.dynamics, "_kernel", None)
+        if kernel is not None:
+            A, b = self.tableau if self.tableau is not None else ((), ())
+            specs = [
+                ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
+                if law is None
+                else ("element", p.link, lookup(type(law)).native, law.native_parameters())
+                for p, law in zip(params, self.units, strict=True)
+            ]
+            rows = [list(map(float, row)) for row in A]
+            self.native = kernel_module().Sensitivity(kernel, rows, list(map(float, b)), self.tableau is None, self.charts, specs)
+        self.controller = controller
+        self.system: System | None = None
+        self._callback: Any = None
+        if controller is not None:
+            self.system = System(self.dynamics, controller)
+            if self.native is not None:
+                settings = controller_settings(scene, self.system)
+                self._callback = settings.get("callback")
+                self.native.set_controller(kernel, settings)
+
+    def step(self, q: Any = None, v: Any = None, tau: Any = None, dt: float = 1e-3) -> StepSensitivity:
+        """One open-loop step of ``dt`` [s] from (q, v) (default the scene's start) under the torques
+        ``tau`` (n_actuated,) [N·m or N] (default zero) held over it, and its exact derivatives with
+        respect to the state, the torques and the parameters. Its q, v are what
+        :func:`coopdyn.rollout` computes for one step (to round-off)."""
+        scene = self.scene
+        q, v = _state(scene, q, v)
+        u = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
+        h = _validate.positive(dt, "dt", "s", SimulationError)
+        nv, na, n_p = scene.nv, scene.n_actuated, len(self.params)
+        m = 2 * nv + na + n_p
+        eye = np.eye(m)
+        seeds = (eye[:nv], eye[nv : 2 * nv], eye[2 * nv : 2 * nv + na], eye[2 * nv + na :])
+        if self.controller is not None:
+            raise SimulationError("Sensitivity.step differentiates an open-loop step; a closed loop's: Sensitivity.trajectory")
+        Q, V, _, dX, _, _ = self._run(q, v, u[None], 1, h, seeds, end_wrench=False)
+        D = dX[1]
+        return StepSensitivity(
+            Q[1], V[1], D[:, : 2 * nv], D[:, 2 * nv : 2 * nv + na], D[:, 2 * nv + na :], self.params, self.exact
+        )
+
+    def trajectory(
+        self,
+        torques: Any,
+        period: float,
+        *,
+        dt: float | None = None,
+        q0: Any = None,
+        v0: Any = None,
+        initial_state: bool = False,
+    ) -> TrajectorySensitivity:
+        """A trajectory — open loop: ``torques[k]`` (N, n_actuated) [N·m or N] held from k·period
+        [s], as :func:`coopdyn.rollout` plays it; closed loop (a :class:`Sensitivity` with a
+        controller): ``torques`` the number of periods N, or (N, n_actuated) torques added to the
+        controller's — in steps of ``dt`` [s] (a divisor of the period, default the period) from
+        (q0, v0) (default the scene's start), and the forward sensitivities ∂x_k/∂p at every sample
+        — with ``initial_state``, ∂x_k/∂x₀ too — chained from the steps' exact derivatives.
+
+        Raises:
+            SimulationError: a bad argument, or a run that diverges (the state is no longer finite).
+        """
+        scene = self.scene
+        q, v = _state(scene, q0, v0)
+        if self.controller is not None and isinstance(torques, int) and not isinstance(torques, bool):
+            if torques < 1:
+                raise SimulationError(f"trajectory: the number of periods must be >= 1, got {torques}")
+            torques = np.zeros((torques, scene.n_actuated))
+        U = _torques(scene, torques)
+        h, per = _step_of(period, dt)
+        na, nv, n_p, N = scene.n_actuated, scene.nv, len(self.params), len(U)
+        m = n_p + (2 * nv if initial_state else 0)
+        dq, dv, du, dp = np.zeros((nv, m)), np.zeros((nv, m)), np.zeros((na, m)), np.zeros((n_p, m))
+        dp[:, :n_p] = np.eye(n_p)
+        if initial_state:
+            dq[:, n_p : n_p + nv] = np.eye(nv)
+            dv[:, n_p + nv :] = np.eye(nv)
+        Q, V, W, dX, dW, applied = self._run(q, v, U, per, h, (dq, dv, du, dp))
+        dx0 = dX[:, :, n_p:] if initial_state else None
+        return TrajectorySensitivity(
+            np.arange(N + 1) * period, Q, V, W, applied, dX[:, :, :n_p], dW[..., :n_p], dx0, self.params, self.exact
+        )
+
+    def _unit_law(self, p: Parameter) -> Any:
+        """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass."""
+        if p.link is None:
+            return None
+        element = self.scene.links[p.link].element
+        matrix, idx, _, _ = _KINDS[p.kind]
+        size = 6 if isinstance(element, SE3Spring) else 3
+        unit, zero = np.zeros((size, size)), np.zeros((size, size))
+        unit[idx, idx] = 1.0
+        K, D = (unit, zero) if matrix == "stiffness" else (zero, unit)
+        cls = SE3Spring if size == 6 else BallSpring
+        return cls(K, D, p.name)
+
+    @staticmethod
+    def _unit_wrench(p: Parameter, law: Any, X: pin.SE3, xi: np.ndarray) -> np.ndarray:
+        """∂G_f_G/∂p at the relative pose X and twist ξ: the wrench of the law with p's entries
+        alone at 1 — for an SE(3) spring (and the hardening one: its κ term has no K) ``−Jlog6ᵀ P e``
+        or ``−Jlog6ᵀ P Jlog6 ξ``, P the projector on p's entries."""
+        if not isinstance(law, SE3Spring):
+            return np.asarray(law.evaluate(X, xi).G_f_G)
+        e, theta = log6(X)
+        J = jlog6(X, e, theta)
+        matrix, idx, _, _ = _KINDS[p.kind]
+        g = np.zeros(6)
+        g[list(idx)] = (e if matrix == "stiffness" else J @ xi)[list(idx)]
+        return -(J.T @ g)
+
+    # -- one stage ----------------------------------------------------------------------------
+    def _stage(self, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The derivatives at (q, v, u), ∂q̈/∂p (nv, n_p) and ∂W/∂p (L, 6, n_p)."""
+        d = self.dynamics.derivatives(q, v, u)
+        self.exact = self.exact and d.exact
+        n_p = len(self.params)
+        da_dp = np.zeros((self.nv, n_p))
+        dW_dp = np.zeros((len(d.wrench), 6, n_p))
+        if n_p:
+            model, data = self.model, self.data
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            M = pin.crba(model, data, q)
+            M = np.triu(M) + np.triu(M, 1).T
+            dQ = np.zeros((self.nv, n_p))
+            for k, (p, law) in enumerate(zip(self.params, self.units, strict=True)):
+                if law is None:
+                    continue
+                link = self.scene.links[p.link]  # type: ignore[index]
+                X = data.oMf[link.tip_frame].actInv(data.oMf[link.grasp_frame])
+                J_G = pin.getFrameJacobian(model, data, link.grasp_frame, LOCAL).reshape(6, self.nv)
+                J_T = pin.getFrameJacobian(model, data, link.tip_frame, LOCAL).reshape(6, self.nv)
+                Jr = J_G - X.toActionMatrixInverse() @ J_T
+                f = self._unit_wrench(p, law, X, Jr @ v)
+                dQ[:, k] = Jr.T @ f
+                dW_dp[p.link, :, k] = f
+            if any(law is None for law in self.units):  # the object's mass: −∂(M q̈ + h)/∂m at q̈
+                Y = pin.computeJointTorqueRegressor(model, data, q, v, d.acceleration)
+                dQ[:, [law is None for law in self.units]] = -(Y[:, self.object_columns] @ self.object_pi)[:, None]
+            da_dp = cho_solve(cho_factor(M), dQ)
+        return d, da_dp, dW_dp
+
+    def _chart(self, delta: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(δ̇ = dexp⁻¹(δ) v, its ∂/∂v, its ∂/∂δ) with exact derivatives (complex step)."""
+        rate, C, N = v.copy(), np.eye(self.nv), np.zeros((self.nv, self.nv))
+        for i0, n in self.charts:
+            s = slice(i0, i0 + n)
+            rate[s], C[s, s], N[s, s] = dexp_inv_rate(delta[s], v[s], _COMPLEX_STEP)
+        return rate, C, N
+
+    # -- one step -----------------------------------------------------------------------------
+    def _step(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        """One step from (q, v) under u, with the derivatives of (δq⁺, v⁺) along the seed columns
+        ``(dq, dv, du, dp)`` (each (n, m)); also the start's derivatives and ∂W/∂p there."""
+        dq0, dv0, du, dp = seeds
+        if self.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
+            d, da_dp, dW_dp = self._stage(q, v, u)
+            v1 = v + h * d.acceleration
+            dv1 = dv0 + h * (d.da_dq @ dq0 + d.da_dv @ dv0 + d.da_dtau @ du + da_dp @ dp)
+            q1, dq1 = self._integrate(q, h * v1, dq0, h * dv1)
+            return q1, v1, dq1, dv1, d, dW_dp
+        A, b = self.tableau
+        kd: list[np.ndarray] = []
+        ka: list[np.ndarray] = []
+        dkd: list[np.ndarray] = []
+        dka: list[np.ndarray] = []
+        start: tuple[Any, np.ndarray] | None = None
+        for i, row in enumerate(A):
+            if i == 0:
+                q_i, v_i, dq_i, dv_i = q, v, dq0, dv0
+                kd.append(v)
+                dkd.append(dv0)
+            else:
+                delta = h * sum((c * k for c, k in zip(row, kd, strict=False) if c), np.zeros(self.nv))
+                ddelta = h * sum((c * k for c, k in zip(row, dkd, strict=False) if c), np.zeros_like(dq0))
+                v_i = v + h * sum((c * k for c, k in zip(row, ka, strict=False) if c), np.zeros(self.nv))
+                dv_i = dv0 + h * sum((c * k for c, k in zip(row, dka, strict=False) if c), np.zeros_like(dv0))
+                q_i, dq_i = self._integrate(q, delta, dq0, ddelta)
+                rate, C, N = self._chart(delta, v_i)
+                kd.append(rate)
+                dkd.append(C @ dv_i + N @ ddelta)
+            d, da_dp, dW_dp = self._stage(q_i, v_i, u)
+            if i == 0:
+                start = (d, dW_dp)
+            ka.append(d.acceleration)
+            dka.append(d.da_dq @ dq_i + d.da_dv @ dv_i + d.da_dtau @ du + da_dp @ dp)
+        Delta = h * sum((c * k for c, k in zip(b, kd, strict=True) if c), np.zeros(self.nv))
+        dDelta = h * sum((c * k for c, k in zip(b, dkd, strict=True) if c), np.zeros_like(dq0))
+        v1 = v + h * sum((c * k for c, k in zip(b, ka, strict=True) if c), np.zeros(self.nv))
+        dv1 = dv0 + h * sum((c * k for c, k in zip(b, dka, strict=True) if c), np.zeros_like(dv0))
+        q1, dq1 = self._integrate(q, Delta, dq0, dDelta)
+        assert start is not None
+        return q1, v1, dq1, dv1, start[0], start[1]
+
+    def _run(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        U: np.ndarray,
+        per: int,
+        h: float,
+        seeds: tuple[np.ndarray, ...],
+        end_wrench: bool = True,
+    ) -> tuple[np.ndarray, ...]:
+        """N = len(U) periods of ``per`` steps of h from (q, v), U[k] held over period k, the
+        derivatives carried along the seed columns ``(dq, dv, du, dp)`` (du, dp the same at every
+        step). Returns Q (N+1, nq), V (N+1, nv), W (N+1, L, 6), dX (N+1, 2nv, m), dW (N+1, L, 6, m):
+        every period's start and the end."""
+        if self.native is not None:
+            try:
+                raw = self.native.run(q, v, U, per, h, *seeds, end_wrench)
+            except RuntimeError as exc:
+                error = getattr(self._callback, "error", None)
+                if error is not None:  # a Python controller's own failure
+                    self._callback.error = None
+                    raise error from None
+                raise SimulationError(f"sensitivities: diverged: {exc}") from exc
+            Q, V, W, dX, dW, exact, applied = raw
+            N, L, m = len(U), len(self.scene.elements), seeds[0].shape[1]
+            self.exact = self.exact and bool(exact)
+            return (
+                Q.reshape(N + 1, -1),
+                V.reshape(N + 1, -1),
+                W.reshape(N + 1, L, 6),
+                dX.reshape(N + 1, 2 * self.nv, m),
+                dW.reshape(N + 1, L, 6, m),
+                applied.reshape(N, -1),
+            )
+        dq, dv, du, dp = seeds
+        N, nv, m, L = len(U), self.nv, dq.shape[1], len(self.scene.elements)
+        applied = np.array(U, dtype=float)
+        Q, V = np.empty((N + 1, self.scene.nq)), np.empty((N + 1, nv))
+        W, dX, dW = np.empty((N + 1, L, 6)), np.empty((N + 1, 2 * nv, m)), np.empty((N + 1, L, 6, m))
+
+        def sample(k: int, d: Any, dW_dp: np.ndarray) -> None:
+            Q[k], V[k], W[k] = q, v, d.wrench
+            dX[k, :nv], dX[k, nv:] = dq, dv
+            dW[k] = np.einsum("lij,jm->lim", d.dwrench_dq, dq) + np.einsum("lij,jm->lim", d.dwrench_dv, dv)
+            dW[k] += np.einsum("lip,pm->lim", dW_dp, dp)
+
+        for k in range(N):
+            du_k = du
+            if self.system is not None:  # the controller's sample, held over the period
+                t_k = k * per * h
+                applied[k] = U[k] + self.system.torque(t_k, q, v)
+                du_k = du + _controller_derivative(self.system, t_k, q, v, dq, dv)
+                self.exact = False
+            for s in range(per):
+                try:
+                    q1, v1, dq1, dv1, d, dW_dp = self._step(q, v, applied[k], h, (dq, dv, du_k, dp))
+                except KernelError as exc:  # (a stage's state is no longer finite)
+                    raise SimulationError(
+                        f"sensitivities: diverged in the step from t = {(k * per + s) * h:.6g} s ({exc})"
+                    ) from exc
+                if s == 0:
+                    sample(k, d, dW_dp)
+                if not all(np.all(np.isfinite(x)) for x in (q1, v1, dq1, dv1)):
+                    raise SimulationError(
+                        f"sensitivities: diverged: the state is not finite at t = {(k * per + s + 1) * h:.6g} s"
+                    )
+                q, v, dq, dv = q1, v1, dq1, dv1
+        if end_wrench:
+            d, _, dW_dp = self._stage(q, v, U[-1])
+            sample(N, d, dW_dp)
+        else:  # (the end's wrench would cost one more evaluation of the derivatives)
+            Q[N], V[N], dX[N, :nv], dX[N, nv:], W[N], dW[N] = q, v, dq, dv, np.nan, np.nan
+        return Q, V, W, dX, dW, applied
+
+    def _integrate(self, q: np.ndarray, delta: np.ndarray, dq: np.ndarray, ddelta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """q ⊕ δ and its tangent derivative, from q's (dq) and δ's (ddelta)."""
+        out = pin.integrate(self.model, q, delta)
+        J0 = pin.dIntegrate(self.model, q, delta, pin.ArgumentPosition.ARG0)
+        J1 = pin.dIntegrate(self.model, q, delta, pin.ArgumentPosition.ARG1)
+        return out, J0 @ dq + J1 @ ddelta
+
+
+def _method_name(method: Integrator) -> str:
+    return f"{method.name!r}" if isinstance(getattr(method, "name", None), str) else type(method).__name__
+
+
+def _controller_derivative(system: System, t: float, q: np.ndarray, v: np.ndarray, dq: np.ndarray, dv: np.ndarray) -> np.ndarray:
+    """∂τ/∂(δq, v)·[dq; dv] (n_actuated, m) by central differences of the controller: along each
+    column (2m calls; a step of 1e-6 on its largest entry) when m < 2nv, else through its whole
+    gain (:func:`coopdyn.linearize.controller_gain`) — as the kernel's twin does."""
+    nv, m = len(v), dq.shape[1]
+    if m >= 2 * nv:
+        G = controller_gain(system, t, q, v)
+        return np.asarray(G[:, :nv] @ dq + G[:, nv:] @ dv)
+    model = system.dynamics.scene.model
+    out = np.zeros((system.n_actuated, m))
+    for j in range(m):
+        size = max(float(np.max(np.abs(dq[:, j]))), float(np.max(np.abs(dv[:, j]))))
+        if size == 0.0:
+            continue
+        eps = 1e-6 / size
+        plus = system.torque(t, pin.integrate(model, q, eps * dq[:, j]), v + eps * dv[:, j])
+        minus = system.torque(t, pin.integrate(model, q, -eps * dq[:, j]), v - eps * dv[:, j])
+        out[:, j] = (plus - minus) / (2.0 * eps)
+    return out
+
+
+def _state(scene: Scene, q: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
+    return scene.check_state(scene.q0 if q is None else q, scene.v0 if v is None else v)
+
+
+def _torques(scene: Scene, torques: Any) -> np.ndarray:
+    U = _validate.finite_array(torques, "torques [N·m or N]", error=SimulationError)
+    if U.ndim != 2 or U.shape[0] < 1 or U.shape[1] != scene.n_actuated:
+        raise SimulationError(f"torques must be (N, {scene.n_actuated}): one row per period, got shape {U.shape}")
+    return U
+
+
+def _step_of(period: float, dt: float | None) -> tuple[float, int]:
+    """(h, steps per period), checked."""
+    period = _validate.positive(period, "period", "s", SimulationError)
+    h = period if dt is None else _validate.positive(dt, "dt", "s", SimulationError)
+    per = round(period / h)
+    if per < 1 or abs(per * h - period) > 1e-9 * period:
+        raise SimulationError(f"dt = {h:g} s must divide the period {period:g} s")
+    return h, per
+
+
+def step_sensitivity(
+    scene: Scene,
+    q: Any = None,
+    v: Any = None,
+    tau: Any = None,
+    dt: float = 1e-3,
+    *,
+    integrator: Any = "rk4",
+    parameters: Sequence[str] = (),
+    backend: str | None = None,
+) -> StepSensitivity:
+    """``Sensitivity(scene, integrator, parameters, backend).step(q, v, tau, dt)``: one step and its
+    exact derivatives (see :class:`Sensitivity`; set one up to differentiate many steps)."""
+    return Sensitivity(scene, integrator, parameters, backend).step(q, v, tau, dt)
+
+
+def trajectory_sensitivity(
+    scene: Scene,
+    torques: Any,
+    period: float,
+    *,
+    dt: float | None = None,
+    q0: Any = None,
+    v0: Any = None,
+    integrator: Any = "rk4",
+    parameters: Sequence[str] = (),
+    initial_state: bool = False,
+    backend: str | None = None,
+    controller: Controller | None = None,
+) -> TrajectorySensitivity:
+    """``Sensitivity(scene, integrator, parameters, backend, controller).trajectory(torques, period,
+    ...)``: a trajectory and its forward sensitivities (see :class:`Sensitivity`)."""
+    return Sensitivity(scene, integrator, parameters, backend, controller).trajectory(
+        torques, period, dt=dt, q0=q0, v0=v0, initial_state=initial_state
+    )

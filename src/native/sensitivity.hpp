@@ -1,0 +1,380 @@
+// Exact sensitivities of open-loop explicit steps: the C++ twin of coopdyn/sensitivity.py (same
+// recursion, see its docstring). Each stage's derivatives come from Kernel::compute_derivatives;
+// a parameter's ∂q̈/∂p is M⁻¹ ∂Q/∂p, ∂Q/∂p the generalized force of a unit law (an element
+// built from the Python side's unit K or D: the law is linear in them) or, for the object's
+// mass, −J_jᵀ (I·a_gf + v ×* I v)/m with the object's body inertia I (RNEA's body force of the
+// object joint, linear in the inertia); the chart rate dexp⁻¹(δ)v is differentiated by complex
+// step of jlog6_of_log (exact to round-off).
+#pragma once
+
+#include "controllers/controller.hpp"
+#include "kernel.hpp"
+
+#include <complex>
+#include <limits>
+
+namespace coopdyn_native {
+
+class Sensitivity {
+public:
+  // kernel: the scene's (coopdyn.dynamics.native); A, b: an explicit tableau (rows of A below the
+  // diagonal), or `symplectic` for symplectic Euler; charts: (idx_v, size) of the free-flyer (6)
+  // and spherical (3) blocks; parameters: one tuple per parameter, ("element", link, kind,
+  // {K, D, ...}) for a unit law, or ("mass", joint, mass) for the object's mass.
+  Sensitivity(bp::object kernel_obj, bp::list A, bp::list b, bool symplectic, bp::list charts, bp::list parameters)
+    : kernel_obj_(kernel_obj), kernel_(bp::extract<Kernel &>(kernel_obj)), model_(kernel_.model()),
+      data_(model_), symplectic_(symplectic) {
+    for (bp::ssize_t i = 0; i < bp::len(A); ++i) A_.push_back(to_doubles(A[i]));
+    b_ = to_doubles(b);
+    if (!symplectic_ && (A_.empty() || b_.size() != A_.size()))
+      throw std::invalid_argument("Sensitivity: inconsistent tableau");
+    for (bp::ssize_t i = 0; i < bp::len(charts); ++i)
+      charts_.emplace_back(bp::extract<Eigen::Index>(charts[i][0]), bp::extract<int>(charts[i][1]));
+    for (bp::ssize_t i = 0; i < bp::len(parameters); ++i) {
+      bp::tuple p = bp::extract<bp::tuple>(parameters[i]);
+      const std::string kind = bp::extract<std::string>(p[0]);
+      Param out;
+      if (kind == "element") {
+        out.link = bp::extract<std::size_t>(p[1]);
+        if (out.link >= kernel_.links().size()) throw std::invalid_argument("Sensitivity: no such link");
+        out.law = coopdyn::make_element(bp::extract<std::string>(p[2]), bp::extract<bp::dict>(p[3]));
+      } else if (kind == "mass") {
+        out.joint = bp::extract<pinocchio::JointIndex>(p[1]);
+        const double mass = bp::extract<double>(p[2]);
+        if (out.joint < 1 || out.joint >= model_.joints.size() || !(mass > 0.0))
+          throw std::invalid_argument("Sensitivity: bad object joint or mass");
+        const pinocchio::Inertia & I = model_.inertias[out.joint];
+        const Eigen::Matrix<double, 10, 1> pi = I.toDynamicParameters() / mass;  // (linear in them)
+        out.unit_inertia = pinocchio::Inertia::FromDynamicParameters(pi);
+      } else
+        throw std::invalid_argument("Sensitivity: unknown parameter kind " + kind);
+      params_.push_back(std::move(out));
+    }
+  }
+
+  // The closed loop's controller, sampled at every period's start and held (a zero-order hold);
+  // its gain ∂τ/∂x there by central differences (linearize.py: controller_gain, same steps).
+  void set_controller(std::unique_ptr<Controller> controller) { ctrl_ = std::move(controller); }
+
+  // N periods of `per` steps of h [s] from (q0, v0) under U (N, na) — with a controller, under
+  // its torque sampled at t = k·per·h (U is then added to it) —, the derivatives carried along the
+  // seed columns (dq0, dv0: (nv, m); dU: (na, m), the same at every step; dP: (np, m)).
+  // Returns (Q (N+1, nq), V (N+1, nv), W (N+1, 6L), dX ((N+1)·2nv, m), dW ((N+1)·6L, m), exact,
+  // the torques applied (N, na)):
+  // the samples at every period's start and the end, the wrenches and derivatives there (at the
+  // end only with `end_wrench`: one more evaluation of the derivatives).
+  bp::tuple run(const RefVec & q0, const RefVec & v0, const RefMat & U, long per, double h, const RefMat & dq0,
+                const RefMat & dv0, const RefMat & dU, const RefMat & dP, bool end_wrench) {
+    const Eigen::Index nq = model_.nq, nv = model_.nv, na = kernel_.actuated().size();
+    const Eigen::Index L = static_cast<Eigen::Index>(kernel_.links().size()), np = static_cast<Eigen::Index>(params_.size());
+    const Eigen::Index m = dq0.cols(), N = U.rows();
+    check_size(q0, nq, "q0");
+    check_size(v0, nv, "v0");
+    if (U.cols() != na || N < 1 || per < 1 || !(h > 0.0) || dq0.rows() != nv || dv0.rows() != nv || dv0.cols() != m ||
+        dU.rows() != na || dU.cols() != m || dP.rows() != np || dP.cols() != m)
+      throw std::invalid_argument("Sensitivity.run: inconsistent shapes");
+    MatrixXd Q(N + 1, nq), V(N + 1, nv), W(N + 1, 6 * L), dX((N + 1) * 2 * nv, m), dW((N + 1) * 6 * L, m);
+    VectorXd q = q0, v = v0, q1, v1;
+    MatrixXd dq = dq0, dv = dv0, dq1, dv1;
+    exact_ = true;
+    MatrixXd applied = U, dUk = dU;
+    VectorXd u;
+    for (Eigen::Index k = 0; k < N; ++k) {
+      u = U.row(k).transpose();
+      if (ctrl_) {
+        VectorXd tau;
+        controller_sample(double(k * per) * h, q, v, dq, dv, tau, dUk);
+        u += tau;
+        applied.row(k) = u.transpose();
+        dUk += dU;
+      }
+      for (long s = 0; s < per; ++s) {
+        step(q, v, u, h, dq, dv, dUk, dP, q1, v1, dq1, dv1);
+        if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
+        if (!q1.allFinite() || !v1.allFinite() || !dq1.allFinite() || !dv1.allFinite())
+          throw std::runtime_error("the state is not finite after the step from t = " + std::to_string(double(k * per + s) * h) + " s");
+        q.swap(q1);
+        v.swap(v1);
+        dq.swap(dq1);
+        dv.swap(dv1);
+      }
+    }
+    if (end_wrench) stage(q, v, U.row(N - 1).transpose());  // (else the last row's W and dW are NaN)
+    sample(N, q, v, dq, dv, dP, Q, V, W, dX, dW, end_wrench);
+    return bp::make_tuple(Q, V, W, dX, dW, exact_ && !ctrl_, applied);
+  }
+
+private:
+  struct Param {
+    std::size_t link = 0;
+    std::unique_ptr<coopdyn::Element> law;  // null for the mass
+    pinocchio::JointIndex joint = 0;
+    pinocchio::Inertia unit_inertia = pinocchio::Inertia::Zero();  // the object's inertia per kg of its mass
+  };
+
+  // τ at (t, q, v) and its derivative along the seed columns, du = ∂τ/∂(δq, v)·[dq; dv] (na, m),
+  // by central differences: along each column (2m calls; a step of 1e-6 on its largest entry)
+  // when m < 2nv, else through the whole gain (4nv calls: steps 1e-6 in δq, 1e-6·max(1, |v|∞) in v,
+  // as linearize.py's controller_gain).
+  void controller_sample(double t, const VectorXd & q, const VectorXd & v, const MatrixXd & dq, const MatrixXd & dv,
+                         VectorXd & tau, MatrixXd & du) {
+    const Eigen::Index nv = model_.nv, na = kernel_.actuated().size(), m = dq.cols();
+    auto torque = [&](const VectorXd & qq, const VectorXd & vv, VectorXd & out) {
+      out.resize(na);
+      if (ctrl_->reads_kernel()) kernel_.kinematics(qq, vv, false);
+      ctrl_->torque(t, qq, vv, out);
+      if (!out.allFinite()) throw std::runtime_error("the controller's torque is not finite at t = " + std::to_string(t) + " s");
+    };
+    torque(q, v, tau);
+    VectorXd qq(model_.nq), vv, e, plus, minus;
+    du.setZero(na, m);
+    if (m < 2 * nv) {
+      for (Eigen::Index j = 0; j < m; ++j) {
+        const double size = std::max(dq.col(j).cwiseAbs().maxCoeff(), dv.col(j).cwiseAbs().maxCoeff());
+        if (size == 0.0) continue;
+        const double eps = 1e-6 / size;
+        e = eps * dq.col(j);
+        pinocchio::integrate(model_, q, e, qq);
+        torque(qq, v + eps * dv.col(j), plus);
+        e = -e;
+        pinocchio::integrate(model_, q, e, qq);
+        torque(qq, v - eps * dv.col(j), minus);
+        du.col(j) = (plus - minus) / (2.0 * eps);
+      }
+      return;
+    }
+    const double h_q = 1e-6, h_v = 1e-6 * std::max(1.0, v.cwiseAbs().maxCoeff());
+    G_.resize(na, 2 * nv);
+    e = VectorXd::Zero(nv);
+    for (Eigen::Index j = 0; j < nv; ++j) {
+      e[j] = h_q;
+      pinocchio::integrate(model_, q, e, qq);
+      torque(qq, v, plus);
+      e[j] = -h_q;
+      pinocchio::integrate(model_, q, e, qq);
+      torque(qq, v, minus);
+      e[j] = 0.0;
+      G_.col(j) = (plus - minus) / (2.0 * h_q);
+      vv = v;
+      vv[j] += h_v;
+      torque(q, vv, plus);
+      vv[j] = v[j] - h_v;
+      torque(q, vv, minus);
+      G_.col(nv + j) = (plus - minus) / (2.0 * h_v);
+    }
+    du.noalias() = G_.leftCols(nv) * dq;
+    du.noalias() += G_.rightCols(nv) * dv;
+  }
+
+  // The derivatives at (q, v, u) into d_, and ∂q̈/∂p (nv, np) into da_dp_, ∂W/∂p (6L, np) into dW_dp_.
+  void stage(const VectorXd & q, const VectorXd & v, const VectorXd & u) {
+    kernel_.compute_derivatives(q, v, u, nullptr, d_);
+    exact_ = exact_ && d_.exact;
+    const Eigen::Index nv = model_.nv, np = static_cast<Eigen::Index>(params_.size());
+    const Eigen::Index L = static_cast<Eigen::Index>(kernel_.links().size());
+    dW_dp_.setZero(6 * L, np);
+    if (np == 0) {
+      da_dp_.resize(nv, 0);
+      return;
+    }
+    Data & data = kernel_.full_data();  // (placements and joint Jacobians at q: compute_derivatives)
+    MatrixXd dQ = MatrixXd::Zero(nv, np);
+    Matrix6x J_G(6, nv), J_T(6, nv);
+    bool kinematics = false;
+    for (Eigen::Index k = 0; k < np; ++k) {
+      const Param & p = params_[static_cast<std::size_t>(k)];
+      if (!p.law) {  // the object's mass: −J_jᵀ (I a_gf + v ×* I v) per kg
+        if (!kinematics) pinocchio::forwardKinematics(model_, data_, q, v, d_.a);
+        kinematics = true;
+        const pinocchio::Motion a_gf = data_.a[p.joint] - data_.oMi[p.joint].actInv(model_.gravity);
+        const pinocchio::Force f = p.unit_inertia * a_gf + data_.v[p.joint].cross(p.unit_inertia * data_.v[p.joint]);
+        J_G.setZero();
+        pinocchio::getJointJacobian(model_, data, p.joint, pinocchio::LOCAL, J_G);
+        dQ.col(k) = -J_G.transpose() * f.toVector();
+        continue;
+      }
+      const Link & lk = kernel_.links()[p.link];
+      const SE3 X = data.oMf[lk.tip].actInv(data.oMf[lk.grasp]);
+      J_G.setZero();
+      J_T.setZero();
+      pinocchio::getFrameJacobian(model_, data, lk.grasp, pinocchio::LOCAL, J_G);
+      pinocchio::getFrameJacobian(model_, data, lk.tip, pinocchio::LOCAL, J_T);
+      const Matrix6x Jr = J_G - X.toActionMatrixInverse() * J_T;
+      p.law->evaluate(X, Jr * v, false, ev_);
+      dQ.col(k) = Jr.transpose() * ev_.f;
+      dW_dp_.block(6 * static_cast<Eigen::Index>(p.link), k, 6, 1) = ev_.f;
+    }
+    da_dp_.noalias() = d_.Minv * dQ;
+  }
+
+  // One step with the derivatives of its end along the seed columns; the start's stage stays in
+  // d_, da_dp_, dW_dp_ when the method has one stage, else in start_ (sample() reads it).
+  void step(const VectorXd & q, const VectorXd & v, const VectorXd & u, double h, const MatrixXd & dq0,
+            const MatrixXd & dv0, const RefMat & dU, const RefMat & dP, VectorXd & q1, VectorXd & v1, MatrixXd & dq1,
+            MatrixXd & dv1) {
+    const Eigen::Index nv = model_.nv;
+    if (symplectic_) {  // v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
+      stage(q, v, u);
+      keep_start();
+      v1 = v + h * d_.a;
+      acceleration_derivative(dq0, dv0, dU, dP, dka0_);
+      dv1 = dv0 + h * dka0_;
+      integrate(q, h * v1, dq0, h * dv1, q1, dq1);
+      return;
+    }
+    const std::size_t s = A_.size();
+    kd_.resize(s);
+    ka_.resize(s);
+    dkd_.resize(s);
+    dka_.resize(s);
+    VectorXd delta(nv), vs(nv), qs;
+    MatrixXd ddelta, dvs, dqs;
+    for (std::size_t i = 0; i < s; ++i) {
+      if (i == 0) {
+        stage(q, v, u);
+        keep_start();
+        kd_[0] = v;
+        dkd_[0] = dv0;
+        dqs = dq0;
+        dvs = dv0;
+      } else {
+        delta.setZero();
+        vs = v;
+        ddelta.setZero(nv, dq0.cols());
+        dvs = dv0;
+        for (std::size_t j = 0; j < i; ++j) {
+          const double c = j < A_[i].size() ? A_[i][j] : 0.0;
+          if (c == 0.0) continue;
+          delta += (h * c) * kd_[j];
+          vs += (h * c) * ka_[j];
+          ddelta += (h * c) * dkd_[j];
+          dvs += (h * c) * dka_[j];
+        }
+        integrate(q, delta, dq0, ddelta, qs, dqs);
+        chart(delta, vs, ddelta, dvs, kd_[i], dkd_[i]);
+        stage(qs, vs, u);
+      }
+      ka_[i] = d_.a;
+      acceleration_derivative(dqs, dvs, dU, dP, dka_[i]);
+    }
+    VectorXd Delta = VectorXd::Zero(nv);
+    MatrixXd dDelta = MatrixXd::Zero(nv, dq0.cols());
+    v1 = v;
+    dv1 = dv0;
+    for (std::size_t i = 0; i < s; ++i) {
+      if (b_[i] == 0.0) continue;
+      Delta += (h * b_[i]) * kd_[i];
+      dDelta += (h * b_[i]) * dkd_[i];
+      v1 += (h * b_[i]) * ka_[i];
+      dv1 += (h * b_[i]) * dka_[i];
+    }
+    integrate(q, Delta, dq0, dDelta, q1, dq1);
+  }
+
+  // dq̈ = ∂q̈/∂q dq + ∂q̈/∂v dv + ∂q̈/∂τ dU + ∂q̈/∂p dP at the last stage() (a zero dU or dP skipped).
+  void acceleration_derivative(const MatrixXd & dq, const MatrixXd & dv, const RefMat & dU, const RefMat & dP,
+                               MatrixXd & out) const {
+    out.noalias() = d_.da_dq * dq;
+    out.noalias() += d_.da_dv * dv;
+    if (!dU.isZero(0.0)) out.noalias() += d_.da_dtau * dU;
+    if (dP.size() && !dP.isZero(0.0)) out.noalias() += da_dp_ * dP;
+  }
+
+  void keep_start() {
+    start_wrench_ = d_.W;
+    start_dW_dq_ = d_.dW_dq;
+    start_dW_dv_ = d_.dW_dv;
+    start_dW_dp_ = dW_dp_;
+  }
+
+  // Sample k: (q, v), the wrenches at the last keep_start() (the step's start, or the last stage()).
+  void sample(Eigen::Index k, const VectorXd & q, const VectorXd & v, const MatrixXd & dq, const MatrixXd & dv,
+              const RefMat & dP, MatrixXd & Q, MatrixXd & V, MatrixXd & W, MatrixXd & dX, MatrixXd & dW,
+              bool wrench = true) {
+    const Eigen::Index nv = model_.nv, L = static_cast<Eigen::Index>(kernel_.links().size());
+    if (k == Q.rows() - 1) keep_start();  // (the end: stage() has just run there)
+    Q.row(k) = q.transpose();
+    V.row(k) = v.transpose();
+    dX.middleRows(2 * nv * k, nv) = dq;
+    dX.middleRows(2 * nv * k + nv, nv) = dv;
+    if (!wrench) {
+      W.row(k).setConstant(std::numeric_limits<double>::quiet_NaN());
+      dW.middleRows(6 * L * k, 6 * L).setConstant(std::numeric_limits<double>::quiet_NaN());
+      return;
+    }
+    for (Eigen::Index l = 0; l < L; ++l) W.block(k, 6 * l, 1, 6) = start_wrench_.row(l);
+    dW.middleRows(6 * L * k, 6 * L) = start_dW_dq_ * dq + start_dW_dv_ * dv + start_dW_dp_ * dP;
+  }
+
+  // q ⊕ δ and its tangent derivative from q's (dq) and δ's (ddelta). dIntegrate is block
+  // diagonal, joint by joint (the identity on a revolute or prismatic joint): applied block-wise.
+  void integrate(const VectorXd & q, const VectorXd & delta, const MatrixXd & dq, const MatrixXd & ddelta, VectorXd & out,
+                 MatrixXd & dout) {
+    const Eigen::Index nv = model_.nv;
+    out.resize(model_.nq);
+    pinocchio::integrate(model_, q, delta, out);
+    J0_.setZero(nv, nv);
+    J1_.setZero(nv, nv);
+    pinocchio::dIntegrate(model_, q, delta, J0_, pinocchio::ARG0);
+    pinocchio::dIntegrate(model_, q, delta, J1_, pinocchio::ARG1);
+    dout.resize(nv, dq.cols());
+    for (pinocchio::JointIndex j = 1; j < model_.joints.size(); ++j) {
+      const Eigen::Index i0 = model_.joints[j].idx_v(), n = model_.joints[j].nv();
+      if (n == 1) {
+        dout.row(i0) = J0_(i0, i0) * dq.row(i0) + J1_(i0, i0) * ddelta.row(i0);
+        continue;
+      }
+      dout.middleRows(i0, n).noalias() = J0_.block(i0, i0, n, n) * dq.middleRows(i0, n);
+      dout.middleRows(i0, n).noalias() += J1_.block(i0, i0, n, n) * ddelta.middleRows(i0, n);
+    }
+  }
+
+  // The chart rate r = dexp⁻¹(δ) v and its derivative dr = ∂r/∂v dv + ∂r/∂δ dδ (the identity on
+  // every joint but the free-flyer and spherical blocks; lie.py: dexp_inv_rate).
+  void chart(const VectorXd & delta, const VectorXd & v, const MatrixXd & ddelta, const MatrixXd & dv, VectorXd & rate,
+             MatrixXd & drate) const {
+    using Complex = std::complex<double>;
+    using Vector6c = Eigen::Matrix<Complex, 6, 1>;
+    constexpr double step = 1e-30;
+    rate = v;
+    drate = dv;
+    Eigen::Matrix<double, 6, 6> N;
+    for (const auto & [i0, n] : charts_) {
+      const int off = 6 - n;  // a spherical joint's δ is the rotation part of a logarithm
+      Vector6 e = Vector6::Zero();
+      e.tail(n) = delta.segment(i0, n);
+      const Matrix6 J = coopdyn::jlog6_of_log<double>(e);
+      rate.segment(i0, n) = J.bottomRightCorner(n, n) * v.segment(i0, n);
+      const Eigen::Matrix<Complex, Eigen::Dynamic, 1> vc = v.segment(i0, n).cast<Complex>();
+      for (int k = 0; k < n; ++k) {
+        Vector6c ec = e.cast<Complex>();
+        ec[off + k] += Complex(0.0, step);
+        const Eigen::Matrix<Complex, 6, 6> Jc = coopdyn::jlog6_of_log<Complex>(ec);
+        N.block(0, k, n, 1) = (Jc.bottomRightCorner(n, n) * vc).imag() / step;
+      }
+      drate.middleRows(i0, n).noalias() = J.bottomRightCorner(n, n) * dv.middleRows(i0, n);
+      drate.middleRows(i0, n).noalias() += N.topLeftCorner(n, n) * ddelta.middleRows(i0, n);
+    }
+  }
+
+  bp::object kernel_obj_;  // keeps the kernel alive
+  Kernel & kernel_;
+  const Model & model_;
+  Data data_;  // scratch: the mass parameter's kinematics
+  bool symplectic_;
+  std::vector<std::vector<double>> A_;
+  std::vector<double> b_;
+  std::vector<std::pair<Eigen::Index, int>> charts_;
+  std::vector<Param> params_;
+  bool exact_ = true;
+  Kernel::Derivatives d_;
+  MatrixXd da_dp_, dW_dp_, start_wrench_, start_dW_dq_, start_dW_dv_, start_dW_dp_;
+  std::vector<VectorXd> kd_, ka_;
+  std::vector<MatrixXd> dkd_, dka_;
+  MatrixXd dka0_;
+  MatrixXd J0_, J1_, G_;
+  std::unique_ptr<Controller> ctrl_;
+  ElementEval ev_;
+};
+
+}  // namespace coopdyn_native

@@ -1,0 +1,310 @@
+"""Exact sensitivities of a step and of a trajectory (coopdyn.sensitivity).
+
+Every derivative is checked against Richardson-extrapolated central differences (error O(h⁴))
+of the library's own step (the Python loop's integrator step) or of compiled rollouts; the
+book's linear system against the closed forms of rk4's and symplectic Euler's step matrices
+(exact to round-off); the forward pass against the compiled loop's step to round-off.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.closed_loop import System
+from coopdyn.dynamics import Dynamics
+from coopdyn.errors import SceneError, SimulationError
+from coopdyn.integrators import get_integrator
+from coopdyn.model.elements.lie import dexp_inv_rate, jlog6_of_log
+from coopdyn.sensitivity import parameters, step_sensitivity, trajectory_sensitivity, with_parameters
+
+
+def richardson(f: Callable[[float], np.ndarray], h: float) -> np.ndarray:
+    """df/ds at s = 0 from central differences at h and h/2, extrapolated (error O(h⁴))."""
+
+    def central(step: float) -> np.ndarray:
+        return (f(step) - f(-step)) / (2.0 * step)
+
+    return (4.0 * central(h / 2) - central(h)) / 3.0
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _damped_pandas() -> cd.Scene:
+    return cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.01, joint_damping=0.5)
+
+
+def _ball_pandas() -> cd.Scene:
+    base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    links = [
+        cd.Interconnection(ic.arm, stiffness=np.diag([1e4, 1e4, 1e4]), damping=np.eye(3) * 20.0, element="ball")
+        for ic in base.interconnection_specs
+    ]
+    return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
+
+
+def _hardening_box() -> cd.Scene:
+    box = cd.RigidObject.box(2.0, (0.2, 0.1, 0.3), pose=[0.1, -0.2, 1.0])
+    K = cd.diagonal([1e3, 2e3, 3e3], [10.0, 20.0, 30.0])
+    link = cd.Interconnection(
+        None, stiffness=K, damping=0.01 * K, grasp=[0.0, 0.0, 0.15], element="hardening", parameters={"hardening": 1e6}
+    )
+    return cd.Scene([], box, [link])
+
+
+#: scene, the parameters differentiated, the start's spread (δq, v, τ)
+CASES: dict[str, tuple[Callable[[], cd.Scene], list[str]]] = {
+    "pandas, damped SE(3) grasps": (
+        _damped_pandas,
+        ["left.k_linear", "right.k_angular", "left.d_linear", "right.k_rz", "object.mass"],
+    ),
+    "pandas, ball grasps": (_ball_pandas, ["left.k_linear", "right.d_y"]),
+    "box hung from a hardening fixture": (_hardening_box, ["fixture.k_z", "fixture.k_rx", "fixture.d_x", "object.mass"]),
+}
+
+
+def _start(scene: cd.Scene, seed: int = 11) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A state with loaded, turned and moving grasps (the object spinning at ~3 rad/s), and torques."""
+    rng = np.random.default_rng(seed)
+    q = pin.integrate(scene.model, scene.q0, 0.05 * rng.normal(size=scene.nv))
+    v = 0.5 * rng.normal(size=scene.nv)
+    v[scene.object_v[3:]] = [3.0, -2.0, 1.5]
+    return q, v, 3.0 * rng.normal(size=scene.n_actuated)
+
+
+def _stepper(
+    scene: cd.Scene, method: str, tau: np.ndarray, backend: str | None = None
+) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    """The library's own step (the Python loop's integrator on the System) under a constant τ."""
+    system = System(Dynamics(scene, backend), lambda t, q, v: tau)
+    integrator = get_integrator(method)
+    return lambda q, v, h: integrator.step(system, 0.0, q, v, h, integrator.workspace(system))
+
+
+@pytest.mark.parametrize("method", ["rk4", "symplectic_euler", "dopri5"])
+@pytest.mark.parametrize("name", CASES)
+def test_the_step_sensitivity_is_the_derivative_of_the_step(name: str, method: str) -> None:
+    make, names = CASES[name]
+    scene = make()
+    q, v, tau = _start(scene)
+    h, nv, model = 4e-3, scene.nv, scene.model
+    s = step_sensitivity(scene, q, v, tau, h, integrator=method, parameters=names)
+    step = _stepper(scene, method, tau)
+    q1, v1 = step(q, v, h)
+    np.testing.assert_allclose(s.q, q1, rtol=0, atol=1e-13)  # the forward pass is the library's step
+    np.testing.assert_allclose(s.v, v1, rtol=0, atol=1e-11 * max(1.0, np.max(np.abs(v1))))
+
+    def state(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        return np.concatenate([pin.difference(model, s.q, qq), vv - s.v])
+
+    for k in range(nv):
+        e = np.eye(nv)[k]
+        ref_q = richardson(lambda x, e=e: state(*step(pin.integrate(model, q, x * e), v, h)), 1e-4)
+        ref_v = richardson(lambda x, e=e: state(*step(q, v + x * e, h)), 1e-4)
+        assert _rel(s.dx_dx[:, k], ref_q) < 1e-7 or np.max(np.abs(s.dx_dx[:, k] - ref_q)) < 1e-10
+        assert _rel(s.dx_dx[:, nv + k], ref_v) < 1e-7 or np.max(np.abs(s.dx_dx[:, nv + k] - ref_v)) < 1e-10
+    for k in range(scene.n_actuated):
+        e = np.eye(scene.n_actuated)[k]
+        ref = richardson(lambda x, e=e: state(*_stepper(scene, method, tau + x * e)(q, v, h)), 1e-2)
+        assert _rel(s.dx_du[:, k], ref) < 1e-7
+    for k, p in enumerate(s.parameters):
+        ref = richardson(
+            lambda x, p=p: state(*_stepper(with_parameters(scene, {p.name: p.value + x}), method, tau)(q, v, h)), 1e-3 * p.value
+        )
+        assert _rel(s.dx_dp[:, k], ref) < 1e-6, p.name
+
+
+def test_the_chart_rate_and_its_derivative() -> None:
+    rng = np.random.default_rng(2)
+    for size in (6, 3):
+        for scale in (1e-3, 0.2, 2.0):  # (the series branch, and the closed forms)
+            delta, v = scale * rng.normal(size=size), rng.normal(size=size)
+            rate, C, N = dexp_inv_rate(delta, v)
+            e = delta if size == 6 else np.concatenate([np.zeros(3), delta])
+            J = jlog6_of_log(e) if size == 6 else jlog6_of_log(e)[3:, 3:]
+            np.testing.assert_allclose(rate, J @ v, rtol=0, atol=1e-15 * max(1.0, np.max(np.abs(J @ v))))
+            np.testing.assert_allclose(C, J, rtol=0, atol=1e-15 * np.max(np.abs(J)))
+            for k in range(size):
+                d = np.eye(size)[k]
+                ref = richardson(lambda x, d=d: dexp_inv_rate(delta + x * d, v)[0], 1e-3)
+                np.testing.assert_allclose(N[:, k], ref, rtol=0, atol=1e-10 * max(1.0, np.max(np.abs(N))))
+    # the rate is the chart velocity the integrators use: dIntegrate(q, δ)⁻¹ v on a free-flyer
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0])
+    scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=1e3)])
+    system = System(Dynamics(scene))
+    delta, v = np.array([0.1, -0.2, 0.3, 0.4, -0.5, 0.6]), rng.normal(size=6)
+    np.testing.assert_allclose(dexp_inv_rate(delta, v)[0], system.chart_velocity(scene.q0, delta, v), rtol=0, atol=1e-14)
+
+
+def test_the_book_system_steps_are_their_closed_forms(book: cd.Scene) -> None:
+    """On a linear system rk4's step matrix is the 4th-order Taylor polynomial of hA, and
+    symplectic Euler's the partitioned matrix of its stability analysis — exactly."""
+    lin = cd.linearize(book)
+    A, B, h = lin.A, lin.B, 1e-2
+    n, eye = len(A) // 2, np.eye(len(A))
+    hA = h * A
+    s = step_sensitivity(book, dt=h)
+    R = eye + hA + hA @ hA / 2 + hA @ hA @ hA / 6 + hA @ hA @ hA @ hA / 24
+    np.testing.assert_allclose(s.dx_dx, R, rtol=0, atol=1e-14 * np.max(np.abs(R)))
+    RB = h * (eye + hA / 2 + hA @ hA / 6 + hA @ hA @ hA / 24) @ B
+    np.testing.assert_allclose(s.dx_du, RB, rtol=0, atol=1e-14 * np.max(np.abs(RB)))
+    s = step_sensitivity(book, dt=h, integrator="symplectic_euler")
+    G = np.block([[np.eye(n) + h * h * A[n:, :n], h * (np.eye(n) + h * A[n:, n:])], [h * A[n:, :n], np.eye(n) + h * A[n:, n:]]])
+    np.testing.assert_allclose(s.dx_dx, G, rtol=0, atol=1e-15 * np.max(np.abs(G)))
+
+
+@pytest.mark.parametrize("method", ["rk4", "symplectic_euler"])
+def test_one_step_is_the_compiled_loops_step(pandas: cd.Scene, method: str) -> None:
+    q, v, tau = _start(pandas)
+    s = step_sensitivity(pandas, q, v, tau, 1e-3, integrator=method)
+    run = cd.rollout(pandas, tau[None, None], period=1e-3, q0=q, v0=v, integrator=method, threads=1)
+    np.testing.assert_allclose(s.q, run.q[0, 1], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(s.v, run.v[0, 1], rtol=0, atol=1e-11 * np.max(np.abs(s.v)))
+
+
+def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts() -> None:
+    scene = _damped_pandas()
+    names = ["left.k_linear", "right.k_angular", "left.d_linear", "object.mass"]
+    rng = np.random.default_rng(4)
+    g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[scene.actuated]
+    U = g + 2.0 * rng.normal(size=(15, scene.n_actuated))
+    v0 = 0.2 * rng.normal(size=scene.nv)
+    tr = trajectory_sensitivity(scene, U, 2e-3, dt=1e-3, v0=v0, parameters=names, initial_state=True)
+    nv, model = scene.nv, scene.model
+    assert tr.dx_dp.shape == (16, 2 * nv, 4) and tr.dx_dx0 is not None and tr.dx_dx0.shape == (16, 2 * nv, 2 * nv)
+
+    def run(s: cd.Scene, q0: np.ndarray = scene.q0, v: np.ndarray = v0) -> np.ndarray:
+        out = cd.rollout(s, U[None], period=2e-3, dt=1e-3, q0=q0, v0=v, integrator="rk4", threads=1)
+        dyn = Dynamics(s)
+        W = np.array([[e.G_f_G for e in dyn.element_states(a, b)] for a, b in zip(out.q[0], out.v[0], strict=True)])
+        x = np.array(
+            [
+                np.concatenate([pin.difference(model, a, b), c - d])
+                for a, b, c, d in zip(tr.q, out.q[0], out.v[0], tr.v, strict=True)
+            ]
+        )
+        return np.concatenate([x.ravel(), W.ravel()])
+
+    base = run(scene)
+    np.testing.assert_allclose(base[: tr.dx_dp[..., 0].size], 0.0, atol=1e-11)  # the samples are the rollout's
+    np.testing.assert_allclose(tr.wrench.ravel(), base[tr.dx_dp[..., 0].size :], rtol=0, atol=1e-9)
+    for k, p in enumerate(tr.parameters):
+        ref = richardson(lambda x, p=p: run(with_parameters(scene, {p.name: p.value + x})), 1e-3 * p.value)
+        got = np.concatenate([tr.dx_dp[..., k].ravel(), tr.dwrench_dp[..., k].ravel()])
+        assert _rel(got, ref) < 1e-6, p.name
+    for k in (0, 7, nv - 1, nv + 3, 2 * nv - 1):  # some start directions: an arm joint, the object
+        e = np.eye(2 * nv)[k]
+        ref = richardson(
+            lambda x, e=e: run(scene, pin.integrate(model, scene.q0, x * e[:nv]), v0 + x * e[nv:])[: tr.dx_dp[..., 0].size], 1e-5
+        )
+        assert _rel(tr.dx_dx0[..., k].ravel(), ref) < 1e-6
+
+
+def test_both_backends_give_the_same_sensitivities() -> None:
+    if not cd.backend.native_available():
+        pytest.skip("coopdyn._native is not built")
+    scene = _damped_pandas()
+    q, v, tau = _start(scene)
+    names = ["left.k_linear", "object.mass"]
+    a, b = (step_sensitivity(scene, q, v, tau, 2e-3, parameters=names, backend=x) for x in ("python", "native"))
+    for x, y in ((a.dx_dx, b.dx_dx), (a.dx_du, b.dx_du), (a.dx_dp, b.dx_dp)):
+        assert _rel(x, y) < 1e-10
+
+
+def test_with_parameters_changes_only_what_it_names(pandas: cd.Scene) -> None:
+    same = with_parameters(pandas, {"left.k_linear": 1e4})
+    q, v, tau = _start(pandas)
+    np.testing.assert_allclose(
+        Dynamics(same).acceleration(q, v, tau), Dynamics(pandas).acceleration(q, v, tau), rtol=0, atol=1e-9
+    )
+    other = with_parameters(pandas, {"left.k_linear": 2e4, "right.k_rz": 3.0, "object.mass": 3.0, "right.d_x": 7.0})
+    K_left, K_right = other.links[0].element.K, other.links[1].element.K
+    np.testing.assert_array_equal(np.diag(K_left), [2e4, 2e4, 2e4, 100.0, 100.0, 100.0])
+    np.testing.assert_array_equal(np.diag(K_right), [1e4, 1e4, 1e4, 100.0, 100.0, 3.0])  # (both of its entries)
+    np.testing.assert_array_equal(np.diag(other.links[1].element.D), [7.0, 0, 0, 0, 0, 0])
+    assert other.object.mass == 3.0
+    np.testing.assert_allclose(other.object.inertia, 1.5 * np.asarray(pandas.object.inertia))
+    for a, b in zip(other.links, pandas.links, strict=True):  # the grasps stay where the scene put them
+        np.testing.assert_allclose(
+            other.model.frames[a.grasp_frame].placement.homogeneous,
+            pandas.model.frames[b.grasp_frame].placement.homogeneous,
+            atol=1e-15,
+        )
+
+
+def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
+    with pytest.raises(SimulationError, match=r"linearly implicit with a Gauss–Newton Jacobian.*'rk4'"):
+        step_sensitivity(pandas, integrator="implicit_euler")
+    with pytest.raises(SimulationError, match="only the explicit Runge–Kutta methods and symplectic Euler"):
+        step_sensitivity(pandas, integrator="scipy")
+    with pytest.raises(SceneError, match="rigid grasps"):
+        step_sensitivity(cd.rigid_limit(pandas))
+    with pytest.raises(SceneError, match=r"unknown parameter 'left\.k'.*'left\.<kind>'.*k_linear.*'object\.mass'"):
+        parameters(pandas, ["left.k"])
+    with pytest.raises(SceneError, match="repeated"):
+        parameters(pandas, ["left.k_x", "left.k_x"])
+    with pytest.raises(SceneError, match="non-empty list"):
+        parameters(pandas, "left.k_x")
+    skewed = cd.Scene(
+        pandas.arm_specs, pandas.object,
+        [cd.Interconnection(ic.arm, stiffness=cd.diagonal([1e4, 2e4, 1e4], 100.0)) for ic in pandas.interconnection_specs],
+    )  # fmt: skip
+    with pytest.raises(SceneError, match=r"not isotropic.*\[10000.0, 20000.0, 10000.0\].*k_x, k_y"):
+        parameters(skewed, ["left.k_linear"])
+    assert parameters(skewed, ["left.k_y"])[0].value == 2e4
+    with pytest.raises(SceneError, match="no rotational"):
+        parameters(_ball_pandas(), ["left.k_rx"])
+    beam = cd.scenes.held_beam(n_elements=2)
+    with pytest.raises(SceneError, match="not one body on one joint"):
+        parameters(beam, ["object.mass"])
+    with pytest.raises(SimulationError, match="must divide the period"):
+        trajectory_sensitivity(pandas, np.zeros((2, pandas.n_actuated)), 1e-3, dt=3e-4)
+    with pytest.raises(SimulationError, match=r"torques must be \(N, 14\)"):
+        trajectory_sensitivity(pandas, np.zeros((2, 3)), 1e-3)
+    with pytest.raises(SimulationError, match="diverged"):
+        trajectory_sensitivity(pandas, np.full((5, pandas.n_actuated), 1e6), 1e-2)
+
+
+def _impedance(scene: cd.Scene) -> Any:
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+
+    return ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0))
+
+
+def test_a_closed_loops_sensitivities_are_the_derivatives_of_its_simulation() -> None:
+    """The demo's controller built for the nominal scene, sampled at 1 kHz, on twins of it: the
+    trajectory is simulate's, its sensitivities are differences of simulate's, the twins agree."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    controller = _impedance(scene)
+    names = ["left.k_linear", "right.k_angular", "object.mass"]
+    tr = trajectory_sensitivity(scene, 80, 1e-3, parameters=names, controller=controller)
+    assert not tr.exact and tr.tau.shape == (80, scene.n_actuated)
+
+    def run(s: cd.Scene) -> cd.Result:
+        return cd.simulate(s, 0.08, controller, "rk4", dt=1e-3, control_dt=1e-3, accuracy_check="off", energy_check="off")
+
+    base = run(scene)
+    np.testing.assert_allclose(tr.q, base.q, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(tr.tau, base.tau[:-1], rtol=0, atol=1e-11)
+    model = scene.model
+    for k, p in enumerate(tr.parameters):
+
+        def x(value: float, p: Any = p) -> np.ndarray:
+            r = run(with_parameters(scene, {p.name: p.value + value}))
+            return np.array(
+                [np.concatenate([pin.difference(model, a, b), c - d]) for a, b, c, d in zip(tr.q, r.q, r.v, tr.v, strict=True)]
+            )
+
+        assert _rel(tr.dx_dp[..., k], richardson(x, 1e-3 * p.value)) < 1e-6, p.name
+    python = trajectory_sensitivity(scene, 30, 1e-3, parameters=names, controller=controller, backend="python")
+    assert _rel(python.dx_dp, tr.dx_dp[:31]) < 1e-7
+    np.testing.assert_allclose(python.q, tr.q[:31], rtol=0, atol=1e-13)
+    with pytest.raises(SimulationError, match=r"open-loop step; a closed loop's: Sensitivity\.trajectory"):
+        cd.sensitivity.Sensitivity(scene, controller=controller).step()
