@@ -24,6 +24,7 @@ from .errors import (
     SweepInterrupted,
     ViewerError,
 )
+from .identify import Identification, Measurements, identify
 from .linearize import Linearization, linearize
 from .model import (
     Arm,
@@ -69,9 +70,11 @@ __all__ = [
     "Energy",
     "EnergyBalanceError",
     "EnergyBalanceWarning",
+    "Identification",
     "Interconnection",
     "JointElasticity",
     "Linearization",
+    "Measurements",
     "ModelAdvice",
     "ModelLoadError",
     "OutputError",
@@ -101,6 +104,7 @@ __all__ = [
     "control",
     "cooperative",
     "diagonal",
+    "identify",
     "integrators",
     "linearize",
     "measure_stable_dt",

@@ -1,0 +1,100 @@
+"""Identification (coopdyn.identify): a hidden parameter set is recovered from noisy synthetic
+measurements within the uncertainty the fit reports, the same with exact and finite-difference
+Jacobians; bad measurements are refused with what is expected."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import coopdyn as cd
+from coopdyn.dynamics import Dynamics
+from coopdyn.errors import SceneError, SimulationError
+from coopdyn.identify import Measurements, identify
+from coopdyn.sensitivity import with_parameters
+
+TRUTH = {"left.k_linear": 1.3e4, "right.k_linear": 0.8e4, "left.d_linear": 150.0, "object.mass": 2.4}
+NOISE = (1e-4, 0.1, 0.01)  # joint angles [rad], forces [N], moments [N·m]
+
+
+def measure(scene: cd.Scene, seed: int, n: int = 60, period: float = 2e-3) -> Measurements:
+    """Gravity compensation plus random torques played on the hidden scene, sampled every period,
+    with Gaussian sensor noise."""
+    hidden = with_parameters(scene, TRUTH)
+    rng = np.random.default_rng(seed)
+    g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[scene.actuated]
+    U = g + 3.0 * rng.normal(size=(n, scene.n_actuated))
+    run = cd.rollout(hidden, U[None], period=period, dt=period / 2, integrator="rk4", threads=1)
+    Q, V = run.q[0], run.v[0]
+    dyn = Dynamics(hidden)
+    W = np.array([[e.G_f_G for e in dyn.element_states(q, v)[: len(scene.links)]] for q, v in zip(Q, V, strict=True)])
+    q_idx = [next(j.idx_q for j in scene.model.joints[1:] if j.idx_v == i) for i in scene.arm_joints]
+    joints = Q[:, q_idx] + NOISE[0] * rng.normal(size=(n + 1, len(q_idx)))
+    W = W + np.concatenate([NOISE[1] * rng.normal(size=(n + 1, 2, 3)), NOISE[2] * rng.normal(size=(n + 1, 2, 3))], axis=2)
+    return Measurements(period, joints, W, U, *NOISE)
+
+
+@pytest.fixture(scope="module")
+def damped() -> cd.Scene:
+    return cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.01)
+
+
+def test_the_hidden_parameters_are_recovered_within_their_uncertainty(damped: cd.Scene) -> None:
+    m = measure(damped, seed=3)
+    fits = [identify(damped, m, list(TRUTH), dt=1e-3, jacobian=j) for j in ("exact", "finite-differences")]
+    exact, fd = fits
+    for name, value in TRUTH.items():
+        lo, hi = exact.interval(name, 3.0)
+        assert lo < value < hi, (name, exact.estimate[name], exact.std[name])
+        assert exact.std[name] < 0.01 * value  # (the data do determine it)
+        assert abs(fd.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name]
+    assert 0.85 < exact.residual_rms < 1.15  # the noise levels given are the true ones
+    assert exact.joint_rms == pytest.approx(NOISE[0], rel=0.15)
+    assert exact.wrench_rms is not None and exact.wrench_rms[0] == pytest.approx(NOISE[1], rel=0.15)
+    assert exact.scene.links[0].element.K[0, 0] == exact.estimate["left.k_linear"]
+    assert exact.jacobians >= 1 and exact.evaluations >= exact.jacobians
+    text = exact.summary()
+    assert "left.k_linear" in text and "N/m" in text and "exact" in text
+    # wrong noise levels show in the residual: σ given 10× too small → RMS ~10
+    others = with_parameters(damped, {k: v for k, v in TRUTH.items() if k != "left.k_linear"})
+    loud = identify(
+        others, Measurements(m.period, m.joints, m.wrench, m.torques, *(x / 10 for x in NOISE)), ["left.k_linear"], dt=1e-3
+    )
+    assert 8.5 < loud.residual_rms < 11.5
+
+
+@pytest.mark.slow
+def test_the_reported_uncertainty_covers_the_truth_as_often_as_it_says(damped: cd.Scene) -> None:
+    """Over 12 noise draws, |estimate − truth| < 2σ about 95 % of the time for each parameter."""
+    inside = 0
+    names = ["left.k_linear", "object.mass"]
+    others = with_parameters(damped, {k: v for k, v in TRUTH.items() if k not in names})  # (the rest known)
+    for seed in range(12):
+        fit = identify(others, measure(damped, seed=100 + seed, n=40), names, dt=1e-3)
+        inside += sum(abs(fit.estimate[k] - TRUTH[k]) < 2.0 * fit.std[k] for k in ("left.k_linear", "object.mass"))
+    assert inside >= 20  # of 24: the binomial(24, 0.95) falls below 20 with probability < 0.01
+
+
+def test_bad_measurements_are_refused(damped: cd.Scene) -> None:
+    m = measure(damped, seed=1, n=5)
+    with pytest.raises(SimulationError, match=r"measurements.torques must be \(4, 14\)"):
+        identify(damped, Measurements(m.period, m.joints[:-1], m.wrench[:-1], m.torques), ["left.k_x"])
+    with pytest.raises(SimulationError, match=r"measurements.wrench must be \(6, 2, 6\)"):
+        identify(damped, Measurements(m.period, m.joints, m.wrench[:, :1], m.torques), ["left.k_x"])
+    with pytest.raises(SimulationError, match=r"measurements.joints must be \(N \+ 1, 14\)"):
+        identify(damped, Measurements(m.period, m.joints[:, :3], m.wrench, m.torques), ["left.k_x"])
+    with pytest.raises(SimulationError, match="joint_noise"):
+        identify(damped, Measurements(m.period, m.joints, m.wrench, m.torques, joint_noise=0.0), ["left.k_x"])
+    with pytest.raises(SimulationError, match="give them, or the controller that ran"):
+        identify(damped, Measurements(m.period, m.joints, m.wrench), ["left.k_x"])
+    with pytest.raises(SimulationError, match="closed-loop fit computes the torques"):
+        identify(damped, m, ["left.k_x"], controller=lambda t, q, v: np.zeros(14))
+    with pytest.raises(SimulationError, match="not among the parameters"):
+        identify(damped, m, ["left.k_x"], initial={"right.k_x": 1.0})
+    with pytest.raises(SimulationError, match="'exact' or 'finite-differences'"):
+        identify(damped, m, ["left.k_x"], jacobian="fd")
+    with pytest.raises(SceneError, match="unknown parameter"):
+        identify(damped, m, ["left.stiffness"])
+    with pytest.raises(SimulationError, match=r"must be a coopdyn\.identify\.Measurements"):
+        identify(damped, (m.torques, m.joints), ["left.k_x"])  # type: ignore[arg-type]
