@@ -239,3 +239,10 @@ def test_identify_example_recovers_the_hidden_grasps_and_its_model_step_is_resol
     for name in ex.HIDDEN:
         assert abs(fine.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name], name
 
+
+def test_gauss_newton_example_lifts_the_box_and_its_step_is_resolved(tmp_path: Path) -> None:
+    out = _load("gauss_newton_lift").main(str(tmp_path))
+    errors = out["errors"]
+    assert errors[0] > 0.05 and errors[-1] < 5e-4  # from 68 mm off (the box falls) to under 0.5 mm [m]
+    assert abs(out["resolved_error"] - errors[-1]) < 5e-5  # the same at rk4 0.25 ms (within 0.05 mm)
+    assert (tmp_path / "gauss_newton_lift.png").exists()
