@@ -54,7 +54,7 @@ class Kernel:
     def rotation_alarm_angle(self) -> float: ...
 
 class Sensitivity:
-    """Exact sensitivities of open-loop explicit steps (src/native/sensitivity.hpp); see coopdyn.sensitivity."""
+    """Exact sensitivities of explicit steps, open loop or closed (src/native/sensitivity.hpp); see coopdyn.sensitivity."""
 
     def __init__(
         self,

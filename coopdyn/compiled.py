@@ -15,6 +15,7 @@ import dataclasses
 from typing import Any, NamedTuple
 
 import numpy as np
+import pinocchio as pin
 
 from ._spec import CompiledSpec, ExponentialSpec, NoControllerSpec, PythonControllerSpec
 from .closed_loop import System
@@ -188,28 +189,30 @@ def controller_settings(scene: Scene, system: System) -> dict[str, Any]:
 
 
 def twin_scenes(a: Scene, b: Scene) -> bool:
-    """Whether two scenes differ only in their interconnections' laws and the object's inertia:
-    the same joints, frames (placements to 1e-12 m) and arm bodies — what a controller's kinematics
-    and arm model read."""
+    """Whether two scenes differ only in their interconnections' laws and the object's inertia: the
+    same joints and frames, placed alike (every frame's placement equal to 1e-12 m at the start
+    and at three other configurations), the same arm bodies, armature and gravity — what a
+    controller's kinematics and arm model read."""
     ma, mb = a.model, b.model
     if (ma.nq, ma.nv, ma.njoints, ma.nframes) != (mb.nq, mb.nv, mb.njoints, mb.nframes) or list(ma.names) != list(mb.names):
         return False
-    if any(fa.name != fb.name or fa.parentJoint != fb.parentJoint for fa, fb in zip(ma.frames, mb.frames, strict=True)):
+    if [f.name for f in ma.frames] != [f.name for f in mb.frames] or [j.shortname() for j in ma.joints] != [
+        j.shortname() for j in mb.joints
+    ]:
         return False
-    if any(
-        not np.allclose(fa.placement.homogeneous, fb.placement.homogeneous, rtol=0, atol=1e-12)
-        for fa, fb in zip(ma.frames, mb.frames, strict=True)
-    ):
-        return False
+    da, db = ma.createData(), mb.createData()
+    rng = np.random.default_rng(0)
+    for q in (a.q0, *(pin.integrate(ma, a.q0, 0.3 * rng.normal(size=ma.nv)) for _ in range(3))):
+        pin.framesForwardKinematics(ma, da, q)
+        pin.framesForwardKinematics(mb, db, q)
+        if any(not np.allclose(x.homogeneous, y.homogeneous, rtol=0, atol=1e-12) for x, y in zip(da.oMf, db.oMf, strict=True)):
+            return False
     skip = a.object_joint
-    return (
-        all(
-            j == skip or np.array_equal(ia.toDynamicParameters(), ib.toDynamicParameters())
-            for j, (ia, ib) in enumerate(zip(ma.inertias, mb.inertias, strict=True))
-        )
-        and np.array_equal(ma.armature, mb.armature)
-        and np.array_equal(a.gravity, b.gravity)
+    same_bodies = all(
+        j == skip or np.array_equal(ia.toDynamicParameters(), ib.toDynamicParameters())
+        for j, (ia, ib) in enumerate(zip(ma.inertias, mb.inertias, strict=True))
     )
+    return same_bodies and np.array_equal(ma.armature, mb.armature) and np.array_equal(a.gravity, b.gravity)
 
 
 def next_chunk(steps: int, seconds: float) -> int:

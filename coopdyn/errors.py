@@ -138,6 +138,12 @@ class LogMapWarning(UserWarning):
     """A deformation's rotation neared π, where the SE(3) logarithm jumps."""
 
 
+class FitWarning(UserWarning):
+    """An identification finished, but its estimate should not be trusted as it stands: the model
+    does not explain the data (a residual far above the noise), or a parameter is not determined
+    by them (its uncertainty as large as its value). The message names which and why."""
+
+
 class NativeBackendWarning(UserWarning):
     """The compiled kernel is unavailable; the (slower) Python path runs instead."""
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -32,10 +33,12 @@ from scipy.optimize import least_squares
 from . import _validate
 from .closed_loop import Controller
 from .dynamics import Dynamics
-from .errors import SceneError, SimulationError
+from .errors import FitWarning, SceneError, SimulationError
+from .integrators import get_integrator
 from .model.scene import Scene
+from .result import Result
 from .rollout import rollout
-from .sensitivity import Parameter, trajectory_sensitivity, with_parameters
+from .sensitivity import Parameter, Sensitivity, step_of, trajectory_sensitivity, with_parameters
 from .sensitivity import parameters as scene_parameters
 from .simulate import simulate
 
@@ -68,20 +71,59 @@ class Measurements:
     q0: np.ndarray | None = None
     v0: np.ndarray | None = None
 
+    @classmethod
+    def from_result(
+        cls,
+        result: Result,
+        *,
+        open_loop: bool = False,
+        joint_noise: float = 1e-4,
+        force_noise: float = 0.1,
+        torque_noise: float = 0.01,
+    ) -> Measurements:
+        """What perfect sensors read during a simulated run, sampled as it was saved: the arm joint
+        angles and each grasp's wrench in its grasp frame's axes (not the world axes of
+        :meth:`Result.wrenches`), with the run's start; with ``open_loop`` the torques applied too,
+        which are the held ones only when the controller was sampled at the save period
+        (``simulate(..., control_dt=dt·save_every)``). For a synthetic study: add your noise to
+        ``joints`` and ``wrench`` (``dataclasses.replace``)."""
+        t = np.asarray(result.t)
+        if len(t) < 2 or not np.allclose(np.diff(t), t[1] - t[0], rtol=1e-9, atol=0.0):
+            raise SimulationError("Measurements.from_result: the run's samples must be evenly spaced, two at least")
+        scene = result.scene
+        q_idx = _joint_coordinates(scene)
+        dynamics = Dynamics(scene, result.backend)
+        L = len(scene.links)
+        wrench = np.array([[e.G_f_G for e in dynamics.element_states(q, v)[:L]] for q, v in zip(result.q, result.v, strict=True)])
+        torques = np.array(result.tau[:-1], dtype=float) if open_loop else None
+        noise = (joint_noise, force_noise, torque_noise)
+        return cls(float(t[1] - t[0]), result.q[:, q_idx].copy(), wrench, torques, *noise, result.q[0].copy(), result.v[0].copy())
+
 
 @dataclass(frozen=True)
 class Identification:
-    """The estimate of :func:`identify` (see the module docstring)."""
+    """The estimate of :func:`identify` (see the module docstring).
+
+    Attributes:
+        parameters: the fitted :class:`~coopdyn.sensitivity.Parameter` (their values at the start).
+        estimate, std: each parameter's estimate and 1-σ uncertainty, by name [its unit].
+        covariance: (n_p, n_p) ``s²·(JᵀJ)⁻¹``; residual_rms: s = √(Σr²/(m − n)), the weighted
+            residual's RMS per degree of freedom (≈ 1 when the noise levels given are the true
+            ones); joint_rms [rad or m], wrench_rms ([N], [N·m]): the plain residuals' RMS.
+        scene: the scene with the estimate. jacobian, exact: how the Jacobian was had, and whether
+            it was exact throughout. evaluations, jacobians, cpu_time [s], message: the fit's work.
+    """
 
     parameters: tuple[Parameter, ...]  #: the fitted parameters, their values at the start of the fit
     estimate: dict[str, float]  #: by name [its unit]
     std: dict[str, float]  #: 1-σ uncertainty by name [its unit]
     covariance: np.ndarray  #: (n_p, n_p) [the units' products]
-    residual_rms: float  #: RMS of the weighted residual at the estimate (≈ 1: the noise levels hold)
+    residual_rms: float  #: √(Σr²/(m − n)) of the weighted residual r (m values, n parameters): ≈ 1 when the noise levels hold
     joint_rms: float  #: RMS joint-angle residual [rad or m]
     wrench_rms: tuple[float, float] | None  #: RMS force [N] and moment [N·m] residuals, or None
     scene: Scene  #: the scene with the estimate
-    jacobian: str  #: "exact" or "finite-differences"
+    jacobian: str  #: "exact" (sensitivities) or "finite-differences"
+    exact: bool  #: the Jacobian was exact throughout (False: finite differences, or a controller's derivative by them)
     evaluations: int  #: runs of the model (residuals)
     jacobians: int  #: Jacobian evaluations
     cpu_time: float  #: CPU time of the fit [s]
@@ -100,9 +142,8 @@ class Identification:
         if self.wrench_rms is not None:
             fit += f", forces {self.wrench_rms[0]:.3g} N, moments {self.wrench_rms[1]:.3g} N·m"
         lines.append(fit)
-        lines.append(
-            f"{self.evaluations} runs, {self.jacobians} Jacobians ({self.jacobian}), {self.cpu_time:.2f} s CPU: {self.message}"
-        )
+        how = self.jacobian if self.exact or self.jacobian != "exact" else "sensitivities; the controller's by differences"
+        lines.append(f"{self.evaluations} runs, {self.jacobians} Jacobians ({how}), {self.cpu_time:.2f} s CPU: {self.message}")
         return "\n".join(lines)
 
 
@@ -192,24 +233,44 @@ def identify(
         raise SceneError(f"identify: scene must be a coopdyn.Scene, got {type(scene).__name__}")
     if jacobian not in ("exact", "finite-differences"):
         raise SimulationError(f"identify: jacobian must be 'exact' or 'finite-differences', got {jacobian!r}")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1:
+        raise SimulationError(f"identify: max_iterations must be a positive integer (runs of the model), got {max_iterations!r}")
+    if controller is not None and not callable(controller):
+        raise SimulationError(
+            f"identify: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}"
+        )
     params = scene_parameters(scene, parameters)
     names = [p.name for p in params]
     start = dict(initial or {})
     unknown = set(start) - set(names)
     if unknown:
         raise SimulationError(f"identify: initial names {sorted(unknown)}, which are not among the parameters {names}")
+    for p in params:
+        if p.name not in start and p.value == 0.0:
+            raise SimulationError(
+                f"identify: {p.name} is 0 {p.unit} in the scene, which cannot start the fit (its scale); give a positive guess: "
+                f"initial={{{p.name!r}: ...}}"
+            )
     x0 = np.array(
         [_validate.positive(start.get(p.name, p.value), f"initial value of {p.name}", p.unit, SimulationError) for p in params]
     )
     U, joints, wrench, q0, v0 = _checked(scene, measurements, controller is not None)
     period = _validate.positive(measurements.period, "measurements.period", "s", SimulationError)
+    model = Sensitivity(scene, integrator, names, backend, controller)  # (refuses a method without sensitivities, up front)
+    if get_integrator(integrator).adaptive:
+        raise SimulationError(
+            f"identify: {integrator!r} adapts its step in a run, so its sensitivities (of fixed steps) and finite differences "
+            "would fit two different models; use a fixed-step method ('rk4', 'symplectic_euler') at a dt that resolves the scene"
+        )
+    del model
+    step_of(period, dt)  # (refuses a dt that does not divide the period)
     q_idx = _joint_coordinates(scene)
     L = len(scene.links)
     w_joint = 1.0 / measurements.joint_noise
     w_wrench = np.array(3 * [1.0 / measurements.force_noise] + 3 * [1.0 / measurements.torque_noise])
     cpu0 = time.process_time()
     cache: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
-    counts = {"runs": 0, "jacobians": 0}
+    counts = {"runs": 0, "jacobians": 0, "inexact": 0}
 
     def model_scene(x: np.ndarray) -> Scene:
         return with_parameters(scene, dict(zip(names, (float(v) for v in x), strict=True)))
@@ -234,6 +295,7 @@ def identify(
                     controller=controller,
                 )
                 cache[key] = (residual(tr.q, tr.wrench), jac(tr.dx_dp, tr.dwrench_dp))
+                counts["inexact"] += not tr.exact
             else:
                 cache[key] = (residual(*_run(s, U, period, dt, q0, v0, integrator, backend, controller)), None)
         return cache[key]
@@ -286,6 +348,7 @@ def identify(
     except np.linalg.LinAlgError:
         cov = np.full((len(x0), len(x0)), np.inf)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    _warn_if_untrustworthy(names, fit.x, std, math.sqrt(s2), [p.unit for p in params], fit.active_mask)
     best = model_scene(fit.x)
     n_joint = (U.shape[0]) * len(q_idx)
     joint_rms = math.sqrt(float(np.mean((r[:n_joint] / w_joint) ** 2)))
@@ -303,11 +366,51 @@ def identify(
         wrench_rms,
         best,
         jacobian,
+        jacobian == "exact" and counts["inexact"] == 0,
         counts["runs"],
         counts["jacobians"],
         time.process_time() - cpu0,
         str(fit.message),
     )
+
+
+#: a weighted residual RMS above this says the model does not explain the data (≈ 1 when it does)
+MISFIT = 3.0
+
+
+def _warn_if_untrustworthy(
+    names: list[str], x: np.ndarray, std: np.ndarray, rms: float, units: list[str], active: np.ndarray
+) -> None:
+    """FitWarning: the model does not explain the data, or a parameter is not determined by them
+    (its uncertainty as large as its value, or the fit stopped at its bound 0)."""
+    bound = [n for n, a in zip(names, active, strict=True) if a]
+    if bound:
+        warnings.warn(
+            f"identify: stopped at the bound 0: {', '.join(bound)} (the uncertainty reported ignores the bound); the data "
+            "want a negative value: check the model (frames, noise, start) or leave it out",
+            FitWarning,
+            stacklevel=3,
+        )
+    if rms > MISFIT:
+        warnings.warn(
+            f"identify: the weighted residual RMS is {rms:.3g} (≈ 1 when the model explains the data within the noise given): "
+            "check the wrench's frame (the grasp frame's axes, not the world's), the noise levels, the start state, the "
+            "parameters fitted and the controller; the uncertainty reported assumes the model is right",
+            FitWarning,
+            stacklevel=3,
+        )
+    loose = [
+        f"{n} = {v:.3g} ± {e:.3g} {u}"
+        for n, v, e, u, a in zip(names, x, std, units, active, strict=True)
+        if not a and not e < abs(v)
+    ]
+    if loose:
+        warnings.warn(
+            f"identify: not determined by these data (the uncertainty is as large as the value): {', '.join(loose)}; a record "
+            "that excites it (motion across that axis, a load on it) or fewer parameters",
+            FitWarning,
+            stacklevel=3,
+        )
 
 
 def _run(

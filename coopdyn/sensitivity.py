@@ -1,4 +1,5 @@
-"""Exact sensitivities of an open-loop step and of a whole open-loop trajectory: ∂x⁺/∂(x, u, p).
+"""Exact sensitivities of a step and of a whole trajectory, open loop or closed under a sampled
+controller: ∂x⁺/∂(x, u, p).
 
 The state is ``x = (δq, v)`` as in :func:`coopdyn.linearize` (δq Pinocchio's tangent coordinates:
 ``q ⊕ δq = pin.integrate(model, q, δq)``; after a step, about the new configuration); the input
@@ -47,7 +48,7 @@ from .integrators import DormandPrince, ExplicitRungeKutta, Integrator, Symplect
 from .linearize import controller_gain
 from .model.elements import lookup
 from .model.elements.ball_spring import BallSpring
-from .model.elements.beam import BeamElement
+from .model.elements.hardening_spring import HardeningSpring
 from .model.elements.lie import dexp_inv_rate, jlog6, log6
 from .model.elements.se3_spring import SE3Spring
 from .model.scene import Scene
@@ -63,6 +64,8 @@ __all__ = [
 ]
 
 LOCAL = pin.ReferenceFrame.LOCAL
+#: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
+MAX_SPEED = 1e4
 #: complex step [m, rad] of the chart-rate derivative (far below round-off: no truncation error)
 _COMPLEX_STEP = 1e-30
 _AXES = ("x", "y", "z", "rx", "ry", "rz")
@@ -81,8 +84,9 @@ def _kinds() -> dict[str, tuple[str, tuple[int, ...], str, str]]:
 
 #: a parameter's kind → (the element's matrix, its diagonal indices, unit, what it is)
 _KINDS = _kinds()
-#: the element laws whose wrench is linear in K and in D (the hardening spring's κ term has no K)
-_LINEAR_IN_KD = (SE3Spring, BallSpring)
+#: the element laws whose wrench is linear in K and in D (the hardening spring's κ term has no K);
+#: exactly these classes: a subclass may change the law
+_LINEAR_IN_KD = (SE3Spring, HardeningSpring, BallSpring)
 
 
 @dataclass(frozen=True)
@@ -144,7 +148,7 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
             raise SceneError(f"unknown parameter {name!r}; this scene has {_names_help(scene)}")
         i = links[owner]
         element = scene.links[i].element
-        if not isinstance(element, _LINEAR_IN_KD) or isinstance(element, BeamElement):
+        if type(element) not in _LINEAR_IN_KD:  # (a subclass may change the law: not known to be linear)
             raise SceneError(
                 f"parameter {name!r}: the {type(element).__name__} law is not known to be linear in its stiffness and damping; "
                 "parameters are offered for the se3, ball and hardening elements"
@@ -161,6 +165,15 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
         out.append(Parameter(name, k, _KINDS[kind][2], i, kind))
     if len({p.name for p in out}) != len(out):
         raise SceneError(f"parameters: a name is repeated in {list(names)}")
+    entries: dict[tuple[int, str, int], str] = {}
+    for p in out:
+        if p.link is None:
+            continue
+        matrix, idx, _, _ = _KINDS[p.kind]
+        for i in idx:
+            other = entries.setdefault((p.link, matrix, i), p.name)
+            if other != p.name:
+                raise SceneError(f"parameters: {other!r} and {p.name!r} both set entry {_AXES[i]} of that {matrix}; keep one")
     return tuple(out)
 
 
@@ -209,7 +222,16 @@ def _grasp_pose(scene: Scene, link: int) -> pin.SE3:
 
 @dataclass(frozen=True)
 class StepSensitivity:
-    """One open-loop step and its exact derivatives (see the module docstring for the state)."""
+    """One open-loop step and its exact derivatives (see the module docstring for the state).
+
+    Attributes:
+        q, v: the state after the step, (nq,) and (nv,).
+        dx_dx: ∂x⁺/∂x (2nv, 2nv): rows (δq⁺ about the new q, v⁺), columns (δq about the start, v).
+        dx_du: ∂x⁺/∂u (2nv, n_actuated), per N·m or N of each actuated joint's torque.
+        dx_dp: ∂x⁺/∂p (2nv, n_parameters), one column per entry of ``parameters``, per its unit.
+        parameters: the :class:`Parameter` of each column of dx_dp.
+        exact: False when an element's tangent came from finite differences (a user's law).
+    """
 
     q: np.ndarray  #: the configuration after the step (nq,)
     v: np.ndarray  #: the velocities after the step (nv,) [m/s, rad/s]
@@ -222,7 +244,17 @@ class StepSensitivity:
 
 @dataclass(frozen=True)
 class TrajectorySensitivity:
-    """A trajectory sampled at every period and the derivatives of its samples."""
+    """A trajectory sampled at every period and the derivatives of its samples.
+
+    Attributes:
+        t: (N + 1,) the sample times [s]; q (N + 1, nq), v (N + 1, nv): the states there.
+        wrench: (N + 1, L, 6) each element's wrench on its grasp frame G, G's axes [N, N·m].
+        tau: (N, n_actuated) the torques applied over each period [N·m or N].
+        dx_dp: (N + 1, 2nv, n_parameters) ∂x_k/∂p (δq about q_k); dwrench_dp (N + 1, L, 6, n_parameters).
+        dx_dx0: (N + 1, 2nv, 2nv) ∂x_k/∂x₀ with ``initial_state=True``, else None.
+        parameters: the :class:`Parameter` of each column; exact: False when a controller's
+            derivative or an element's tangent came from finite differences.
+    """
 
     t: np.ndarray  #: (N + 1,) [s]
     q: np.ndarray  #: (N + 1, nq)
@@ -244,8 +276,8 @@ class Sensitivity:
     Args:
         scene: an elastic scene (rigid grasps are refused).
         integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` (a step of its
-            fifth-order solution at the h given) or an explicit
-            :class:`~coopdyn.integrators.ExplicitRungeKutta`.
+            fifth-order solution at the h given — a fixed step: rollout and simulate adapt
+            theirs) or an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`.
         parameters: names as :func:`parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
             whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
@@ -287,8 +319,9 @@ class Sensitivity:
             self.tableau = None
         else:
             why = (
-                "an implicit method is linearly implicit with a Gauss–Newton Jacobian, whose own derivative coopdyn does not have"
-                if method.a_stable or "implicit" in type(method).__name__.lower()
+                "its step is built on the Gauss–Newton Jacobian (an implicit method solves with it, the exponential one "
+                "exponentiates it), whose own derivative coopdyn does not have"
+                if method.a_stable
                 else "only the explicit Runge–Kutta methods and symplectic Euler are"
             )
             raise SimulationError(
@@ -347,7 +380,12 @@ class Sensitivity:
         """One open-loop step of ``dt`` [s] from (q, v) (default the scene's start) under the torques
         ``tau`` (n_actuated,) [N·m or N] (default zero) held over it, and its exact derivatives with
         respect to the state, the torques and the parameters. Its q, v are what
-        :func:`coopdyn.rollout` computes for one step (to round-off)."""
+        :func:`coopdyn.rollout` computes for one step with the same integrator (to round-off).
+
+        Raises:
+            SimulationError: a bad argument, a closed loop (its steps are :meth:`trajectory`'s), or a
+                step that diverges (a speed above 1e4 rad/s or m/s, as a rollout's default).
+        """
         scene = self.scene
         q, v = _state(scene, q, v)
         u = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
@@ -391,7 +429,7 @@ class Sensitivity:
                 raise SimulationError(f"trajectory: the number of periods must be >= 1, got {torques}")
             torques = np.zeros((torques, scene.n_actuated))
         U = _torques(scene, torques)
-        h, per = _step_of(period, dt)
+        h, per = step_of(period, dt)
         na, nv, n_p, N = scene.n_actuated, scene.nv, len(self.params), len(U)
         m = n_p + (2 * nv if initial_state else 0)
         dq, dv, du, dp = np.zeros((nv, m)), np.zeros((nv, m)), np.zeros((na, m)), np.zeros((n_p, m))
@@ -518,7 +556,7 @@ class Sensitivity:
         assert start is not None
         return q1, v1, dq1, dv1, start[0], start[1]
 
-    def _run(
+    def _run_raw(
         self,
         q: np.ndarray,
         v: np.ndarray,
@@ -540,7 +578,9 @@ class Sensitivity:
                 if error is not None:  # a Python controller's own failure
                     self._callback.error = None
                     raise error from None
-                raise SimulationError(f"sensitivities: diverged: {exc}") from exc
+                self.dynamics.reraise_python_error()  # a Python element's own failure (or Ctrl-C in it)
+                what = "diverged" if "not finite" in str(exc) else "the kernel stopped the run"
+                raise SimulationError(f"sensitivities: {what}: {exc}") from exc
             Q, V, W, dX, dW, exact, applied = raw
             N, L, m = len(U), len(self.scene.elements), seeds[0].shape[1]
             self.exact = self.exact and bool(exact)
@@ -592,6 +632,28 @@ class Sensitivity:
             Q[N], V[N], dX[N, :nv], dX[N, nv:], W[N], dW[N] = q, v, dq, dv, np.nan, np.nan
         return Q, V, W, dX, dW, applied
 
+    def _run(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        U: np.ndarray,
+        per: int,
+        h: float,
+        seeds: tuple[np.ndarray, ...],
+        end_wrench: bool = True,
+    ) -> tuple[np.ndarray, ...]:
+        """:meth:`_run_raw`, refused as diverged when a sample's speed passes :data:`MAX_SPEED`."""
+        self.exact = True  # (this run's: _run_raw clears it for a tangent or a controller by differences)
+        out = self._run_raw(q, v, U, per, h, seeds, end_wrench)
+        speeds = np.max(np.abs(out[1]), axis=1)
+        if np.any(speeds > MAX_SPEED):
+            k = int(np.argmax(speeds > MAX_SPEED))
+            raise SimulationError(
+                f"sensitivities: diverged: a speed of {speeds[k]:.3g} rad/s or m/s at t = {k * per * h:.6g} s "
+                f"(above {MAX_SPEED:g}); a smaller step, or a method that resolves the scene's modes"
+            )
+        return out
+
     def _integrate(self, q: np.ndarray, delta: np.ndarray, dq: np.ndarray, ddelta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q ⊕ δ and its tangent derivative, from q's (dq) and δ's (ddelta)."""
         out = pin.integrate(self.model, q, delta)
@@ -636,7 +698,7 @@ def _torques(scene: Scene, torques: Any) -> np.ndarray:
     return U
 
 
-def _step_of(period: float, dt: float | None) -> tuple[float, int]:
+def step_of(period: float, dt: float | None) -> tuple[float, int]:
     """(h, steps per period), checked."""
     period = _validate.positive(period, "period", "s", SimulationError)
     h = period if dt is None else _validate.positive(dt, "dt", "s", SimulationError)

@@ -14,6 +14,7 @@ Run: python examples/identify_stiffness.py [OUT_FOLDER]
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Any
@@ -34,15 +35,10 @@ def experiment(nominal: cd.Scene, controller: Any, seed: int = 7, t_final: float
     """The hidden robot's run under the controller, read by noisy sensors every PERIOD."""
     robot = cd.with_parameters(nominal, HIDDEN)
     run = cd.simulate(robot, t_final, controller, "rk4", dt=PERIOD / 4, control_dt=PERIOD, save_every=4, accuracy_check="off")
-    wrench = np.array([[e.G_f_G for e in cd.Dynamics(robot).element_states(q, v)] for q, v in zip(run.q, run.v, strict=True)])
+    perfect = cd.Measurements.from_result(run, joint_noise=NOISE[0], force_noise=NOISE[1], torque_noise=NOISE[2])
     rng = np.random.default_rng(seed)
-    n, joints = len(run.t), run.q[:, _joint_coordinates(nominal)]
-    noise = np.concatenate([NOISE[1] * rng.normal(size=(n, 2, 3)), NOISE[2] * rng.normal(size=(n, 2, 3))], axis=2)
-    return cd.Measurements(PERIOD, joints + NOISE[0] * rng.normal(size=joints.shape), wrench[:, :2] + noise, None, *NOISE)
-
-
-def _joint_coordinates(scene: cd.Scene) -> list[int]:
-    return [next(j.idx_q for j in scene.model.joints[1:] if j.idx_v == i) for i in scene.arm_joints]
+    wrench = perfect.wrench + np.concatenate([s * rng.normal(size=(len(run.t), 2, 3)) for s in NOISE[1:]], axis=2)
+    return dataclasses.replace(perfect, joints=perfect.joints + NOISE[0] * rng.normal(size=perfect.joints.shape), wrench=wrench)
 
 
 def main(out: str = "out/identify_stiffness", t_final: float = T_FINAL, plot: bool = True) -> dict[str, Any]:

@@ -4,12 +4,14 @@ controller — and the cases that must stay in Python."""
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import coopdyn as cd
@@ -100,6 +102,12 @@ def test_a_controller_built_for_a_twin_scene_runs_compiled_with_its_own_model(da
     assert not twin_scenes(damped, moved)  # (other grasp frames)
     assert controller_settings(moved, System(cd.Dynamics(moved), ctrl))["kind"] == "python"
     assert not twin_scenes(damped, cd.scenes.facing_arms("panda", stiffness=1e4, gravity=(0.0, 0.0, -9.0)))
+    higher = cd.Scene(
+        damped.arm_specs,
+        dataclasses.replace(damped.object, pose=pin.SE3(np.eye(3), object_start(damped) + np.array([0.0, 0.0, 0.05]))),
+        damped.interconnection_specs,
+    )
+    assert not twin_scenes(damped, higher)  # (the object joint placed elsewhere)
 
 
 def test_object_impedance_holding_computed_torque_and_no_controller(damped: cd.Scene) -> None:

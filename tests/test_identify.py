@@ -10,7 +10,7 @@ import pytest
 
 import coopdyn as cd
 from coopdyn.dynamics import Dynamics
-from coopdyn.errors import SceneError, SimulationError
+from coopdyn.errors import FitWarning, SceneError, SimulationError
 from coopdyn.identify import Measurements, identify
 from coopdyn.sensitivity import with_parameters
 
@@ -58,9 +58,10 @@ def test_the_hidden_parameters_are_recovered_within_their_uncertainty(damped: cd
     assert "left.k_linear" in text and "N/m" in text and "exact" in text
     # wrong noise levels show in the residual: σ given 10× too small → RMS ~10
     others = with_parameters(damped, {k: v for k, v in TRUTH.items() if k != "left.k_linear"})
-    loud = identify(
-        others, Measurements(m.period, m.joints, m.wrench, m.torques, *(x / 10 for x in NOISE)), ["left.k_linear"], dt=1e-3
-    )
+    with pytest.warns(FitWarning, match="weighted residual RMS is 9.*the wrench's frame"):
+        loud = identify(
+            others, Measurements(m.period, m.joints, m.wrench, m.torques, *(x / 10 for x in NOISE)), ["left.k_linear"], dt=1e-3
+        )
     assert 8.5 < loud.residual_rms < 11.5
 
 
@@ -98,3 +99,32 @@ def test_bad_measurements_are_refused(damped: cd.Scene) -> None:
         identify(damped, m, ["left.stiffness"])
     with pytest.raises(SimulationError, match=r"must be a coopdyn\.identify\.Measurements"):
         identify(damped, (m.torques, m.joints), ["left.k_x"])  # type: ignore[arg-type]
+    with pytest.raises(SimulationError, match="adapts its step in a run"):
+        identify(damped, m, ["left.k_x"], integrator="dopri5")
+    with pytest.raises(SimulationError, match="built on the Gauss–Newton Jacobian"):
+        identify(damped, m, ["left.k_x"], integrator="implicit_euler")
+    with pytest.raises(SimulationError, match="must divide the period"):
+        identify(damped, m, ["left.k_x"], dt=3e-4)
+    with pytest.raises(SimulationError, match="max_iterations must be a positive integer"):
+        identify(damped, m, ["left.k_x"], max_iterations=0)
+    with pytest.raises(SimulationError, match="controller must be a callable"):
+        identify(damped, Measurements(m.period, m.joints, m.wrench), ["left.k_x"], controller=3)  # type: ignore[arg-type]
+    undamped = cd.scenes.facing_arms("panda", stiffness=1e4)
+    with pytest.raises(SimulationError, match=r"left\.d_linear is 0 N·s/m in the scene.*initial=\{'left\.d_linear': \.\.\.\}"):
+        identify(undamped, m, ["left.d_linear"])
+
+
+def test_measurements_from_a_run_read_the_wrench_in_the_grasp_frames_axes(damped: cd.Scene) -> None:
+    from coopdyn.control import GravityCompensationPD
+
+    run = cd.simulate(damped, 0.05, GravityCompensationPD(damped), "rk4", dt=1e-3, control_dt=1e-3, accuracy_check="off")
+    m = Measurements.from_result(run, open_loop=True)
+    dyn = Dynamics(damped)
+    k = 30
+    local = [e.G_f_G for e in dyn.element_states(run.q[k], run.v[k])[:2]]
+    np.testing.assert_allclose(m.wrench[k], local, rtol=0, atol=1e-12)
+    assert np.max(np.abs(m.wrench[k] - run.wrenches()[k])) > 1e-3  # (world axes differ)
+    assert m.period == pytest.approx(1e-3) and m.torques is not None and m.torques.shape == (50, 14)
+    # perfect data, replayed open loop from 10 % off: the fit returns to the scene's value
+    fit = identify(damped, m, ["left.k_linear"], initial={"left.k_linear": 1.1e4})
+    assert fit.estimate["left.k_linear"] == pytest.approx(1e4, rel=1e-6) and fit.residual_rms < 1e-3

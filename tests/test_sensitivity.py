@@ -8,12 +8,14 @@ book's linear system against the closed forms of rk4's and symplectic Euler's st
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from test_linearize import _rel, richardson
 
 import coopdyn as cd
 from coopdyn.closed_loop import System
@@ -22,19 +24,6 @@ from coopdyn.errors import SceneError, SimulationError
 from coopdyn.integrators import get_integrator
 from coopdyn.model.elements.lie import dexp_inv_rate, jlog6_of_log
 from coopdyn.sensitivity import parameters, step_sensitivity, trajectory_sensitivity, with_parameters
-
-
-def richardson(f: Callable[[float], np.ndarray], h: float) -> np.ndarray:
-    """df/ds at s = 0 from central differences at h and h/2, extrapolated (error O(h⁴))."""
-
-    def central(step: float) -> np.ndarray:
-        return (f(step) - f(-step)) / (2.0 * step)
-
-    return (4.0 * central(h / 2) - central(h)) / 3.0
-
-
-def _rel(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
 
 
 def _damped_pandas() -> cd.Scene:
@@ -63,7 +52,7 @@ def _hardening_box() -> cd.Scene:
 CASES: dict[str, tuple[Callable[[], cd.Scene], list[str]]] = {
     "pandas, damped SE(3) grasps": (
         _damped_pandas,
-        ["left.k_linear", "right.k_angular", "left.d_linear", "right.k_rz", "object.mass"],
+        ["left.k_linear", "right.k_angular", "left.d_linear", "left.k_rz", "object.mass"],
     ),
     "pandas, ball grasps": (_ball_pandas, ["left.k_linear", "right.d_y"]),
     "box hung from a hardening fixture": (_hardening_box, ["fixture.k_z", "fixture.k_rx", "fixture.d_x", "object.mass"]),
@@ -240,8 +229,9 @@ def test_with_parameters_changes_only_what_it_names(pandas: cd.Scene) -> None:
 
 
 def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
-    with pytest.raises(SimulationError, match=r"linearly implicit with a Gauss–Newton Jacobian.*'rk4'"):
-        step_sensitivity(pandas, integrator="implicit_euler")
+    for method in ("implicit_euler", "trapezoid", "exponential"):
+        with pytest.raises(SimulationError, match=r"built on the Gauss–Newton Jacobian.*'rk4'"):
+            step_sensitivity(pandas, integrator=method)
     with pytest.raises(SimulationError, match="only the explicit Runge–Kutta methods and symplectic Euler"):
         step_sensitivity(pandas, integrator="scipy")
     with pytest.raises(SceneError, match="rigid grasps"):
@@ -308,3 +298,63 @@ def test_a_closed_loops_sensitivities_are_the_derivatives_of_its_simulation() ->
     np.testing.assert_allclose(python.q, tr.q[:31], rtol=0, atol=1e-13)
     with pytest.raises(SimulationError, match=r"open-loop step; a closed loop's: Sensitivity\.trajectory"):
         cd.sensitivity.Sensitivity(scene, controller=controller).step()
+
+
+def test_one_period_and_one_parameter_with_the_start_give_the_references_derivatives(pandas: cd.Scene) -> None:
+    """(1, n) inputs to the kernel's twin: one period of torques, one parameter with the start's
+    columns — eigenpy once mapped such arrays wrongly through an Eigen::Ref."""
+    U = 3.0 * np.random.default_rng(0).normal(size=(1, pandas.n_actuated))
+    for names, start in ((["left.k_linear"], True), (["left.k_linear", "object.mass"], False)):
+        a, b = (
+            trajectory_sensitivity(pandas, U, 2e-3, dt=1e-3, parameters=names, initial_state=start, backend=x)
+            for x in ("native", "python")
+        )
+        np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(a.tau, U, rtol=0, atol=0)
+        assert _rel(a.dx_dp, b.dx_dp) < 1e-10
+        if start:
+            assert a.dx_dx0 is not None and b.dx_dx0 is not None and _rel(a.dx_dx0, b.dx_dx0) < 1e-10
+
+
+def test_a_python_elements_own_error_reaches_the_user_from_the_kernels_twin(pandas: cd.Scene) -> None:
+    from coopdyn.model.elements import SE3Spring
+
+    class Flaky(SE3Spring):
+        kind = "flaky_test"
+        calls = 0
+
+        def evaluate(self, T_M_G: Any, xi: Any, jacobians: bool = False) -> Any:
+            Flaky.calls += 1
+            if Flaky.calls > 40:
+                raise ValueError("flaky element gave up")
+            return super().evaluate(T_M_G, xi, jacobians)
+
+    links = [cd.Interconnection(ic.arm, stiffness=1e4, element=Flaky) for ic in pandas.interconnection_specs]
+    with warnings.catch_warnings():  # (no C++ twin: the kernel calls the Python law)
+        warnings.simplefilter("ignore")
+        scene = cd.Scene(pandas.arm_specs, pandas.object, links)
+        sens = cd.Sensitivity(scene, backend="native")
+    with pytest.raises((ValueError, SimulationError), match="flaky element gave up") as caught:
+        sens.trajectory(np.zeros((20, scene.n_actuated)), 1e-3)
+    assert "diverged" not in str(caught.value)  # (the element's failure, named, not a divergence)
+
+
+def test_parameters_refuse_laws_they_do_not_know_and_entries_set_twice(pandas: cd.Scene) -> None:
+    from coopdyn.model.elements import SE3Spring
+
+    class Doubled(SE3Spring):
+        kind = "doubled_test"
+
+        def evaluate(self, T_M_G: Any, xi: Any, jacobians: bool = False) -> Any:
+            ev = super().evaluate(T_M_G, xi, jacobians)
+            return ev._replace(G_f_G=2.0 * ev.G_f_G)
+
+    links = [cd.Interconnection(ic.arm, stiffness=1e4, element=Doubled) for ic in pandas.interconnection_specs]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = cd.Scene(pandas.arm_specs, pandas.object, links)
+    with pytest.raises(SceneError, match="Doubled law is not known to be linear"):
+        parameters(scene, ["left.k_linear"])
+    with pytest.raises(SceneError, match=r"'left\.k_linear' and 'left\.k_x' both set entry x of that stiffness"):
+        parameters(pandas, ["left.k_linear", "left.k_x"])
+    assert len(parameters(pandas, ["left.k_linear", "left.d_x", "right.k_x"])) == 3

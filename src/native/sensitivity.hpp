@@ -1,5 +1,6 @@
-// Exact sensitivities of open-loop explicit steps: the C++ twin of coopdyn/sensitivity.py (same
-// recursion, see its docstring). Each stage's derivatives come from Kernel::compute_derivatives;
+// Exact sensitivities of explicit steps, open loop or closed under a sampled controller: the C++
+// twin of coopdyn/sensitivity.py (same recursion, see its docstring). Each stage's derivatives
+// come from Kernel::compute_derivatives;
 // a parameter's ∂q̈/∂p is M⁻¹ ∂Q/∂p, ∂Q/∂p the generalized force of a unit law (an element
 // built from the Python side's unit K or D: the law is linear in them) or, for the object's
 // mass, −J_jᵀ (I·a_gf + v ×* I v)/m with the object's body inertia I (RNEA's body force of the
@@ -63,8 +64,10 @@ public:
   // the torques applied (N, na)):
   // the samples at every period's start and the end, the wrenches and derivatives there (at the
   // end only with `end_wrench`: one more evaluation of the derivatives).
-  bp::tuple run(const RefVec & q0, const RefVec & v0, const RefMat & U, long per, double h, const RefMat & dq0,
-                const RefMat & dv0, const RefMat & dU, const RefMat & dP, bool end_wrench) {
+  // (The matrices are taken as copies, not Eigen::Ref: eigenpy maps a (1, n) array through a Ref
+  // with its row stride as the column stride — one period, one parameter — and reads past its end.)
+  bp::tuple run(const RefVec & q0, const RefVec & v0, const MatrixXd & U, long per, double h, const MatrixXd & dq0,
+                const MatrixXd & dv0, const MatrixXd & dU, const MatrixXd & dP, bool end_wrench) {
     const Eigen::Index nq = model_.nq, nv = model_.nv, na = kernel_.actuated().size();
     const Eigen::Index L = static_cast<Eigen::Index>(kernel_.links().size()), np = static_cast<Eigen::Index>(params_.size());
     const Eigen::Index m = dq0.cols(), N = U.rows();

@@ -102,11 +102,13 @@ _B = tuple((-1.0) ** k / math.factorial(2 * k + 2) for k in range(9))
 _C = tuple((-1.0) ** k / math.factorial(2 * k + 3) for k in range(9))
 
 
-def _coefficients_t2(t2: complex) -> tuple[complex, complex, complex, complex, complex]:
-    """(a, β, β'/θ, b, c) as analytic functions of t2 = θ² (real or complex: complex-step safe)."""
-    if abs(t2.real) < SERIES_BELOW * SERIES_BELOW:
+def _coefficients_t2(t2: Any) -> tuple[Any, Any, Any, Any, Any]:
+    """(a, β, β'/θ, b, c) as analytic functions of t2 = θ² (real or complex: complex-step safe),
+    of one θ² or of an array of them sharing one real part (a complex step's perturbations of one
+    logarithm: one branch serves all)."""
+    if abs(np.ravel(t2)[0].real) < SERIES_BELOW * SERIES_BELOW:
         return _poly(_A, t2), _poly(_BETA, t2), _poly(_BETA_DOT, t2), _poly(_B, t2), _poly(_C, t2)
-    theta = np.sqrt(t2 + 0j) if isinstance(t2, complex) else math.sqrt(t2)
+    theta = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
     st, ct = np.sin(theta), np.cos(theta)
     a = 0.5 * theta * st / (1.0 - ct)
     inv_2_2ct = 1.0 / (2.0 * (1.0 - ct))
@@ -141,7 +143,7 @@ def jlog6_of_logs(E: np.ndarray) -> np.ndarray:
     series serves all of them."""
     rho, w = E[:, :3], E[:, 3:]
     t2 = np.einsum("ni,ni->n", w, w)  # no conjugate: analytic
-    a, beta, beta_dot, b, c = _coefficients_batch(t2)
+    a, beta, beta_dot, b, c = _coefficients_t2(t2)
     W = _skews(w)
     Wr = np.einsum("nij,nj->ni", W, rho)
     p = rho + b[:, None] * Wr + c[:, None] * np.einsum("nij,nj->ni", W, Wr)
@@ -156,19 +158,6 @@ def jlog6_of_logs(E: np.ndarray) -> np.ndarray:
     J[:, 3:, 3:] = A
     J[:, :3, 3:] = C @ A
     return J
-
-
-def _coefficients_batch(t2: Any) -> tuple[np.ndarray, ...]:
-    """(a, β, β'/θ, b, c) of :func:`_coefficients_t2` for an array of θ² sharing one real part."""
-    if abs(t2[0].real) < SERIES_BELOW * SERIES_BELOW:
-        return _poly(_A, t2), _poly(_BETA, t2), _poly(_BETA_DOT, t2), _poly(_B, t2), _poly(_C, t2)
-    theta = np.sqrt(t2 + 0j) if np.iscomplexobj(t2) else np.sqrt(t2)
-    st, ct = np.sin(theta), np.cos(theta)
-    a = 0.5 * theta * st / (1.0 - ct)
-    inv_2_2ct = 1.0 / (2.0 * (1.0 - ct))
-    beta = 1.0 / t2 - st / theta * inv_2_2ct
-    beta_dot = -2.0 / (t2 * t2) + (1.0 + st / theta) / t2 * inv_2_2ct
-    return a, beta, beta_dot, (1.0 - ct) / t2, (theta - st) / (t2 * theta)
 
 
 def dexp_inv_rate(delta: np.ndarray, v: np.ndarray, step: float = 1e-30) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
