@@ -26,6 +26,7 @@ import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -35,6 +36,15 @@ from coopdyn.bench import single_threaded_blas
 from coopdyn.control import TorqueSequence
 
 H = 1e-3  # [s]
+
+
+def _example(name: str) -> Any:
+    """The module examples/<name>.py (its functions and constants)."""
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).parent.parent / "examples" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def step_table(rounds: int) -> None:
@@ -101,12 +111,7 @@ def step_table(rounds: int) -> None:
 
 
 def identification_table() -> None:
-    spec = importlib.util.spec_from_file_location(
-        "identify_stiffness", Path(__file__).parent.parent / "examples" / "identify_stiffness.py"
-    )
-    assert spec is not None and spec.loader is not None
-    ex = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ex)
+    ex = _example("identify_stiffness")
     from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
     from coopdyn.scenes import object_start
 
@@ -130,12 +135,7 @@ def identification_table() -> None:
 def trajectory_table() -> None:
     """examples/gauss_newton_lift.py's Jacobian ∂x_N/∂U (20 periods × 14 torques): chained exact
     step sensitivities against forward differences (one batch of 280 compiled rollouts)."""
-    spec = importlib.util.spec_from_file_location(
-        "gauss_newton_lift", Path(__file__).parent.parent / "examples" / "gauss_newton_lift.py"
-    )
-    assert spec is not None and spec.loader is not None
-    ex = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ex)
+    ex = _example("gauss_newton_lift")
     scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
     nu, N = scene.n_actuated, ex.N
     g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[scene.actuated]
