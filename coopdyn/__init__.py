@@ -42,6 +42,7 @@ from .model import (
     quasi_static,
     rigid_limit,
 )
+from .parameters import with_parameters
 from .result import Result
 from .rollout import Rollouts, rollout
 from .sensitivity import (
@@ -50,7 +51,6 @@ from .sensitivity import (
     TrajectorySensitivity,
     step_sensitivity,
     trajectory_sensitivity,
-    with_parameters,
 )
 from .simulate import simulate
 from .simulator import Simulator

@@ -36,10 +36,11 @@ from .dynamics import Dynamics
 from .errors import FitWarning, SceneError, SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
+from .parameters import Parameter, with_parameters
+from .parameters import parameters as scene_parameters
 from .result import Result
 from .rollout import rollout
-from .sensitivity import Parameter, Sensitivity, step_of, trajectory_sensitivity, with_parameters
-from .sensitivity import parameters as scene_parameters
+from .sensitivity import Sensitivity, step_of, trajectory_sensitivity
 from .simulate import simulate
 
 __all__ = ["Identification", "Measurements", "identify"]
@@ -105,7 +106,7 @@ class Identification:
     """The estimate of :func:`identify` (see the module docstring).
 
     Attributes:
-        parameters: the fitted :class:`~coopdyn.sensitivity.Parameter` (their values at the start).
+        parameters: the fitted :class:`~coopdyn.parameters.Parameter` (their values at the start).
         estimate, std: each parameter's estimate and 1-σ uncertainty, by name [its unit].
         covariance: (n_p, n_p) ``s²·(JᵀJ)⁻¹``; residual_rms: s = √(Σr²/(m − n)), the weighted
             residual's RMS per degree of freedom (≈ 1 when the noise levels given are the true
@@ -211,7 +212,7 @@ def identify(
     backend: str | None = None,
     controller: Controller | None = None,
 ) -> Identification:
-    """Fit the named ``parameters`` of ``scene`` (:func:`coopdyn.sensitivity.parameters`: e.g.
+    """Fit the named ``parameters`` of ``scene`` (:func:`coopdyn.parameters.parameters`: e.g.
     ``["left.k_linear", "right.k_linear"]`` [N/m]) to ``measurements`` (see the module docstring).
 
     Args:

@@ -4,7 +4,7 @@ controller: ∂x⁺/∂(x, u, p).
 The state is ``x = (δq, v)`` as in :func:`coopdyn.linearize` (δq Pinocchio's tangent coordinates:
 ``q ⊕ δq = pin.integrate(model, q, δq)``; after a step, about the new configuration); the input
 ``u`` is the actuated joints' torque, held over the step [N·m or N]; ``p`` are named physical
-parameters of the scene (:func:`parameters`).
+parameters of the scene (:func:`coopdyn.parameters.parameters`).
 
 The derivative is that of the discrete map the method computes, not of the continuous flow: an
 explicit Runge–Kutta step takes its stages in the chart around q (``q_i = q ⊕ δ_i``, the chart
@@ -29,8 +29,7 @@ sensitivity against central finite differences of the step and of the compiled l
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,176 +47,19 @@ from .integrators import DormandPrince, ExplicitRungeKutta, Integrator, Symplect
 from .linearize import controller_gain
 from .model.elements import lookup
 from .model.elements.ball_spring import BallSpring
-from .model.elements.hardening_spring import HardeningSpring
 from .model.elements.lie import dexp_inv_rate, jlog6, log6
 from .model.elements.se3_spring import SE3Spring
 from .model.scene import Scene
+from .parameters import KINDS, Parameter
+from .parameters import parameters as scene_parameters
 
-__all__ = [
-    "Parameter",
-    "StepSensitivity",
-    "TrajectorySensitivity",
-    "parameters",
-    "step_sensitivity",
-    "trajectory_sensitivity",
-    "with_parameters",
-]
+__all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "step_sensitivity", "trajectory_sensitivity"]
 
 LOCAL = pin.ReferenceFrame.LOCAL
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
 MAX_SPEED = 1e4
 #: complex step [m, rad] of the chart-rate derivative (far below round-off: no truncation error)
 _COMPLEX_STEP = 1e-30
-_AXES = ("x", "y", "z", "rx", "ry", "rz")
-
-
-def _kinds() -> dict[str, tuple[str, tuple[int, ...], str, str]]:
-    """A parameter's kind → (the element's matrix, its diagonal indices, unit, what it is)."""
-    out: dict[str, tuple[str, tuple[int, ...], str, str]] = {}
-    for m, matrix, units in (("k", "stiffness", ("N/m", "N·m/rad")), ("d", "damping", ("N·s/m", "N·m·s/rad"))):
-        out[f"{m}_linear"] = (matrix, (0, 1, 2), units[0], f"translational {matrix} (x, y, z alike)")
-        out[f"{m}_angular"] = (matrix, (3, 4, 5), units[1], f"rotational {matrix} (rx, ry, rz alike)")
-        for j, axis in enumerate(_AXES):
-            out[f"{m}_{axis}"] = (matrix, (j,), units[j // 3], f"{matrix} along {axis}")
-    return out
-
-
-#: a parameter's kind → (the element's matrix, its diagonal indices, unit, what it is)
-_KINDS = _kinds()
-#: the element laws whose wrench is linear in K and in D (the hardening spring's κ term has no K);
-#: exactly these classes: a subclass may change the law
-_LINEAR_IN_KD = (SE3Spring, HardeningSpring, BallSpring)
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """A named physical parameter of a scene (see :func:`parameters`)."""
-
-    name: str  #: e.g. ``"left.k_linear"`` or ``"object.mass"``
-    value: float  #: its value in the scene [unit]
-    unit: str  #: e.g. ``"N/m"``
-    link: int | None  #: the interconnection's index in ``scene.links``; None for the object's mass
-    kind: str  #: ``k_linear``, ``k_angular``, ``d_linear``, ``d_angular`` or ``mass``
-
-
-def _names_help(scene: Scene) -> str:
-    links = ", ".join(f"'{lk.name}.<kind>'" for lk in scene.links)
-    return f"{links} (kinds: {', '.join(_KINDS)}), 'object.mass'"
-
-
-def _entries(element: Any, kind: str) -> np.ndarray:
-    """The sub-block of the element's K or D that the kind names."""
-    matrix, idx, _, _ = _KINDS[kind]
-    return np.asarray(element.K if matrix == "stiffness" else element.D)[np.ix_(idx, idx)]
-
-
-def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
-    """The scene's parameters named ``"<interconnection>.<kind>"`` or ``"object.mass"``, checked.
-
-    A kind names diagonal entries of the element's K or D (its own axes: :class:`coopdyn.Interconnection`):
-    ``k_x``, ``k_y``, ``k_z`` [N/m], ``k_rx``, ``k_ry``, ``k_rz`` [N·m/rad], and ``d_…`` alike
-    [N·s/m, N·m·s/rad], one entry each; or ``k_linear``, ``k_angular``, ``d_linear``,
-    ``d_angular``: one value for the three entries of a block, which must then be k·I₃ (isotropic).
-    The other entries stay as they are. A ball spring has the translational ones only.
-    ``object.mass`` [kg] is a rigid object's mass, its rotational inertia scaled with it (the same
-    shape, a different density).
-
-    Raises:
-        SceneError: an unknown name, a repeated one, an element whose law is not linear in K and D
-            (a beam, a user's law), or a block that is not isotropic.
-    """
-    if not isinstance(scene, Scene):
-        raise SceneError(f"parameters: scene must be a coopdyn.Scene, got {type(scene).__name__}")
-    if isinstance(names, str) or not isinstance(names, Sequence) or not names:
-        raise SceneError(f"parameters must be a non-empty list of names such as {_names_help(scene)}, got {names!r}")
-    out = []
-    links = {lk.name: i for i, lk in enumerate(scene.links)}
-    for name in names:
-        if not isinstance(name, str) or name.count(".") != 1:
-            raise SceneError(f"parameter {name!r}: a name is '<interconnection>.<kind>' or 'object.mass': {_names_help(scene)}")
-        owner, kind = name.split(".")
-        if name == "object.mass":
-            if scene.object.with_mass(1.0) is None:
-                raise SceneError(
-                    f"parameter 'object.mass': the object is a {type(scene.object).__name__}, not one body on one joint "
-                    "(a RigidObject): its mass is not one parameter"
-                )
-            out.append(Parameter(name, float(scene.object.mass_and_com()[0]), "kg", None, "mass"))
-            continue
-        if owner not in links or kind not in _KINDS:
-            raise SceneError(f"unknown parameter {name!r}; this scene has {_names_help(scene)}")
-        i = links[owner]
-        element = scene.links[i].element
-        if type(element) not in _LINEAR_IN_KD:  # (a subclass may change the law: not known to be linear)
-            raise SceneError(
-                f"parameter {name!r}: the {type(element).__name__} law is not known to be linear in its stiffness and damping; "
-                "parameters are offered for the se3, ball and hardening elements"
-            )
-        if isinstance(element, BallSpring) and max(_KINDS[kind][1]) > 2:
-            raise SceneError(f"parameter {name!r}: a ball spring has no rotational stiffness or damping")
-        B = _entries(element, kind)
-        k = float(B[0, 0])
-        if np.max(np.abs(B - k * np.eye(len(B)))) > 1e-12 * max(abs(k), 1e-300):
-            raise SceneError(
-                f"parameter {name!r}: the {_KINDS[kind][3]} block of {owner!r} is not isotropic (k·I₃): "
-                f"diagonal {np.diag(B).tolist()}; fit its entries one by one ({kind[0]}_x, {kind[0]}_y, …) instead"
-            )
-        out.append(Parameter(name, k, _KINDS[kind][2], i, kind))
-    if len({p.name for p in out}) != len(out):
-        raise SceneError(f"parameters: a name is repeated in {list(names)}")
-    entries: dict[tuple[int, str, int], str] = {}
-    for p in out:
-        if p.link is None:
-            continue
-        matrix, idx, _, _ = _KINDS[p.kind]
-        for i in idx:
-            other = entries.setdefault((p.link, matrix, i), p.name)
-            if other != p.name:
-                raise SceneError(f"parameters: {other!r} and {p.name!r} both set entry {_AXES[i]} of that {matrix}; keep one")
-    return tuple(out)
-
-
-_parameters = parameters
-
-
-def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
-    """A new scene, equal to ``scene`` but for the named parameters' values (see :func:`parameters`).
-
-    The grasps, the start state and everything else are kept; a grasp that was placed at an arm's
-    tool (``grasp=None``) is kept where it was.
-    """
-    names = list(values)
-    params = parameters(scene, names)
-    specs = list(scene.interconnection_specs)
-    obj = scene.object
-    matrices: dict[int, dict[str, np.ndarray]] = {}  # link → its new K and D
-    for p in params:
-        if p.kind == "mass":
-            changed = obj.with_mass(_validate.positive(values[p.name], "parameter 'object.mass'", "kg"))
-            assert changed is not None  # (parameters() checked it)
-            obj = changed
-            continue
-        assert p.link is not None
-        value = _validate.non_negative(values[p.name], f"parameter {p.name!r}", p.unit)
-        element: Any = scene.links[p.link].element
-        current = matrices.setdefault(p.link, {"stiffness": np.array(element.K, float), "damping": np.array(element.D, float)})
-        matrix, idx, _, _ = _KINDS[p.kind]
-        current[matrix][np.ix_(idx, idx)] = value * np.eye(len(idx))
-    for i, new in matrices.items():
-        spec = specs[i]
-        grasp = spec.grasp if spec.grasp is not None else _grasp_pose(scene, i)
-        specs[i] = dataclasses.replace(spec, grasp=grasp, stiffness=new["stiffness"], damping=new["damping"])
-    return Scene(list(scene.arm_specs), obj, specs, scene.gravity)
-
-
-def _grasp_pose(scene: Scene, link: int) -> pin.SE3:
-    """The pose of link's grasp frame in the object frame (as the scene placed it)."""
-    frames = scene.model.frames
-    g = frames[scene.links[link].grasp_frame]
-    o = frames[scene.object_frame]
-    if g.parentJoint != o.parentJoint:
-        raise SceneError("with_parameters: the grasp is not on the object's body (an elastic object)")
-    return o.placement.actInv(g.placement)
 
 
 @dataclass(frozen=True)
@@ -229,7 +71,7 @@ class StepSensitivity:
         dx_dx: ∂x⁺/∂x (2nv, 2nv): rows (δq⁺ about the new q, v⁺), columns (δq about the start, v).
         dx_du: ∂x⁺/∂u (2nv, n_actuated), per N·m or N of each actuated joint's torque.
         dx_dp: ∂x⁺/∂p (2nv, n_parameters), one column per entry of ``parameters``, per its unit.
-        parameters: the :class:`Parameter` of each column of dx_dp.
+        parameters: the :class:`~coopdyn.parameters.Parameter` of each column of dx_dp.
         exact: False when an element's tangent came from finite differences (a user's law).
     """
 
@@ -252,7 +94,7 @@ class TrajectorySensitivity:
         tau: (N, n_actuated) the torques applied over each period [N·m or N].
         dx_dp: (N + 1, 2nv, n_parameters) ∂x_k/∂p (δq about q_k); dwrench_dp (N + 1, L, 6, n_parameters).
         dx_dx0: (N + 1, 2nv, 2nv) ∂x_k/∂x₀ with ``initial_state=True``, else None.
-        parameters: the :class:`Parameter` of each column; exact: False when a controller's
+        parameters: the :class:`~coopdyn.parameters.Parameter` of each column; exact: False when a controller's
             derivative or an element's tangent came from finite differences.
     """
 
@@ -278,7 +120,7 @@ class Sensitivity:
         integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` (a step of its
             fifth-order solution at the h given — a fixed step: rollout and simulate adapt
             theirs) or an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`.
-        parameters: names as :func:`parameters` takes them (e.g. ``["left.k_linear"]``).
+        parameters: names as :func:`coopdyn.parameters.parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
             whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
             round-off.
@@ -306,7 +148,7 @@ class Sensitivity:
             raise SceneError(
                 f"sensitivities: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}"
             )
-        params = _parameters(scene, parameters) if len(parameters) else ()
+        params = scene_parameters(scene, parameters) if len(parameters) else ()
         if scene.constraints:
             raise SceneError(
                 "sensitivities: the scene has rigid grasps (constraints); differentiate the elastic scene they stand for"
@@ -448,7 +290,7 @@ class Sensitivity:
         if p.link is None:
             return None
         element = self.scene.links[p.link].element
-        matrix, idx, _, _ = _KINDS[p.kind]
+        matrix, idx, _, _ = KINDS[p.kind]
         size = 6 if isinstance(element, SE3Spring) else 3
         unit, zero = np.zeros((size, size)), np.zeros((size, size))
         unit[idx, idx] = 1.0
@@ -465,7 +307,7 @@ class Sensitivity:
             return np.asarray(law.evaluate(X, xi).G_f_G)
         e, theta = log6(X)
         J = jlog6(X, e, theta)
-        matrix, idx, _, _ = _KINDS[p.kind]
+        matrix, idx, _, _ = KINDS[p.kind]
         g = np.zeros(6)
         g[list(idx)] = (e if matrix == "stiffness" else J @ xi)[list(idx)]
         return -(J.T @ g)

@@ -87,7 +87,7 @@ def test_a_controller_built_for_a_twin_scene_runs_compiled_with_its_own_model(da
     heavier box (what identification does): compiled, equal to the Python loop, where the
     controller keeps its own model; a scene with other frames leaves it to Python."""
     from coopdyn.compiled import twin_scenes
-    from coopdyn.sensitivity import with_parameters
+    from coopdyn.parameters import with_parameters
 
     ctrl = ObjectImpedance(damped, GripLiftOscillate(start=object_start(damped), squeeze=20.0))
     twin = with_parameters(damped, {"left.k_linear": 1.3e4, "right.d_angular": 0.5, "object.mass": 2.6})

@@ -12,7 +12,7 @@ import coopdyn as cd
 from coopdyn.dynamics import Dynamics
 from coopdyn.errors import FitWarning, SceneError, SimulationError
 from coopdyn.identify import Measurements, identify
-from coopdyn.sensitivity import with_parameters
+from coopdyn.parameters import with_parameters
 
 TRUTH = {"left.k_linear": 1.3e4, "right.k_linear": 0.8e4, "left.d_linear": 150.0, "object.mass": 2.4}
 NOISE = (1e-4, 0.1, 0.01)  # joint angles [rad], forces [N], moments [N·m]

@@ -23,7 +23,8 @@ from coopdyn.dynamics import Dynamics
 from coopdyn.errors import SceneError, SimulationError
 from coopdyn.integrators import get_integrator
 from coopdyn.model.elements.lie import dexp_inv_rate, jlog6_of_log
-from coopdyn.sensitivity import parameters, step_sensitivity, trajectory_sensitivity, with_parameters
+from coopdyn.parameters import parameters, with_parameters
+from coopdyn.sensitivity import step_sensitivity, trajectory_sensitivity
 
 
 def _damped_pandas() -> cd.Scene:
