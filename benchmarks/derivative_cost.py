@@ -85,6 +85,7 @@ def step_table(rounds: int) -> None:
     work: dict[str, Callable[[], object]] = {
         "one rk4 step (a 0.1 s compiled run / 100)": lambda: sim.run(0.1, q, v),
         "exact ∂x⁺/∂(x, u): Sensitivity.step": lambda: sens.step(q, v, tau, H),
+        "the dynamics' exact derivatives, once: Dynamics.derivatives": lambda: sens.dynamics.derivatives(q, v, tau),
         f"central differences: {2 * (2 * nv + na)} one-step rollouts": lambda: differences(best),
     }
     per_call = {"one rk4 step (a 0.1 s compiled run / 100)": 100}
@@ -102,7 +103,7 @@ def step_table(rounds: int) -> None:
     step = statistics.median(times["one rk4 step (a 0.1 s compiled run / 100)"])
     print(f"1. One step, two Pandas (nv = {nv}, nu = {na}), rk4 at {H * 1e3:g} ms: median of {rounds} interleaved rounds")
     for name, t in times.items():
-        print(f"  {name:52s} {statistics.median(t) * 1e6:9.1f} µs   {statistics.median(t) / step:7.1f} steps")
+        print(f"  {name:60s} {statistics.median(t) * 1e6:9.1f} µs   {statistics.median(t) / step:7.1f} steps")
     print(f"  (central differences at one compiled step each, without the rollouts' overhead: {2 * (2 * nv + na)} steps)")
     print(
         f"  central differences' best error against the exact derivative: {errors[best]:.1e} of its largest entry (ε = {best:g})"
