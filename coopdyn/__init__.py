@@ -49,6 +49,7 @@ from .sensitivity import (
     Sensitivity,
     StepSensitivity,
     TrajectorySensitivity,
+    Transitions,
     step_sensitivity,
     trajectory_sensitivity,
 )
@@ -97,6 +98,7 @@ __all__ = [
     "SweepError",
     "SweepInterrupted",
     "TrajectorySensitivity",
+    "Transitions",
     "ViewerError",
     "__version__",
     "advise",

@@ -53,7 +53,7 @@ from .model.scene import Scene
 from .parameters import KINDS, Parameter
 from .parameters import parameters as scene_parameters
 
-__all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "step_sensitivity", "trajectory_sensitivity"]
+__all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "Transitions", "step_sensitivity", "trajectory_sensitivity"]
 
 LOCAL = pin.ReferenceFrame.LOCAL
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
@@ -106,6 +106,29 @@ class TrajectorySensitivity:
     dx_dp: np.ndarray  #: (N + 1, 2nv, n_parameters): ∂x_k/∂p, δq about q_k
     dwrench_dp: np.ndarray  #: (N + 1, L, 6, n_parameters)
     dx_dx0: np.ndarray | None  #: (N + 1, 2nv, 2nv): ∂x_k/∂x₀, when asked for
+    parameters: tuple[Parameter, ...]
+    exact: bool
+
+
+@dataclass(frozen=True)
+class Transitions:
+    """A trajectory and its linearisation period by period (:meth:`Sensitivity.transitions`).
+
+    Attributes:
+        t: (N + 1,) [s]; q (N + 1, nq), v (N + 1, nv): the states at every period's start and the end.
+        A: (N, 2nv, 2nv) ∂x_{k+1}/∂x_k (δq about q_k, then about q_{k+1}).
+        B: (N, 2nv, n_actuated) ∂x_{k+1}/∂u_k, per N·m or N of the torque held over period k.
+        P: (N, 2nv, n_parameters) ∂x_{k+1}/∂p at a fixed x_k.
+        parameters: the :class:`~coopdyn.parameters.Parameter` of P's columns; exact: as
+            :class:`StepSensitivity`.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    P: np.ndarray
     parameters: tuple[Parameter, ...]
     exact: bool
 
@@ -284,6 +307,39 @@ class Sensitivity:
         return TrajectorySensitivity(
             np.arange(N + 1) * period, Q, V, W, applied, dX[:, :, :n_p], dW[..., :n_p], dx0, self.params, self.exact
         )
+
+    def transitions(self, torques: Any, period: float, *, dt: float | None = None, q0: Any = None, v0: Any = None) -> Transitions:
+        """An open-loop trajectory (``torques[k]`` held over period k, as :meth:`trajectory`) and its
+        linearisation period by period: ``δx_{k+1} = A_k δx_k + B_k δu_k + P_k δp`` in the tangent
+        coordinates about the trajectory — what a model-predictive controller, iLQR or a
+        trajectory optimiser works with, and what a scalar loss's gradient is chained backwards
+        through (examples/gauss_newton_lift.py). Each period's matrices are one run of its steps
+        with the identity as seeds: exact, as :meth:`step`.
+
+        Raises:
+            SimulationError: a bad argument, a closed loop (its input is the controller's), or a
+                run that diverges.
+        """
+        if self.controller is not None:
+            raise SimulationError("Sensitivity.transitions linearises an open loop; a closed loop's: Sensitivity.trajectory")
+        scene = self.scene
+        q, v = _state(scene, q0, v0)
+        U = _torques(scene, torques)
+        h, per = step_of(period, dt)
+        nv, na, n_p, N = scene.nv, scene.n_actuated, len(self.params), len(U)
+        m = 2 * nv + na + n_p
+        eye = np.eye(m)
+        seeds = (eye[:nv], eye[nv : 2 * nv], eye[2 * nv : 2 * nv + na], eye[2 * nv + na :])
+        Q, V = np.empty((N + 1, scene.nq)), np.empty((N + 1, nv))
+        A, B, P = np.empty((N, 2 * nv, 2 * nv)), np.empty((N, 2 * nv, na)), np.empty((N, 2 * nv, n_p))
+        Q[0], V[0] = q, v
+        exact = True
+        for k in range(N):
+            out = self._run(Q[k], V[k], U[k : k + 1], per, h, seeds, end_wrench=False)
+            exact = exact and self.exact
+            Q[k + 1], V[k + 1], D = out[0][1], out[1][1], out[3][1]
+            A[k], B[k], P[k] = D[:, : 2 * nv], D[:, 2 * nv : 2 * nv + na], D[:, 2 * nv + na :]
+        return Transitions(np.arange(N + 1) * period, Q, V, A, B, P, self.params, exact)
 
     def _unit_law(self, p: Parameter) -> Any:
         """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass."""

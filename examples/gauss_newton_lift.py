@@ -5,7 +5,8 @@ each of 20 periods of 10 ms (zero-order hold), open loop, started at the gravity
 torques of the start. Goal: the box 3 cm higher at 0.2 s and still (its velocity zero), with
 torques that stay near gravity compensation (a small penalty on their change). A few
 Gauss–Newton iterations (single shooting, Levenberg–Marquardt damping) on the stacked residuals, with the
-Jacobian chained from ``cd.Sensitivity.step`` — ∂x⁺/∂(x, u) of every rk4 step of 1 ms — instead
+Jacobian chained from ``cd.Sensitivity.transitions`` — each period's exact ∂x_{k+1}/∂(x_k, u_k),
+itself chained from its rk4 steps of 1 ms — instead
 of the 280 extra rollouts per iteration that finite differences would need. Prints each
 iteration's box-height error and the CPU time of the Jacobians; writes gauss_newton_lift.png
 (the box's height over the iterations).  Run: python examples/gauss_newton_lift.py [OUT_FOLDER]
@@ -28,37 +29,21 @@ LIFT = 0.03  # [m]
 W_POS, W_VEL, W_TAU = 1.0 / 1e-4, 1.0 / 1e-3, 1.0 / 20.0  # weights: per 0.1 mm, per mm/s, per 20 N·m of change
 
 
-def rollout_with_jacobian(
-    sens: cd.Sensitivity, scene: cd.Scene, U: np.ndarray
-) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+def rollout_with_jacobian(sens: cd.Sensitivity, scene: cd.Scene, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The trajectory under U (N, nu) — its states at every period — and ∂x_N/∂U (2nv, N·nu),
-    chained from the exact step sensitivities (δq of x_N about q_N)."""
-    per = round(PERIOD / DT)
-    q, v = scene.q0, scene.v0
-    Q, V = [q], [v]
-    nv, nu = scene.nv, scene.n_actuated
-    Phi = np.eye(2 * nv)  # ∂x_N/∂x_k, built backwards below
-    A_periods, B_periods = [], []
-    for k in range(N):
-        A, B = np.eye(2 * nv), np.zeros((2 * nv, nu))
-        for _ in range(per):
-            s = sens.step(q, v, U[k], DT)
-            A, B = s.dx_dx @ A, s.dx_dx @ B + s.dx_du
-            q, v = s.q, s.v
-        A_periods.append(A)
-        B_periods.append(B)
-        Q.append(q)
-        V.append(v)
-    J = np.zeros((2 * nv, N * nu))
+    chained backwards from the periods' exact linearisation (``Sensitivity.transitions``:
+    δx_{k+1} = A_k δx_k + B_k δu_k; δq of x_N about q_N)."""
+    tr = sens.transitions(U, PERIOD, dt=DT)
+    nu = scene.n_actuated
+    J = np.zeros((2 * scene.nv, N * nu))
+    Phi = np.eye(2 * scene.nv)  # ∂x_N/∂x_{k+1}
     for k in reversed(range(N)):
-        J[:, k * nu : (k + 1) * nu] = Phi @ B_periods[k]
-        Phi = Phi @ A_periods[k]
-    return Q, V, J
+        J[:, k * nu : (k + 1) * nu] = Phi @ tr.B[k]
+        Phi = Phi @ tr.A[k]
+    return tr.q, tr.v, J
 
 
-def residuals(
-    scene: cd.Scene, Q: list[np.ndarray], V: list[np.ndarray], U: np.ndarray, U0: np.ndarray, target: np.ndarray
-) -> np.ndarray:
+def residuals(scene: cd.Scene, Q: np.ndarray, V: np.ndarray, U: np.ndarray, U0: np.ndarray, target: np.ndarray) -> np.ndarray:
     obj_q, obj_v = scene.object_q, scene.object_v
     return np.concatenate([W_POS * (Q[-1][obj_q[:3]] - target), W_VEL * V[-1][obj_v], W_TAU * (U - U0).ravel()])
 
@@ -76,7 +61,7 @@ def main(out: str = "out/gauss_newton_lift", iterations: int = 8, plot: bool = T
 
     def cost_of(U: np.ndarray) -> float:  # (a compiled rollout: the trial step's cost)
         run = cd.rollout(scene, U[None], period=PERIOD, dt=DT, integrator="rk4", threads=1)
-        r = residuals(scene, list(run.q[0]), list(run.v[0]), U, U0, target)
+        r = residuals(scene, run.q[0], run.v[0], U, U0, target)
         return float(0.5 * r @ r) if np.all(np.isfinite(r)) else np.inf
 
     for it in range(iterations + 1):

@@ -359,3 +359,34 @@ def test_parameters_refuse_laws_they_do_not_know_and_entries_set_twice(pandas: c
     with pytest.raises(SceneError, match=r"'left\.k_linear' and 'left\.k_x' both set entry x of that stiffness"):
         parameters(pandas, ["left.k_linear", "left.k_x"])
     assert len(parameters(pandas, ["left.k_linear", "left.d_x", "right.k_x"])) == 3
+
+
+def test_transitions_are_the_periods_linearisation(book: cd.Scene, pandas: cd.Scene) -> None:
+    """On the book system a period of k rk4 steps is R(hA)^k exactly; on two Pandas each period's
+    A_k, B_k chain into what the trajectory's forward sensitivities say about the start and what
+    one-step sensitivities give."""
+    lin = cd.linearize(book)
+    h, per = 1e-2, 3
+    tr = cd.Sensitivity(book).transitions(np.zeros((2, book.n_actuated)), per * h, dt=h)
+    hA = h * lin.A
+    R = np.eye(len(hA)) + hA + hA @ hA / 2 + hA @ hA @ hA / 6 + hA @ hA @ hA @ hA / 24
+    np.testing.assert_allclose(tr.A[1], np.linalg.matrix_power(R, per), rtol=0, atol=1e-13)
+    U = 2.0 * np.random.default_rng(3).normal(size=(4, pandas.n_actuated))
+    sens = cd.Sensitivity(pandas, parameters=["left.k_linear"])
+    tr = sens.transitions(U, 2e-3, dt=1e-3)
+    full = sens.trajectory(U, 2e-3, dt=1e-3, initial_state=True)
+    assert full.dx_dx0 is not None
+    np.testing.assert_allclose(tr.q, full.q, rtol=0, atol=0)
+    chain = np.eye(2 * pandas.nv)
+    for k in range(4):
+        chain = tr.A[k] @ chain
+        assert _rel(chain, full.dx_dx0[k + 1]) < 1e-12
+    dp = np.zeros((2 * pandas.nv, 1))  # ∂x_k/∂p by the periods: P_k + A_k ∂x_{k-1}/∂p
+    for k in range(4):
+        dp = tr.A[k] @ dp + tr.P[k]
+        assert _rel(dp, full.dx_dp[k + 1]) < 1e-12
+    one = sens.step(tr.q[0], tr.v[0], U[0], 1e-3)
+    two = sens.step(one.q, one.v, U[0], 1e-3)
+    np.testing.assert_allclose(tr.B[0], two.dx_dx @ one.dx_du + two.dx_du, rtol=0, atol=1e-12 * np.max(np.abs(tr.B[0])))
+    with pytest.raises(SimulationError, match="linearises an open loop"):
+        cd.Sensitivity(pandas, controller=_impedance(pandas)).transitions(U, 2e-3)
