@@ -163,8 +163,8 @@ def trajectory_table() -> None:
     error = np.max(np.abs(x.T / eps - J)) / np.max(np.abs(J))
     steps = N * round(ex.PERIOD / ex.DT)
     print(f"\n2. A trajectory's Jacobian ∂x_N/∂U ({N} periods × {nu} torques, {steps} rk4 steps; gauss_newton_lift.py)")
-    print(f"  exact, chained from Sensitivity.transitions         {exact_cpu:8.3f} s CPU")
-    print(f"  forward differences, {N * nu + 1} compiled rollouts  {fd_cpu:8.3f} s CPU")
+    print(f"  {'exact, chained from Sensitivity.transitions':48s} {exact_cpu:8.3f} s CPU")
+    print(f"  {f'forward differences, {N * nu + 1} compiled rollouts':48s} {fd_cpu:8.3f} s CPU")
     print(f"    (their error against the exact Jacobian: {error:.1e} of its largest entry)")
 
 
