@@ -165,10 +165,8 @@ def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
 
 
 def _grasp_pose(scene: Scene, link: int) -> pin.SE3:
-    """The pose of link's grasp frame in the object frame (as the scene placed it)."""
-    frames = scene.model.frames
-    g = frames[scene.links[link].grasp_frame]
-    o = frames[scene.object_frame]
-    if g.parentJoint != o.parentJoint:
-        raise SceneError("with_parameters: the grasp is not on the object's body (an elastic object)")
-    return o.placement.actInv(g.placement)
+    """The pose of link's grasp frame in the object frame, at the scene's start (as the scene
+    placed it; on an elastic object the grasp rides on a node, the pose is the same at rest)."""
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    return data.oMf[scene.object_frame].actInv(data.oMf[scene.links[link].grasp_frame])
