@@ -86,17 +86,38 @@ class Measurements:
         angles and each grasp's wrench in its grasp frame's axes (not the world axes of
         :meth:`Result.wrenches`), with the run's start; with ``open_loop`` the torques applied too,
         which are the held ones only when the controller was sampled at the save period
-        (``simulate(..., control_dt=dt·save_every)``). For a synthetic study: add your noise to
-        ``joints`` and ``wrench`` (``dataclasses.replace``)."""
+        (``simulate(..., control_dt=dt·save_every)``): they are replayed once, and refused when
+        the replay leaves the run. For a synthetic study: add your noise to ``joints`` and
+        ``wrench`` (``dataclasses.replace``).
+
+        Raises:
+            SimulationError: uneven samples, rigid grasps (their wrench is a constraint's, which
+                the elastic model's fit cannot read), or torques that are not the held ones."""
         t = np.asarray(result.t)
         if len(t) < 2 or not np.allclose(np.diff(t), t[1] - t[0], rtol=1e-9, atol=0.0):
             raise SimulationError("Measurements.from_result: the run's samples must be evenly spaced, two at least")
         scene = result.scene
+        if scene.constraints:
+            raise SimulationError(
+                "Measurements.from_result: the run has rigid grasps, whose wrenches are constraint forces; "
+                "simulate the elastic scene to make measurements of it"
+            )
         q_idx = _joint_coordinates(scene)
         dynamics = Dynamics(scene, result.backend)
         L = len(scene.links)
         wrench = np.array([[e.G_f_G for e in dynamics.element_states(q, v)[:L]] for q, v in zip(result.q, result.v, strict=True)])
         torques = np.array(result.tau[:-1], dtype=float) if open_loop else None
+        if torques is not None:
+            period = float(t[1] - t[0])
+            replay = rollout(scene, torques[None], period=period, dt=min(result.dt, period), q0=result.q[0], v0=result.v[0],
+                             integrator=result.integrator, threads=1)  # fmt: skip
+            gap = float(np.max(np.abs(replay.q[0] - result.q)))
+            if not gap < 1e-8:
+                raise SimulationError(
+                    f"Measurements.from_result: the run's saved torques, each held for a period, do not replay it "
+                    f"({gap:.3g} apart): its controller was not sampled at the save period; simulate with "
+                    f"control_dt = {period:g} s (dt·save_every) for open-loop measurements, or fit the closed loop"
+                )
         noise = (joint_noise, force_noise, torque_noise)
         return cls(float(t[1] - t[0]), result.q[:, q_idx].copy(), wrench, torques, *noise, result.q[0].copy(), result.v[0].copy())
 
@@ -217,8 +238,9 @@ def identify(
 
     Args:
         initial: start values by name (default: the scene's values).
-        integrator: the method the model runs with (an explicit one: ``"rk4"``, ``"dopri5"``,
-            ``"symplectic_euler"``); ``dt`` [s] its step, a divisor of the period (default the period).
+        integrator: the method the model runs with, an explicit fixed-step one (``"rk4"``,
+            ``"symplectic_euler"``, an explicit tableau) for either Jacobian, so that both fit the
+            same model; ``dt`` [s] its step, a divisor of the period (default the period).
         jacobian: ``"exact"`` (default) or ``"finite-differences"`` (forward differences of
             compiled rollouts, for comparison).
         max_iterations: the optimiser's budget of runs (residual evaluations).

@@ -335,7 +335,7 @@ class Sensitivity:
         Q[0], V[0] = q, v
         exact = True
         for k in range(N):
-            out = self._run(Q[k], V[k], U[k : k + 1], per, h, seeds, end_wrench=False)
+            out = self._run(Q[k], V[k], U[k : k + 1], per, h, seeds, end_wrench=False, t0=k * period)
             exact = exact and self.exact
             Q[k + 1], V[k + 1], D = out[0][1], out[1][1], out[3][1]
             A[k], B[k], P[k] = D[:, : 2 * nv], D[:, 2 * nv : 2 * nv + na], D[:, 2 * nv + na :]
@@ -539,15 +539,17 @@ class Sensitivity:
         h: float,
         seeds: tuple[np.ndarray, ...],
         end_wrench: bool = True,
+        t0: float = 0.0,
     ) -> tuple[np.ndarray, ...]:
-        """:meth:`_run_raw`, refused as diverged when a sample's speed passes :data:`MAX_SPEED`."""
+        """:meth:`_run_raw`, refused as diverged when a sample's speed passes :data:`MAX_SPEED`
+        (``t0`` [s]: the run's start, for the message)."""
         self.exact = True  # (this run's: _run_raw clears it for a tangent or a controller by differences)
         out = self._run_raw(q, v, U, per, h, seeds, end_wrench)
         speeds = np.max(np.abs(out[1]), axis=1)
         if np.any(speeds > MAX_SPEED):
             k = int(np.argmax(speeds > MAX_SPEED))
             raise SimulationError(
-                f"sensitivities: diverged: a speed of {speeds[k]:.3g} rad/s or m/s at t = {k * per * h:.6g} s "
+                f"sensitivities: diverged: a speed of {speeds[k]:.3g} rad/s or m/s at t = {t0 + k * per * h:.6g} s "
                 f"(above {MAX_SPEED:g}); a smaller step, or a method that resolves the scene's modes"
             )
         return out

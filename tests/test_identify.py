@@ -125,6 +125,13 @@ def test_measurements_from_a_run_read_the_wrench_in_the_grasp_frames_axes(damped
     np.testing.assert_allclose(m.wrench[k], local, rtol=0, atol=1e-12)
     assert np.max(np.abs(m.wrench[k] - run.wrenches()[k])) > 1e-3  # (world axes differ)
     assert m.period == pytest.approx(1e-3) and m.torques is not None and m.torques.shape == (50, 14)
+    continuous = cd.simulate(damped, 0.02, GravityCompensationPD(damped), "rk4", dt=1e-3, accuracy_check="off")
+    with pytest.raises(SimulationError, match=r"do not replay it .* control_dt = 0\.001 s"):
+        Measurements.from_result(continuous, open_loop=True)  # (τ sampled at every stage, not held)
+    assert Measurements.from_result(continuous).torques is None  # (a closed-loop fit needs none)
+    rigid = cd.rigid_limit(damped)
+    with pytest.raises(SimulationError, match="rigid grasps, whose wrenches are constraint forces"):
+        Measurements.from_result(cd.simulate(rigid, 0.01, None, "rk4", dt=1e-3, accuracy_check="off"))
     # perfect data, replayed open loop from 10 % off: the fit returns to the scene's value
     fit = identify(damped, m, ["left.k_linear"], initial={"left.k_linear": 1.1e4})
     assert fit.estimate["left.k_linear"] == pytest.approx(1e4, rel=1e-6) and fit.residual_rms < 1e-3
