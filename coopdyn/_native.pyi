@@ -77,6 +77,8 @@ class Sensitivity:
         dU: np.ndarray,
         dP: np.ndarray,
         end_wrench: bool,
+        max_speed: float,
+        t0: float,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool, np.ndarray]: ...
     def set_controller(self, kernel: Kernel, controller: dict[str, Any]) -> None: ...
 

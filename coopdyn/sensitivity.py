@@ -454,7 +454,7 @@ class Sensitivity:
         assert start is not None
         return q1, v1, dq1, dv1, start[0], start[1]
 
-    def _run_raw(
+    def _run(
         self,
         q: np.ndarray,
         v: np.ndarray,
@@ -463,22 +463,27 @@ class Sensitivity:
         h: float,
         seeds: tuple[np.ndarray, ...],
         end_wrench: bool = True,
+        t0: float = 0.0,
     ) -> tuple[np.ndarray, ...]:
         """N = len(U) periods of ``per`` steps of h from (q, v), U[k] held over period k, the
         derivatives carried along the seed columns ``(dq, dv, du, dp)`` (du, dp the same at every
-        step). Returns Q (N+1, nq), V (N+1, nv), W (N+1, L, 6), dX (N+1, 2nv, m), dW (N+1, L, 6, m):
-        every period's start and the end."""
+        step). Returns Q (N+1, nq), V (N+1, nv), W (N+1, L, 6), dX (N+1, 2nv, m), dW (N+1, L, 6, m)
+        and the torques applied: every period's start and the end. A step whose speed passes
+        :data:`MAX_SPEED` stops it as diverged (``t0`` [s]: the run's start, for the message)."""
+        self.exact = True  # (this run's: a tangent or a controller by differences clears it)
         if self.native is not None:
             try:
-                raw = self.native.run(q, v, U, per, h, *seeds, end_wrench)
+                raw = self.native.run(q, v, U, per, h, *seeds, end_wrench, MAX_SPEED, t0)
             except RuntimeError as exc:
                 error = getattr(self._callback, "error", None)
                 if error is not None:  # a Python controller's own failure
                     self._callback.error = None
                     raise error from None
                 self.dynamics.reraise_python_error()  # a Python element's own failure (or Ctrl-C in it)
-                what = "diverged" if "not finite" in str(exc) else "the kernel stopped the run"
-                raise SimulationError(f"sensitivities: {what}: {exc}") from exc
+                diverged = "not finite" in str(exc) or "a speed of" in str(exc)
+                what = "diverged" if diverged else "the kernel stopped the run"
+                hint = "; a smaller step, or a method that resolves the scene's modes" if diverged else ""
+                raise SimulationError(f"sensitivities: {what}: {exc}{hint}") from exc
             Q, V, W, dX, dW, exact, applied = raw
             N, L, m = len(U), len(self.scene.elements), seeds[0].shape[1]
             self.exact = self.exact and bool(exact)
@@ -514,13 +519,19 @@ class Sensitivity:
                     q1, v1, dq1, dv1, d, dW_dp = self._step(q, v, applied[k], h, (dq, dv, du_k, dp))
                 except KernelError as exc:  # (a stage's state is no longer finite)
                     raise SimulationError(
-                        f"sensitivities: diverged in the step from t = {(k * per + s) * h:.6g} s ({exc})"
+                        f"sensitivities: diverged in the step from t = {t0 + (k * per + s) * h:.6g} s ({exc})"
                     ) from exc
                 if s == 0:
                     sample(k, d, dW_dp)
                 if not all(np.all(np.isfinite(x)) for x in (q1, v1, dq1, dv1)):
                     raise SimulationError(
-                        f"sensitivities: diverged: the state is not finite at t = {(k * per + s + 1) * h:.6g} s"
+                        f"sensitivities: diverged: the state is not finite at t = {t0 + (k * per + s + 1) * h:.6g} s"
+                    )
+                if np.max(np.abs(v1)) > MAX_SPEED:
+                    raise SimulationError(
+                        f"sensitivities: diverged: a speed of {np.max(np.abs(v1)):.3g} rad/s or m/s (above {MAX_SPEED:.6g}) "
+                        f"after the step from t = {t0 + (k * per + s) * h:.6g} s; a smaller step, or a method that resolves "
+                        "the scene's modes"
                     )
                 q, v, dq, dv = q1, v1, dq1, dv1
         if end_wrench:
@@ -529,30 +540,6 @@ class Sensitivity:
         else:  # (the end's wrench would cost one more evaluation of the derivatives)
             Q[N], V[N], dX[N, :nv], dX[N, nv:], W[N], dW[N] = q, v, dq, dv, np.nan, np.nan
         return Q, V, W, dX, dW, applied
-
-    def _run(
-        self,
-        q: np.ndarray,
-        v: np.ndarray,
-        U: np.ndarray,
-        per: int,
-        h: float,
-        seeds: tuple[np.ndarray, ...],
-        end_wrench: bool = True,
-        t0: float = 0.0,
-    ) -> tuple[np.ndarray, ...]:
-        """:meth:`_run_raw`, refused as diverged when a sample's speed passes :data:`MAX_SPEED`
-        (``t0`` [s]: the run's start, for the message)."""
-        self.exact = True  # (this run's: _run_raw clears it for a tangent or a controller by differences)
-        out = self._run_raw(q, v, U, per, h, seeds, end_wrench)
-        speeds = np.max(np.abs(out[1]), axis=1)
-        if np.any(speeds > MAX_SPEED):
-            k = int(np.argmax(speeds > MAX_SPEED))
-            raise SimulationError(
-                f"sensitivities: diverged: a speed of {speeds[k]:.3g} rad/s or m/s at t = {t0 + k * per * h:.6g} s "
-                f"(above {MAX_SPEED:g}); a smaller step, or a method that resolves the scene's modes"
-            )
-        return out
 
     def _integrate(self, q: np.ndarray, delta: np.ndarray, dq: np.ndarray, ddelta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q ⊕ δ and its tangent derivative, from q's (dq) and δ's (ddelta)."""

@@ -413,3 +413,25 @@ def test_transitions_are_the_periods_linearisation(book: cd.Scene, pandas: cd.Sc
     np.testing.assert_allclose(tr.B[0], two.dx_dx @ one.dx_du + two.dx_du, rtol=0, atol=1e-12 * np.max(np.abs(tr.B[0])))
     with pytest.raises(SimulationError, match="linearises an open loop"):
         cd.Sensitivity(pandas, controller=_impedance(pandas)).transitions(U, 2e-3)
+
+
+def test_a_diverging_run_is_stopped_at_its_first_fast_step_with_its_time() -> None:
+    """rk4 at 20 ms on a 28 Hz box (|R| ≈ 3.8 a step): the speed passes 1e4 at a step of a later
+    period; trajectory and transitions (which runs period by period) both stop there and name the
+    same instant, on both backends."""
+    box = cd.RigidObject.box(1.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0])
+    spring = cd.Interconnection(None, stiffness=cd.diagonal(3e4, 1.0), grasp=[0.0, 0.0, 0.05])
+    scene = cd.Scene([], box, [spring])
+    v0 = np.zeros(6)
+    v0[0] = 0.1
+    messages = []
+    for backend in ("native", "python"):
+        sens = cd.Sensitivity(scene, backend=backend)
+        for run in (
+            lambda: sens.trajectory(np.zeros((20, 0)), 0.04, dt=0.02, v0=v0),
+            lambda: sens.transitions(np.zeros((20, 0)), 0.04, dt=0.02, v0=v0),
+        ):
+            with pytest.raises(SimulationError, match=r"diverged.*above 10000.*after the step from t = ") as caught:
+                run()
+            messages.append(str(caught.value).split("after the step from t = ")[1].split(" s")[0])
+    assert len(set(messages)) == 1 and float(messages[0]) >= 0.04, messages  # (a later period: transitions counts from the start)

@@ -12,6 +12,8 @@
 #include "kernel.hpp"
 
 #include <complex>
+#include <iomanip>
+#include <sstream>
 #include <limits>
 
 namespace coopdyn_native {
@@ -66,8 +68,11 @@ public:
   // end only with `end_wrench`: one more evaluation of the derivatives).
   // (The matrices are taken as copies, not Eigen::Ref: eigenpy maps a (1, n) array through a Ref
   // with its row stride as the column stride — one period, one parameter — and reads past its end.)
+  // A step whose speed passes max_speed [rad/s or m/s] stops the run as diverged (t0 [s]: the
+  // run's start, for the message).
   bp::tuple run(const RefVec & q0, const RefVec & v0, const MatrixXd & U, long per, double h, const MatrixXd & dq0,
-                const MatrixXd & dv0, const MatrixXd & dU, const MatrixXd & dP, bool end_wrench) {
+                const MatrixXd & dv0, const MatrixXd & dU, const MatrixXd & dP, bool end_wrench, double max_speed,
+                double t0) {
     const Eigen::Index nq = model_.nq, nv = model_.nv, na = kernel_.actuated().size();
     const Eigen::Index L = static_cast<Eigen::Index>(kernel_.links().size()), np = static_cast<Eigen::Index>(params_.size());
     const Eigen::Index m = dq0.cols(), N = U.rows();
@@ -94,8 +99,12 @@ public:
       for (long s = 0; s < per; ++s) {
         step(q, v, u, h, dq, dv, dUk, dP, q1, v1, dq1, dv1);
         if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
+        const double t_step = t0 + double(k * per + s) * h;
         if (!q1.allFinite() || !v1.allFinite() || !dq1.allFinite() || !dv1.allFinite())
-          throw std::runtime_error("the state is not finite after the step from t = " + std::to_string(double(k * per + s) * h) + " s");
+          throw std::runtime_error("the state is not finite after the step from t = " + number(t_step, 6) + " s");
+        if (v1.cwiseAbs().maxCoeff() > max_speed)
+          throw std::runtime_error("a speed of " + number(v1.cwiseAbs().maxCoeff(), 3) + " rad/s or m/s (above " +
+                                   number(max_speed, 6) + ") after the step from t = " + number(t_step, 6) + " s");
         q.swap(q1);
         v.swap(v1);
         dq.swap(dq1);
@@ -108,6 +117,13 @@ public:
   }
 
 private:
+  // x with `digits` significant digits, as Python's format "{:.<digits>g}".
+  static std::string number(double x, int digits) {
+    std::ostringstream out;
+    out << std::setprecision(digits) << x;
+    return out.str();
+  }
+
   struct Param {
     std::size_t link = 0;
     std::unique_ptr<coopdyn::Element> law;  // null for the mass
