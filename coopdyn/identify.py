@@ -40,7 +40,7 @@ from .parameters import Parameter, with_parameters
 from .parameters import parameters as scene_parameters
 from .result import Result
 from .rollout import rollout
-from .sensitivity import Sensitivity, step_of, trajectory_sensitivity
+from .sensitivity import explicit_tableau, step_of, trajectory_sensitivity
 from .simulate import simulate
 
 __all__ = ["Identification", "Measurements", "identify"]
@@ -279,13 +279,12 @@ def identify(
     )
     U, joints, wrench, q0, v0 = _checked(scene, measurements, controller is not None)
     period = _validate.positive(measurements.period, "measurements.period", "s", SimulationError)
-    model = Sensitivity(scene, integrator, names, backend, controller)  # (refuses a method without sensitivities, up front)
+    explicit_tableau(integrator)  # (refuses a method without sensitivities, up front)
     if get_integrator(integrator).adaptive:
         raise SimulationError(
             f"identify: {integrator!r} adapts its step in a run, so its sensitivities (of fixed steps) and finite differences "
             "would fit two different models; use a fixed-step method ('rk4', 'symplectic_euler') at a dt that resolves the scene"
         )
-    del model
     step_of(period, dt)  # (refuses a dt that does not divide the period)
     q_idx = _joint_coordinates(scene)
     L = len(scene.links)

@@ -44,10 +44,11 @@ from .dynamics import Dynamics
 from .dynamics.backend import kernel_module
 from .errors import KernelError, SceneError, SimulationError
 from .integrators import DormandPrince, ExplicitRungeKutta, Integrator, SymplecticEuler, get_integrator
+from .integrators.explicit import combine
 from .linearize import controller_gain
 from .model.elements import lookup
 from .model.elements.ball_spring import BallSpring
-from .model.elements.lie import dexp_inv_rate, jlog6, log6
+from .model.elements.lie import dexp_inv_rate
 from .model.elements.se3_spring import SE3Spring
 from .model.scene import Scene
 from .parameters import KINDS, Parameter
@@ -176,23 +177,7 @@ class Sensitivity:
             raise SceneError(
                 "sensitivities: the scene has rigid grasps (constraints); differentiate the elastic scene they stand for"
             )
-        method = get_integrator(integrator)
-        if isinstance(method, ExplicitRungeKutta | DormandPrince):
-            tab = method.tableau
-            self.tableau: tuple[Any, ...] | None = (tab.A, tab.b)
-        elif type(method) is SymplecticEuler:
-            self.tableau = None
-        else:
-            why = (
-                "its step is built on the Gauss–Newton Jacobian (an implicit method solves with it, the exponential one "
-                "exponentiates it), whose own derivative coopdyn does not have"
-                if method.a_stable
-                else "only the explicit Runge–Kutta methods and symplectic Euler are"
-            )
-            raise SimulationError(
-                f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', "
-                "'symplectic_euler' or an explicit tableau (ExplicitRungeKutta)"
-            )
+        self.tableau = explicit_tableau(integrator)
         self.scene, self.params = scene, params
         self.dynamics = Dynamics(scene, backend)
         self.model = scene.model
@@ -212,7 +197,6 @@ class Sensitivity:
                         "free-flyer, spherical, continuous and every joint whose configuration is its coordinates"
                     )
         self.nv = nv
-        self.n_act = scene.n_actuated
         self.units = [self._unit_law(p) for p in params]
         self.exact = True
         if any(p.kind == "mass" for p in params):
@@ -251,16 +235,14 @@ class Sensitivity:
             SimulationError: a bad argument, a closed loop (its steps are :meth:`trajectory`'s), or a
                 step that diverges (a speed above 1e4 rad/s or m/s, as a rollout's default).
         """
+        if self.controller is not None:
+            raise SimulationError("Sensitivity.step differentiates an open-loop step; a closed loop's: Sensitivity.trajectory")
         scene = self.scene
         q, v = _state(scene, q, v)
         u = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
         h = _validate.positive(dt, "dt", "s", SimulationError)
         nv, na, n_p = scene.nv, scene.n_actuated, len(self.params)
-        m = 2 * nv + na + n_p
-        eye = np.eye(m)
-        seeds = (eye[:nv], eye[nv : 2 * nv], eye[2 * nv : 2 * nv + na], eye[2 * nv + na :])
-        if self.controller is not None:
-            raise SimulationError("Sensitivity.step differentiates an open-loop step; a closed loop's: Sensitivity.trajectory")
+        seeds = _identity_seeds(nv, na, n_p)
         Q, V, _, dX, _, _ = self._run(q, v, u[None], 1, h, seeds, end_wrench=False)
         D = dX[1]
         return StepSensitivity(
@@ -327,9 +309,7 @@ class Sensitivity:
         U = _torques(scene, torques)
         h, per = step_of(period, dt)
         nv, na, n_p, N = scene.nv, scene.n_actuated, len(self.params), len(U)
-        m = 2 * nv + na + n_p
-        eye = np.eye(m)
-        seeds = (eye[:nv], eye[nv : 2 * nv], eye[2 * nv : 2 * nv + na], eye[2 * nv + na :])
+        seeds = _identity_seeds(nv, na, n_p)
         Q, V = np.empty((N + 1, scene.nq)), np.empty((N + 1, nv))
         A, B, P = np.empty((N, 2 * nv, 2 * nv)), np.empty((N, 2 * nv, na)), np.empty((N, 2 * nv, n_p))
         Q[0], V[0] = q, v
@@ -354,20 +334,6 @@ class Sensitivity:
         cls = SE3Spring if size == 6 else BallSpring
         return cls(K, D, p.name)
 
-    @staticmethod
-    def _unit_wrench(p: Parameter, law: Any, X: pin.SE3, xi: np.ndarray) -> np.ndarray:
-        """∂G_f_G/∂p at the relative pose X and twist ξ: the wrench of the law with p's entries
-        alone at 1 — for an SE(3) spring (and the hardening one: its κ term has no K) ``−Jlog6ᵀ P e``
-        or ``−Jlog6ᵀ P Jlog6 ξ``, P the projector on p's entries."""
-        if not isinstance(law, SE3Spring):
-            return np.asarray(law.evaluate(X, xi).G_f_G)
-        e, theta = log6(X)
-        J = jlog6(X, e, theta)
-        matrix, idx, _, _ = KINDS[p.kind]
-        g = np.zeros(6)
-        g[list(idx)] = (e if matrix == "stiffness" else J @ xi)[list(idx)]
-        return -(J.T @ g)
-
     # -- one stage ----------------------------------------------------------------------------
     def _stage(self, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
         """The derivatives at (q, v, u), ∂q̈/∂p (nv, n_p) and ∂W/∂p (L, 6, n_p)."""
@@ -391,7 +357,7 @@ class Sensitivity:
                 J_G = pin.getFrameJacobian(model, data, link.grasp_frame, LOCAL).reshape(6, self.nv)
                 J_T = pin.getFrameJacobian(model, data, link.tip_frame, LOCAL).reshape(6, self.nv)
                 Jr = J_G - X.toActionMatrixInverse() @ J_T
-                f = self._unit_wrench(p, law, X, Jr @ v)
+                f = law.evaluate(X, Jr @ v).G_f_G  # (the law with p's entries alone at 1: ∂G_f_G/∂p)
                 dQ[:, k] = Jr.T @ f
                 dW_dp[p.link, :, k] = f
             if any(law is None for law in self.units):  # the object's mass: −∂(M q̈ + h)/∂m at q̈
@@ -418,7 +384,7 @@ class Sensitivity:
         if self.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
             d, da_dp, dW_dp = self._stage(q, v, u)
             v1 = v + h * d.acceleration
-            dv1 = dv0 + h * (d.da_dq @ dq0 + d.da_dv @ dv0 + d.da_dtau @ du + da_dp @ dp)
+            dv1 = dv0 + h * _acceleration_derivative(d, da_dp, dq0, dv0, du, dp)
             q1, dq1 = self._integrate(q, h * v1, dq0, h * dv1)
             return q1, v1, dq1, dv1, d, dW_dp
         A, b = self.tableau
@@ -433,10 +399,10 @@ class Sensitivity:
                 kd.append(v)
                 dkd.append(dv0)
             else:
-                delta = h * sum((c * k for c, k in zip(row, kd, strict=False) if c), np.zeros(self.nv))
-                ddelta = h * sum((c * k for c, k in zip(row, dkd, strict=False) if c), np.zeros_like(dq0))
-                v_i = v + h * sum((c * k for c, k in zip(row, ka, strict=False) if c), np.zeros(self.nv))
-                dv_i = dv0 + h * sum((c * k for c, k in zip(row, dka, strict=False) if c), np.zeros_like(dv0))
+                delta = h * combine(row, kd)
+                ddelta = h * combine(row, dkd)
+                v_i = v + h * combine(row, ka)
+                dv_i = dv0 + h * combine(row, dka)
                 q_i, dq_i = self._integrate(q, delta, dq0, ddelta)
                 rate, C, N = self._chart(delta, v_i)
                 kd.append(rate)
@@ -445,11 +411,11 @@ class Sensitivity:
             if i == 0:
                 start = (d, dW_dp)
             ka.append(d.acceleration)
-            dka.append(d.da_dq @ dq_i + d.da_dv @ dv_i + d.da_dtau @ du + da_dp @ dp)
-        Delta = h * sum((c * k for c, k in zip(b, kd, strict=True) if c), np.zeros(self.nv))
-        dDelta = h * sum((c * k for c, k in zip(b, dkd, strict=True) if c), np.zeros_like(dq0))
-        v1 = v + h * sum((c * k for c, k in zip(b, ka, strict=True) if c), np.zeros(self.nv))
-        dv1 = dv0 + h * sum((c * k for c, k in zip(b, dka, strict=True) if c), np.zeros_like(dv0))
+            dka.append(_acceleration_derivative(d, da_dp, dq_i, dv_i, du, dp))
+        Delta = h * combine(b, kd)
+        dDelta = h * combine(b, dkd)
+        v1 = v + h * combine(b, ka)
+        dv1 = dv0 + h * combine(b, dka)
         q1, dq1 = self._integrate(q, Delta, dq0, dDelta)
         assert start is not None
         return q1, v1, dq1, dv1, start[0], start[1]
@@ -551,6 +517,44 @@ class Sensitivity:
 
 def _method_name(method: Integrator) -> str:
     return f"{method.name!r}" if isinstance(getattr(method, "name", None), str) else type(method).__name__
+
+
+def explicit_tableau(integrator: Any) -> tuple[Any, ...] | None:
+    """``(A, b)`` of an explicit Runge–Kutta method (rk4, dopri5's step, a user's tableau), None
+    for symplectic Euler: the methods :class:`Sensitivity` differentiates.
+
+    Raises:
+        SimulationError: any other method, with the reason.
+    """
+    method = get_integrator(integrator)
+    if isinstance(method, ExplicitRungeKutta | DormandPrince):
+        return (method.tableau.A, method.tableau.b)
+    if type(method) is SymplecticEuler:
+        return None
+    why = (
+        "its step is built on the Gauss–Newton Jacobian (an implicit method solves with it, the exponential one "
+        "exponentiates it), whose own derivative coopdyn does not have"
+        if method.a_stable
+        else "only the explicit Runge–Kutta methods and symplectic Euler are"
+    )
+    raise SimulationError(
+        f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', "
+        "'symplectic_euler' or an explicit tableau (ExplicitRungeKutta)"
+    )
+
+
+def _acceleration_derivative(
+    d: Any, da_dp: np.ndarray, dq: np.ndarray, dv: np.ndarray, du: np.ndarray, dp: np.ndarray
+) -> np.ndarray:
+    """dq̈ along the seed columns: ∂q̈/∂q dq + ∂q̈/∂v dv + ∂q̈/∂τ du + ∂q̈/∂p dp (the kernel's twin:
+    Sensitivity::acceleration_derivative)."""
+    return np.asarray(d.da_dq @ dq + d.da_dv @ dv + d.da_dtau @ du + da_dp @ dp)
+
+
+def _identity_seeds(nv: int, na: int, n_p: int) -> tuple[np.ndarray, ...]:
+    """The seed columns (dq, dv, du, dp) of a derivative with respect to all of (x, u, p)."""
+    eye = np.eye(2 * nv + na + n_p)
+    return eye[:nv], eye[nv : 2 * nv], eye[2 * nv : 2 * nv + na], eye[2 * nv + na :]
 
 
 def _controller_derivative(system: System, t: float, q: np.ndarray, v: np.ndarray, dq: np.ndarray, dv: np.ndarray) -> np.ndarray:

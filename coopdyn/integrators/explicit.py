@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -67,8 +68,8 @@ class ButcherTableau:
                 raise SimulationError(f"inconsistent tableau: {name} sums to {math.fsum(w)!r}, not 1")
 
 
-def _combine(coefficients: tuple[float, ...], ks: list[np.ndarray]) -> np.ndarray:
-    """Σ cᵢ kᵢ over the non-zero coefficients."""
+def combine(coefficients: Sequence[float], ks: list[np.ndarray]) -> np.ndarray:
+    """Σ cᵢ kᵢ over the non-zero coefficients (vectors, or matrices of derivatives: coopdyn.sensitivity)."""
     out = np.zeros_like(ks[0])
     for c, k in zip(coefficients, ks, strict=False):
         if c:
@@ -85,8 +86,8 @@ def _stages(
     last = (np.zeros_like(v), q, v)
     for row, c in zip(tab.A, tab.c, strict=True):
         if kd:
-            delta = h * _combine(row, kd)
-            v_s = v + h * _combine(row, ka)
+            delta = h * combine(row, kd)
+            v_s = v + h * combine(row, ka)
             q_s = system.integrate(q, delta)
             kd.append(system.chart_velocity(q, delta, v_s))
             ka.append(system.acceleration(t + c * h, q_s, v_s))
@@ -127,8 +128,8 @@ class ExplicitRungeKutta(Integrator):
     ) -> tuple[np.ndarray, np.ndarray]:
         tab = self.tableau
         kd, ka, _ = _stages(tab, system, t, q, v, h)
-        delta = h * _combine(tab.b, kd)
-        return system.integrate(q, delta), v + h * _combine(tab.b, ka)
+        delta = h * combine(tab.b, kd)
+        return system.integrate(q, delta), v + h * combine(tab.b, ka)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         return _rk_stability(self.tableau, z, self.tableau.b)
@@ -198,7 +199,7 @@ class DormandPrince(AdaptiveIntegrator):
         a0 = ws.a if ws is not None and ws.q is q and not system.new_sample else None  # a new held torque: afresh
         kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the 5th-order solution
         diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
-        err = self.error_norm(system, h * _combine(diff, kd), h * _combine(diff, ka), q, v, v_new)
+        err = self.error_norm(system, h * combine(diff, kd), h * combine(diff, ka), q, v, v_new)
         if ws is not None:
             ws.q, ws.a = q_new, ka[-1]
         return Attempt(q_new, v_new, err)

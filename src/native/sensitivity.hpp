@@ -97,7 +97,7 @@ public:
         dUk += dU;
       }
       for (long s = 0; s < per; ++s) {
-        step(q, v, u, h, dq, dv, dUk, dP, q1, v1, dq1, dv1);
+        step(q, v, u, h, dq, dv, dUk, dP, s == 0, q1, v1, dq1, dv1);
         if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
         const double t_step = t0 + double(k * per + s) * h;
         if (!q1.allFinite() || !v1.allFinite() || !dq1.allFinite() || !dv1.allFinite())
@@ -226,15 +226,15 @@ private:
     da_dp_.noalias() = d_.Minv * dQ;
   }
 
-  // One step with the derivatives of its end along the seed columns; the start's stage stays in
-  // d_, da_dp_, dW_dp_ when the method has one stage, else in start_ (sample() reads it).
+  // One step with the derivatives of its end along the seed columns; with `sampled`, the start's
+  // wrenches and their derivatives are kept for sample() (keep_start).
   void step(const VectorXd & q, const VectorXd & v, const VectorXd & u, double h, const MatrixXd & dq0,
-            const MatrixXd & dv0, const RefMat & dU, const RefMat & dP, VectorXd & q1, VectorXd & v1, MatrixXd & dq1,
-            MatrixXd & dv1) {
+            const MatrixXd & dv0, const RefMat & dU, const RefMat & dP, bool sampled, VectorXd & q1, VectorXd & v1,
+            MatrixXd & dq1, MatrixXd & dv1) {
     const Eigen::Index nv = model_.nv;
     if (symplectic_) {  // v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
       stage(q, v, u);
-      keep_start();
+      if (sampled) keep_start();
       v1 = v + h * d_.a;
       acceleration_derivative(dq0, dv0, dU, dP, dka0_);
       dv1 = dv0 + h * dka0_;
@@ -251,7 +251,7 @@ private:
     for (std::size_t i = 0; i < s; ++i) {
       if (i == 0) {
         stage(q, v, u);
-        keep_start();
+        if (sampled) keep_start();
         kd_[0] = v;
         dkd_[0] = dv0;
         dqs = dq0;
