@@ -172,7 +172,8 @@ class Sensitivity:
             raise SceneError(
                 f"sensitivities: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}"
             )
-        params = scene_parameters(scene, parameters) if len(parameters) else ()
+        none = isinstance(parameters, list | tuple) and len(parameters) == 0
+        params = () if none else scene_parameters(scene, parameters)  # (which refuses a bad one)
         if scene.constraints:
             raise SceneError(
                 "sensitivities: the scene has rigid grasps (constraints); differentiate the elastic scene they stand for"

@@ -266,6 +266,8 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
         parameters(pandas, ["left.k_x", "left.k_x"])
     with pytest.raises(SceneError, match="non-empty list"):
         parameters(pandas, "left.k_x")
+    with pytest.raises(SceneError, match="non-empty list"):
+        cd.Sensitivity(pandas, parameters=3)  # type: ignore[arg-type]
     skewed = cd.Scene(
         pandas.arm_specs, pandas.object,
         [cd.Interconnection(ic.arm, stiffness=cd.diagonal([1e4, 2e4, 1e4], 100.0)) for ic in pandas.interconnection_specs],
