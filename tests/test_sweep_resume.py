@@ -75,12 +75,14 @@ def alive(pid: int) -> bool:
 
 
 def start_and_stop(spec: Path, how: signal.Signals, after: int) -> tuple[subprocess.Popen[str], list[int]]:
-    """Start ``coopdyn sweep`` on two workers, send ``how`` to it once ``after`` rows are done."""
+    """Start ``coopdyn sweep`` on two workers, send ``how`` to it once ``after`` rows are done.
+    Its temporary files go beside the spec: a process killed with -9 cannot remove them itself."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "coopdyn", "sweep", str(spec), "--workers", "2", "--chunk-size", "1"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "TMPDIR": str(spec.parent)},
     )
     deadline = time.monotonic() + 180
     while len(journal_rows(spec.parent / "out")) < after and time.monotonic() < deadline and proc.poll() is None:
