@@ -74,6 +74,33 @@ def test_element_tangent_is_the_derivative_of_its_wrench(name: str, theta: float
     assert element.exact_tangent
 
 
+@pytest.mark.parametrize("theta", [0.0, 1e-4, 0.26, 2.8])
+@pytest.mark.parametrize("name", ELEMENTS)
+def test_element_matrix_tangent_is_the_derivative_of_its_gauss_newton_matrices(name: str, theta: float) -> None:
+    """∂(S_K w_K + S_D w_D)/∂(δ, ξ) for fixed twists (an implicit step's derivative needs it)."""
+    element = ELEMENTS[name]
+    rng = np.random.default_rng(int(theta * 1000) + 7 * len(name))
+    axis = rng.normal(size=3)
+    X = pin.SE3(pin.exp3(theta * axis / np.linalg.norm(axis)), 0.05 * rng.normal(size=3))
+    xi, w_K, w_D = rng.normal(size=(3, 6))
+
+    def applied(pose: pin.SE3, twist: np.ndarray) -> np.ndarray:
+        ev = element.evaluate(pose, twist, True)
+        return np.asarray(ev.S_K @ w_K + ev.S_D @ w_D)
+
+    G_d, G_x = element.matrix_tangent(X, xi, w_K, w_D)
+    scale = max(np.max(np.abs(G_d)), 1.0)
+    for k in range(6):
+        e = np.eye(6)[k]
+        ref_d = richardson(lambda s, e=e: applied(X * pin.exp6(s * e), xi), 1e-3)
+        ref_x = richardson(lambda s, e=e: applied(X, xi + s * e), 1e-3)
+        np.testing.assert_allclose(G_d[:, k], ref_d, rtol=0.0, atol=1e-8 * scale)
+        np.testing.assert_allclose(G_x[:, k], ref_x, rtol=0.0, atol=1e-8 * scale)
+    # a user's law gets the base class's differences, which agree
+    for a, b in zip(Element.matrix_tangent(element, X, xi, w_K, w_D), (G_d, G_x), strict=True):
+        assert np.max(np.abs(a - b)) < 1e-7 * scale
+
+
 def test_the_logarithm_jacobian_as_a_function_of_the_logarithm_is_jlog6() -> None:
     rng = np.random.default_rng(2)
     for theta in (0.0, 1e-7, 0.1, 0.249, 0.251, 1.5, 3.0):

@@ -25,7 +25,7 @@ pin.integrate(model, q, δq)`` (LOCAL for a free-flyer: δq = body twist · time
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -64,6 +64,27 @@ def force_cross_map(f: np.ndarray) -> np.ndarray:
     out[:3, 3:] = out[3:, :3] = -pin.skew(f[:3])
     out[3:, 3:] = -pin.skew(f[3:])
     return out
+
+
+def relative_twist(
+    model: pin.Model, data: pin.Data, t_id: int, g_id: int
+) -> tuple[pin.SE3, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(X, J_G, J_T, Jr, ξ, ∂ξ/∂q)`` of the frame pair (T, G) after
+    ``computeForwardKinematicsDerivatives``, ``computeJointJacobians`` and
+    ``updateFramePlacements`` at (q, v): X = T_M_G, the frames' LOCAL Jacobians (6, nv), the
+    relative Jacobian ``Jr = J_G − Ad(X⁻¹) J_T``, the relative twist ξ = Jr v and its derivative
+    with respect to q at fixed v (6, nv)."""
+    nv = model.nv
+    X = data.oMf[t_id].actInv(data.oMf[g_id])
+    J_G = pin.getFrameJacobian(model, data, g_id, LOCAL).reshape(6, nv)
+    J_T = pin.getFrameJacobian(model, data, t_id, LOCAL).reshape(6, nv)
+    Ad_inv = X.toActionMatrixInverse()
+    Jr = J_G - Ad_inv @ J_T
+    dVG_dq, _ = pin.getFrameVelocityDerivatives(model, data, g_id, LOCAL)
+    dVT_dq, _ = pin.getFrameVelocityDerivatives(model, data, t_id, LOCAL)
+    V_T = Ad_inv @ pin.getFrameVelocity(model, data, t_id, LOCAL).vector  # V_T in G axes
+    xi = pin.getFrameVelocity(model, data, g_id, LOCAL).vector - V_T
+    return X, J_G, J_T, Jr, xi, dVG_dq - motion_cross(V_T) @ Jr - Ad_inv @ dVT_dq
 
 
 def dynamics_derivatives(
@@ -109,15 +130,7 @@ def dynamics_derivatives(
         fext[joint] += model.frames[frame].placement.act(pin.Force(f))
 
     for i, (_, t_id, g_id, element) in enumerate(links):
-        X = data.oMf[t_id].actInv(data.oMf[g_id])
-        J_G, J_T = frame_jacobian(g_id), frame_jacobian(t_id)
-        Ad_inv = X.toActionMatrixInverse()
-        Jr = J_G - Ad_inv @ J_T
-        dVG_dq, _ = pin.getFrameVelocityDerivatives(model, data, g_id, LOCAL)
-        dVT_dq, _ = pin.getFrameVelocityDerivatives(model, data, t_id, LOCAL)
-        V_T = Ad_inv @ pin.getFrameVelocity(model, data, t_id, LOCAL).vector  # V_T in G axes
-        xi = pin.getFrameVelocity(model, data, g_id, LOCAL).vector - V_T
-        dxi_dq = dVG_dq - motion_cross(V_T) @ Jr - Ad_inv @ dVT_dq
+        X, J_G, J_T, Jr, xi, dxi_dq = relative_twist(model, data, t_id, g_id)
         f_G = element.evaluate(X, xi).G_f_G
         F_d, F_x = element.tangent(X, xi)
         exact = exact and bool(element.exact_tangent)
@@ -155,3 +168,76 @@ def dynamics_derivatives(
     da_dq += Minv @ dQ_dq
     da_dv += Minv @ dQ_dv
     return Derivatives(a, da_dq, da_dv, Minv[:, actuated], W, dW_dq, dW_dv, exact)
+
+
+class MatrixDerivatives:
+    """Exact derivatives of the linearly implicit methods' matrices applied to fixed vectors:
+    ``G(q, v) = M(q) w_M + D̃(q, v) w_D + K̃(q, v) w_K`` (nv,), with K̃ and D̃ the Gauss–Newton
+    matrices of :meth:`coopdyn.Dynamics.implicit_terms` — what the derivative of an implicit step
+    needs (its step matrix and right-hand side are made of them).
+
+    ``K̃ w = Σ Jrᵀ S_K Jr w`` is the generalized force of the body wrenches ``g = S_K·(Jr w)`` on
+    G and ``−X.dual·g`` on T, so it is differentiated as :func:`dynamics_derivatives`
+    differentiates the elements' force: the wrenches' own variation through
+    :meth:`~coopdyn.model.elements.Element.matrix_tangent` and ``∂(Jr w)/∂q`` (Pinocchio's
+    frame-velocity derivatives at the velocity w), their motion with the bodies together with
+    ``∂(M w_M)/∂q`` from one ``computeRNEADerivatives(q, 0, w_M, −fext)`` without gravity
+    (``RNEA(q, 0, a, fext) = M a − Σ Jᵀ fext`` there). B and the elastic joints' matrices are
+    constant.
+
+    Args:
+        model: the scene's model (a copy without gravity is kept).
+        links: ``(link index, T frame, G frame, element)`` of every element with a force law.
+        damped: for each of ``links``, whether its S_D enters D̃ (the element's ``has_damping``).
+    """
+
+    def __init__(self, model: pin.Model, links: Sequence[tuple[int, int, int, Element]], damped: Sequence[bool]) -> None:
+        self.model, self.data = model, model.createData()
+        self.free = pin.Model(model)  # (no gravity: RNEA(q, 0, a) = M a)
+        self.free.gravity = pin.Motion.Zero()
+        self.free_data = self.free.createData()
+        self.links, self.damped = list(links), list(damped)
+        self.exact = all(type(el).matrix_tangent is not Element.matrix_tangent for *_, el in self.links)
+
+    def kinematics(self, q: np.ndarray, *velocities: np.ndarray) -> list[list[tuple[Any, ...]]]:
+        """:func:`relative_twist` of every link at q for each velocity (one pass each)."""
+        model, data, zero = self.model, self.data, np.zeros(self.model.nv)
+        out = []
+        for w in velocities:
+            pin.computeForwardKinematicsDerivatives(model, data, q, w, zero)
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            out.append([relative_twist(model, data, t_id, g_id) for _, t_id, g_id, _ in self.links])
+        return out
+
+    def __call__(
+        self, q: np.ndarray, v: np.ndarray, w_M: np.ndarray, w_D: np.ndarray, w_K: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, list[tuple[Any, ...]], list[tuple[Any, ...]]]:
+        """``(∂G/∂q, ∂G/∂v)`` (nv, nv) at (q, v) in tangent coordinates, and the links'
+        :func:`relative_twist` at w_D and at w_K (for the parameters' columns)."""
+        model, free, nv = self.model, self.free, self.model.nv
+        at_v, at_D, at_K = self.kinematics(q, v, w_D, w_K)
+        fext = [pin.Force.Zero() for _ in range(model.njoints)]
+        dG_dq, dG_dv = np.zeros((nv, nv)), np.zeros((nv, nv))
+
+        def add_wrench(frame: int, f: np.ndarray) -> None:
+            joint = model.frames[frame].parentJoint
+            fext[joint] -= model.frames[frame].placement.act(pin.Force(f))  # (−fext: RNEA subtracts Jᵀ fext)
+
+        for (_, t_id, g_id, element), damped, kin_v, kin_D, kin_K in zip(self.links, self.damped, at_v, at_D, at_K, strict=True):
+            X, J_G, J_T, Jr, xi, dxi_dq = kin_v
+            xi_K, dxiK_dq, xi_D, dxiD_dq = kin_K[4], kin_K[5], kin_D[4], kin_D[5]
+            if not damped:
+                xi_D, dxiD_dq = np.zeros(6), np.zeros((6, nv))
+            ev = element.evaluate(X, xi, True)
+            g = ev.S_K @ xi_K + ev.S_D @ xi_D
+            G_d, G_x = element.matrix_tangent(X, xi, xi_K, xi_D)
+            dg_dq = G_d @ Jr + G_x @ dxi_dq + ev.S_K @ dxiK_dq + ev.S_D @ dxiD_dq
+            dg_dv = G_x @ Jr
+            dual = X.toDualActionMatrix()
+            dG_dq += J_G.T @ dg_dq - J_T.T @ (dual @ (dg_dq + force_cross_map(g) @ Jr))
+            dG_dv += J_G.T @ dg_dv - J_T.T @ (dual @ dg_dv)
+            add_wrench(g_id, g)
+            add_wrench(t_id, -(dual @ g))
+        dtau_dq, _, _ = pin.computeRNEADerivatives(free, self.free_data, q, np.zeros(nv), w_M, fext)
+        return dG_dq + np.asarray(dtau_dq), dG_dv, at_D, at_K

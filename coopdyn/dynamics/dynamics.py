@@ -117,6 +117,12 @@ class Dynamics:
         # constraint solver's λ, dynamics.constrained)
         self._forces = [(i, *link) for i, link in enumerate(self._frames) if link[2].constraint is None]
 
+    @property
+    def force_links(self) -> list[tuple[int, int, int, Any]]:
+        """``(link index, T frame, G frame, element)`` of every element with a force law (a rigid
+        grasp's constraint has none), in scene order."""
+        return list(self._forces)
+
     # -- the interface (implemented by both backends) --------------------------------------------
     def acceleration(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None) -> np.ndarray:
         """Joint accelerations q̈ (nv,) for arm torques ``tau`` (n_actuated,) [N·m or N] and an

@@ -74,6 +74,17 @@ class BallSpring(SpringDamper):
         theta = float(np.linalg.norm(pin.log3(R)))
         return ElementEval(0.5 * float(p @ self.K @ p), p.copy(), G_f_G, power, S_K, S_D, theta)
 
+    def matrix_tangent(self, T_M_G: pin.SE3, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact derivatives of ``S_K w_K + S_D w_D = [Rᵀ K R w_K,v + Rᵀ D R w_D,v; 0]`` (see
+        :meth:`Element.matrix_tangent`): R → R·exp(δ_ω^) turns ``P w`` (P = Rᵀ K R) by
+        ``[P w]^ δ_ω − P [w]^ δ_ω``; nothing depends on δ_v or ξ."""
+        R = T_M_G.rotation
+        G_d = np.zeros((6, 6))
+        for C, w in ((self.K, w_K[:3]), (self.D, w_D[:3])):
+            P = R.T @ C @ R
+            G_d[:3, 3:] += pin.skew(P @ w) - P @ pin.skew(w)
+        return G_d, np.zeros((6, 6))
+
     def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact ``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)`` (see :meth:`Element.tangent`). With ``f = K p + D R ξ_v``
         and ``G_f_G = −Rᵀ f``, a perturbation ``T_M_G·exp6(δ)`` moves p by ``R δ_v`` and R by

@@ -15,7 +15,9 @@ so ``d/dt T_M_G = T_M_G ξ^``) [m/s, rad/s]:
   to K̃ and D̃, with ``Jr = J_G − Ad(T_M_G⁻¹) J_T`` the relative Jacobian (6, nv);
 * for the exact linearisation (:func:`coopdyn.linearize`), :meth:`Element.tangent`: the
   derivatives of ``G_f_G`` with respect to a right perturbation of the pose, ``T_M_G·exp6(δ)``,
-  and to ξ — the full second derivative of U, geometric stiffness included.
+  and to ξ — the full second derivative of U, geometric stiffness included;
+* for the derivative of a linearly implicit step (:mod:`coopdyn.sensitivity`),
+  :meth:`Element.matrix_tangent`: the same derivatives of ``S_K w_K + S_D w_D`` for fixed twists.
 
 Elements are immutable: their constructor validates the parameters and keeps them as read-only
 arrays. The same :meth:`Element.evaluate` serves the dynamics, the implicit terms and every
@@ -120,6 +122,31 @@ class Element(ABC):
             d[k] = h_x
             F_x[:, k] = (self.evaluate(T_M_G, xi + d).G_f_G - self.evaluate(T_M_G, xi - d).G_f_G) / (2.0 * h_x)
         return F_d, F_x
+
+    def matrix_tangent(self, T_M_G: pin.SE3, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The derivatives of ``S_K w_K + S_D w_D`` (6,) — the Gauss–Newton matrices applied to two
+        fixed twists — with respect to a right perturbation of the pose, ``T_M_G·exp6(δ)``, and to
+        the relative twist ξ, each (6, 6): what the derivative of a linearly implicit step needs
+        (:mod:`coopdyn.sensitivity`).
+
+        This default takes central differences of :meth:`evaluate` (its :attr:`exact_tangent`
+        stays False); the built-in elements override it with exact derivatives."""
+        xi = np.asarray(xi, dtype=float)
+
+        def applied(pose: pin.SE3, twist: np.ndarray) -> np.ndarray:
+            ev = self.evaluate(pose, twist, True)
+            return np.asarray(ev.S_K @ w_K + ev.S_D @ w_D)
+
+        G_d, G_x = np.zeros((6, 6)), np.zeros((6, 6))
+        h_d = _FD_STEP * max(1.0, float(np.linalg.norm(T_M_G.translation)))
+        h_x = _FD_STEP * max(1.0, float(np.linalg.norm(xi)))
+        for k in range(6):
+            d = np.zeros(6)
+            d[k] = h_d
+            G_d[:, k] = (applied(T_M_G * pin.exp6(d), xi) - applied(T_M_G * pin.exp6(-d), xi)) / (2.0 * h_d)
+            d[k] = h_x
+            G_x[:, k] = (applied(T_M_G, xi + d) - applied(T_M_G, xi - d)) / (2.0 * h_x)
+        return G_d, G_x
 
     @property
     def has_damping(self) -> bool:

@@ -65,5 +65,12 @@ class HardeningSpring(SE3Spring):
         g[:3] += self.hardening * (p @ p) * p
         return g
 
+    def hessian(self, e: np.ndarray) -> np.ndarray:
+        """∂²U/∂e² = K + κ (|p|² I₃ + 2 p pᵀ) ⊕ 0₃ (analytic in e)."""
+        p = e[:3]
+        H = self.K + np.zeros((6, 6), dtype=np.result_type(e, float))
+        H[:3, :3] += self.hardening * ((p @ p) * np.eye(3) + 2.0 * np.outer(p, p))
+        return H
+
     def __repr__(self) -> str:
         return f"{super().__repr__()[:-1]}, hardening {self.hardening:g} N/m³)"

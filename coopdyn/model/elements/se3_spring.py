@@ -43,11 +43,16 @@ class SE3Spring(SpringDamper):
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """A subclass that changes :meth:`evaluate` without its own :meth:`gradient` or
-        :meth:`tangent` gets the base class's central differences, not this law's exact tangent."""
+        :meth:`tangent` gets the base class's central differences, not this law's exact tangent;
+        one that changes :meth:`evaluate` or :meth:`gradient` without its own :meth:`hessian` or
+        :meth:`matrix_tangent`, the base class's :meth:`~Element.matrix_tangent`."""
         super().__init_subclass__(**kwargs)
         if "evaluate" in cls.__dict__ and not ({"gradient", "tangent"} & cls.__dict__.keys()):
             cls.exact_tangent = False
             cls.tangent = Element.tangent  # type: ignore[method-assign]
+        own = cls.__dict__.keys()
+        if ({"evaluate", "gradient"} & own) and not ({"hessian", "matrix_tangent"} & own):  # its S_K may not be Jᵀ·hessian·J
+            cls.matrix_tangent = Element.matrix_tangent  # type: ignore[method-assign]
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         K = _validate.spd6(stiffness, f"{name}: stiffness", "N/m, N·m/rad")
@@ -73,6 +78,26 @@ class SE3Spring(SpringDamper):
     def gradient(self, e: np.ndarray) -> np.ndarray:
         """∂U/∂e (6,) at the logarithm e; analytic in e (a complex e is allowed)."""
         return self.K @ e
+
+    def hessian(self, e: np.ndarray) -> np.ndarray:
+        """∂²U/∂e² (6, 6) at the logarithm e (S_K = Jlog6ᵀ·hessian·Jlog6); analytic in e."""
+        return np.asarray(self.K)
+
+    def matrix_tangent(self, T_M_G: pin.SE3, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact derivatives of ``S_K w_K + S_D w_D = Jlog6ᵀ (hessian(e) Jlog6 w_K + D Jlog6 w_D)``
+        (see :meth:`Element.matrix_tangent`): along ``e + i·h·Jlog6 δ`` by complex step; they do
+        not depend on ξ."""
+        e, theta = log6(T_M_G)
+        J = jlog6(T_M_G, e, theta)
+        G_d = np.empty((6, 6))
+        for k in range(6):
+            e_c = e + (1j * COMPLEX_STEP) * J[:, k]
+            J_c = jlog6_of_log(e_c)
+            w = self.hessian(e_c) @ (J_c @ w_K)
+            if self._damped:
+                w = w + self.D @ (J_c @ w_D)
+            G_d[:, k] = (J_c.T @ w).imag / COMPLEX_STEP
+        return G_d, np.zeros((6, 6))
 
     def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact ``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)`` (see :meth:`Element.tangent`): ``G_f_G =
