@@ -7,7 +7,8 @@ one rollout per parameter).
    ``--rounds`` rounds: a compiled rk4 step (its share of a 0.1 s run), the full ∂x⁺/∂(x, u)
    exact (``Sensitivity.step`` on the compiled kernel), and central differences of compiled
    one-step rollouts (2·(2nv + nu) of them, one ``cd.rollout`` call, one thread) with their
-   error against the exact derivative.
+   error against the exact derivative. Then the same for implicit Euler and the trapezoid on
+   grasps of 1e6 N/m (their derivative runs in Python).
 2. **A trajectory's Jacobian** (examples/gauss_newton_lift.py's, with respect to 280 torques):
    chained exact step sensitivities against forward differences of compiled rollouts.
 3. **Identification** (examples/identify_stiffness.py's experiment, 2 s at 1 kHz, closed loop):
@@ -47,16 +48,16 @@ def _example(name: str) -> Any:
     return module
 
 
-def step_table(rounds: int) -> None:
-    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+def step_table(rounds: int, method: str = "rk4", stiffness: float = 1e4, label: str = "1.") -> None:
+    scene = cd.scenes.facing_arms("panda", stiffness=stiffness, damping=0.002)
     rng = np.random.default_rng(0)
     model, nv, na = scene.model, scene.nv, scene.n_actuated
     q = pin.integrate(model, scene.q0, 0.05 * rng.normal(size=nv))
     v, tau = 0.3 * rng.normal(size=nv), 5.0 * rng.normal(size=na)
-    sens = cd.Sensitivity(scene)
+    sens = cd.Sensitivity(scene, method)
     exact = sens.step(q, v, tau, H)
     D = np.hstack([exact.dx_dx, exact.dx_du])
-    sim = cd.Simulator(scene, TorqueSequence(scene, tau[None], 0.1), "rk4", H)
+    sim = cd.Simulator(scene, TorqueSequence(scene, tau[None], 0.1), method, H)
 
     def differences(eps: float) -> np.ndarray:
         """[∂x⁺/∂x, ∂x⁺/∂u] by central differences of one batch of compiled one-step rollouts."""
@@ -69,7 +70,7 @@ def step_table(rounds: int) -> None:
                 starts_v.append(v + e[nv : 2 * nv])
                 torques.append((tau + e[2 * nv :])[None])
         run = cd.rollout(
-            scene, np.array(torques), period=H, q0=np.array(starts_q), v0=np.array(starts_v), integrator="rk4", threads=1
+            scene, np.array(torques), period=H, q0=np.array(starts_q), v0=np.array(starts_v), integrator=method, threads=1
         )
         x = np.array(
             [
@@ -82,13 +83,15 @@ def step_table(rounds: int) -> None:
     scale = np.max(np.abs(D))
     errors = {eps: float(np.max(np.abs(differences(eps) - D)) / scale) for eps in (1e-4, 1e-5, 1e-6, 1e-7)}
     best = min(errors, key=errors.__getitem__)
+    one = f"one {method} step (a 0.1 s compiled run / 100)"
+    where = "compiled" if sens.native is not None else "in Python"
     work: dict[str, Callable[[], object]] = {
-        "one rk4 step (a 0.1 s compiled run / 100)": lambda: sim.run(0.1, q, v),
-        "exact ∂x⁺/∂(x, u): Sensitivity.step": lambda: sens.step(q, v, tau, H),
+        one: lambda: sim.run(0.1, q, v),
+        f"exact ∂x⁺/∂(x, u): Sensitivity.step ({where})": lambda: sens.step(q, v, tau, H),
         "the dynamics' exact derivatives, once: Dynamics.derivatives": lambda: sens.dynamics.derivatives(q, v, tau),
         f"central differences: {2 * (2 * nv + na)} one-step rollouts": lambda: differences(best),
     }
-    per_call = {"one rk4 step (a 0.1 s compiled run / 100)": 100}
+    per_call = {one: 100}
     times: dict[str, list[float]] = {name: [] for name in work}
     with single_threaded_blas():
         for f in work.values():
@@ -100,8 +103,11 @@ def step_table(rounds: int) -> None:
                 for _ in range(n):
                     f()
                 times[name].append((time.perf_counter() - t0) / n / per_call.get(name, 1))
-    step = statistics.median(times["one rk4 step (a 0.1 s compiled run / 100)"])
-    print(f"1. One step, two Pandas (nv = {nv}, nu = {na}), rk4 at {H * 1e3:g} ms: median of {rounds} interleaved rounds")
+    step = statistics.median(times[one])
+    print(
+        f"{label} One step, two Pandas (nv = {nv}, nu = {na}), grasps of {stiffness:g} N/m, {method} at {H * 1e3:g} ms: "
+        f"median of {rounds} interleaved rounds"
+    )
     for name, t in times.items():
         print(f"  {name:60s} {statistics.median(t) * 1e6:9.1f} µs   {statistics.median(t) / step:7.1f} steps")
     print(f"  (central differences at one compiled step each, without the rollouts' overhead: {2 * (2 * nv + na)} steps)")
@@ -174,6 +180,8 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f} at the start")
     step_table(args.rounds)
+    step_table(args.rounds, "implicit_euler", 1e6, "\n1b.")
+    step_table(args.rounds, "trapezoid", 1e6, "\n1c.")
     trajectory_table()
     identification_table()
     print(f"load average {os.getloadavg()[0]:.2f} at the end")

@@ -40,7 +40,7 @@ from .parameters import Parameter, with_parameters
 from .parameters import parameters as scene_parameters
 from .result import Result
 from .rollout import rollout
-from .sensitivity import explicit_tableau, step_of, trajectory_sensitivity
+from .sensitivity import step_method, step_of, trajectory_sensitivity
 from .simulate import simulate
 
 __all__ = ["Identification", "Measurements", "identify"]
@@ -238,9 +238,10 @@ def identify(
 
     Args:
         initial: start values by name (default: the scene's values).
-        integrator: the method the model runs with, an explicit fixed-step one (``"rk4"``,
-            ``"symplectic_euler"``, an explicit tableau) for either Jacobian, so that both fit the
-            same model; ``dt`` [s] its step, a divisor of the period (default the period).
+        integrator: the method the model runs with, a fixed-step one with sensitivities
+            (``"rk4"``, ``"symplectic_euler"``, an explicit tableau, or for stiff grasps
+            ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``) for either Jacobian, so that both fit
+            the same model; ``dt`` [s] its step, a divisor of the period (default the period).
         jacobian: ``"exact"`` (default) or ``"finite-differences"`` (forward differences of
             compiled rollouts, for comparison).
         max_iterations: the optimiser's budget of runs (residual evaluations).
@@ -279,11 +280,12 @@ def identify(
     )
     U, joints, wrench, q0, v0 = _checked(scene, measurements, controller is not None)
     period = _validate.positive(measurements.period, "measurements.period", "s", SimulationError)
-    explicit_tableau(integrator)  # (refuses a method without sensitivities, up front)
+    step_method(integrator)  # (refuses a method without sensitivities, up front)
     if get_integrator(integrator).adaptive:
         raise SimulationError(
             f"identify: {integrator!r} adapts its step in a run, so its sensitivities (of fixed steps) and finite differences "
-            "would fit two different models; use a fixed-step method ('rk4', 'symplectic_euler') at a dt that resolves the scene"
+            "would fit two different models; use a fixed-step method ('rk4', 'symplectic_euler', 'trapezoid') at a dt that "
+            "resolves the scene"
         )
     step_of(period, dt)  # (refuses a dt that does not divide the period)
     q_idx = _joint_coordinates(scene)

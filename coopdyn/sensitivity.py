@@ -21,10 +21,20 @@ rates ``δ̇_i = dexp⁻¹(δ_i) v_i``), and every stage is differentiated exact
   mass scales its whole inertia (uniform density), so ∂(M q̈ + h)/∂m is the object's columns of
   Pinocchio's joint-torque regressor times its inertial parameters / m.
 
-The implicit methods are not covered: they are linearly implicit with a Gauss–Newton Jacobian,
-so the exact derivative of their step needs the derivative of that Jacobian (the dynamics'
-second derivatives), which coopdyn does not have. ``tests/test_sensitivity.py`` checks every
-sensitivity against central finite differences of the step and of the compiled loop's rollout.
+The linearly implicit methods (implicit Euler, ROS2, the trapezoid, generalized-α) solve their
+stages with the step matrix ``S = M + γ' D̃ + β' K̃`` of the step's start (γ' = γh, β' = (γh)² but
+for generalized-α), K̃ and D̃ the Gauss–Newton matrices. A stage ``S k_v = M y − γ' K̃ f_q`` is
+differentiated as it stands: ``S dk_v = M dy − γ' K̃ df_q − dG`` with ``G = M (k_v − y) + γ' D̃ k_v
++ K̃ (β' k_v + γ' f_q)`` — the matrices' own variation with the start and the parameters, exact
+(:class:`coopdyn.dynamics.derivatives.MatrixDerivatives`: the elements'
+:meth:`~coopdyn.model.elements.Element.matrix_tangent`, Pinocchio's frame-velocity and RNEA
+derivatives) — one more solve with the step's own S per stage. Generalized-α's algorithmic
+acceleration and its derivative are carried from step to step within a period. These run in
+Python on either backend (the dynamics' derivatives are the backend's); the exponential method
+and implicit Euler with ``jacobian_every > 1`` are not differentiated.
+
+``tests/test_sensitivity.py`` checks every sensitivity against central finite differences of
+the step and of the compiled loop's rollout.
 """
 
 from __future__ import annotations
@@ -42,9 +52,21 @@ from .closed_loop import Controller, System
 from .compiled import controller_settings
 from .dynamics import Dynamics
 from .dynamics.backend import kernel_module
+from .dynamics.derivatives import MatrixDerivatives
 from .errors import KernelError, SceneError, SimulationError
-from .integrators import DormandPrince, ExplicitRungeKutta, Integrator, SymplecticEuler, get_integrator
+from .integrators import (
+    ROS2,
+    AdaptiveROS2,
+    DormandPrince,
+    ExplicitRungeKutta,
+    Integrator,
+    LinearlyImplicitEuler,
+    SymplecticEuler,
+    Trapezoid,
+    get_integrator,
+)
 from .integrators.explicit import combine
+from .integrators.implicit import GAMMA, GeneralizedAlpha, alpha_coefficients
 from .linearize import controller_gain
 from .model.elements import lookup
 from .model.elements.ball_spring import BallSpring
@@ -143,7 +165,10 @@ class Sensitivity:
         scene: an elastic scene (rigid grasps are refused).
         integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` (a step of its
             fifth-order solution at the h given — a fixed step: rollout and simulate adapt
-            theirs) or an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`.
+            theirs), an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`, or for stiff
+            grasps a linearly implicit method: ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``,
+            ``"generalized_alpha"`` (any ρ∞) — stable at steps where the explicit ones diverge;
+            their derivative runs in Python (no compiled twin yet).
         parameters: names as :func:`coopdyn.parameters.parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
             whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
@@ -178,7 +203,7 @@ class Sensitivity:
             raise SceneError(
                 "sensitivities: the scene has rigid grasps (constraints); differentiate the elastic scene they stand for"
             )
-        self.tableau = explicit_tableau(integrator)
+        self.method = step_method(integrator)
         self.scene, self.params = scene, params
         self.dynamics = Dynamics(scene, backend)
         self.model = scene.model
@@ -205,9 +230,14 @@ class Sensitivity:
             self.object_columns = slice(10 * (j - 1), 10 * j)
             self.object_pi = self.model.inertias[j].toDynamicParameters() / scene.object.mass_and_com()[0]
         self.native = None  # the kernel's twin (src/native/sensitivity.hpp), on the native backend
+        self.matrices: MatrixDerivatives | None = None  # a linearly implicit step's: ∂(M, K̃, D̃)
+        self._carry: tuple[np.ndarray, np.ndarray] | None = None  # generalized-α's (a, da) within a period
+        if self.method.implicit:
+            links = self.dynamics.force_links
+            self.matrices = MatrixDerivatives(self.model, links, [element.has_damping for *_, element in links])
         kernel = getattr(self.dynamics, "_kernel", None)
-        if kernel is not None:
-            A, b = self.tableau if self.tableau is not None else ((), ())
+        if kernel is not None and not self.method.implicit:
+            A, b = self.method.tableau if self.method.tableau is not None else ((), ())
             specs = [
                 ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
                 if law is None
@@ -215,7 +245,8 @@ class Sensitivity:
                 for p, law in zip(params, self.units, strict=True)
             ]
             rows = [list(map(float, row)) for row in A]
-            self.native = kernel_module().Sensitivity(kernel, rows, list(map(float, b)), self.tableau is None, self.charts, specs)
+            symplectic = self.method.tableau is None
+            self.native = kernel_module().Sensitivity(kernel, rows, list(map(float, b)), symplectic, self.charts, specs)
         self.controller = controller
         self.system: System | None = None
         self._callback: Any = None
@@ -382,13 +413,17 @@ class Sensitivity:
         """One step from (q, v) under u, with the derivatives of (δq⁺, v⁺) along the seed columns
         ``(dq, dv, du, dp)`` (each (n, m)); also the start's derivatives and ∂W/∂p there."""
         dq0, dv0, du, dp = seeds
-        if self.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
+        if self.method.alpha is not None:
+            return self._alpha_step(q, v, u, h, seeds)
+        if self.method.gamma is not None:
+            return self._implicit_step(q, v, u, h, seeds)
+        if self.method.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
             d, da_dp, dW_dp = self._stage(q, v, u)
             v1 = v + h * d.acceleration
             dv1 = dv0 + h * _acceleration_derivative(d, da_dp, dq0, dv0, du, dp)
             q1, dq1 = self._integrate(q, h * v1, dq0, h * dv1)
             return q1, v1, dq1, dv1, d, dW_dp
-        A, b = self.tableau
+        A, b = self.method.tableau
         kd: list[np.ndarray] = []
         ka: list[np.ndarray] = []
         dkd: list[np.ndarray] = []
@@ -420,6 +455,131 @@ class Sensitivity:
         q1, dq1 = self._integrate(q, Delta, dq0, dDelta)
         assert start is not None
         return q1, v1, dq1, dv1, start[0], start[1]
+
+    def _implicit_step(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        """A linearly implicit step (:mod:`coopdyn.integrators.implicit`) and its derivative along
+        the seed columns, as :meth:`_step`. Implicit Euler is the first stage at γ = 1
+        (``δ = h k_q``, ``v⁺ = v + h k_v``); the two-stage scheme (ROS2, the trapezoid) adds
+        ``(I − γhJ) k₂ = f(q ⊕ hk_q1, v + hk_v1) − 2k₁`` with the same matrices, and
+        ``δ = h(3k₁ + k₂)/2``."""
+        dq0, dv0, du, dp = seeds
+        assert self.method.gamma is not None
+        dyn, gh, stages = self.dynamics, self.method.gamma * h, self.method.stages
+        d, da_dp, dW_dp = self._stage(q, v, u)
+        f, M, K, D = dyn.implicit_terms(q, v, u)
+        gains = np.zeros(self.scene.n_actuated)
+        dyn.factor(M, K, D, gh, gains, gains)
+        start = (q, v, cho_factor(M + gh * D + gh * gh * K), M, K)
+        kq1, kv1 = dyn.solve(v, f)
+        da1 = _acceleration_derivative(d, da_dp, dq0, dv0, du, dp)
+        dkv1 = self._solve_derivative(start, (gh, gh * gh), v, kv1, d.acceleration, da1, dv0, seeds)
+        dkq1 = dv0 + gh * dkv1
+        if stages == 1:
+            q1, dq1 = self._integrate(q, h * kq1, dq0, h * dkq1)
+            return q1, v + h * kv1, dq1, dv0 + h * dkv1, d, dW_dp
+        d2, v2, dd2, dv2 = h * kq1, v + h * kv1, h * dkq1, dv0 + h * dkv1
+        q2, dq2 = self._integrate(q, d2, dq0, dd2)
+        e, da_dp2, _ = self._stage(q2, v2, u)
+        rate, C, N = self._chart(d2, v2)
+        y2, dy2 = e.acceleration - 2.0 * kv1, _acceleration_derivative(e, da_dp2, dq2, dv2, du, dp) - 2.0 * dkv1
+        fq2, dfq2 = rate - 2.0 * kq1, C @ dv2 + N @ dd2 - 2.0 * dkq1
+        kq2, kv2 = dyn.solve(fq2, M @ y2)
+        dkv2 = self._solve_derivative(start, (gh, gh * gh), fq2, kv2, y2, dy2, dfq2, seeds)
+        dkq2 = dfq2 + gh * dkv2
+        q1, dq1 = self._integrate(q, h * (1.5 * kq1 + 0.5 * kq2), dq0, h * (1.5 * dkq1 + 0.5 * dkq2))
+        return q1, v + h * (1.5 * kv1 + 0.5 * kv2), dq1, dv0 + h * (1.5 * dkv1 + 0.5 * dkv2), d, dW_dp
+
+    def _alpha_step(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        """A generalized-α step (:class:`coopdyn.integrators.GeneralizedAlpha`: one linearised solve
+        for x̂ = (1 − α_m)a⁺ + α_m a, one Newton correction with the same S) and its derivative, as
+        :meth:`_step`; the algorithmic acceleration a and its derivative are carried in
+        ``self._carry`` from step to step within a period (None: a fresh start, a = q̈)."""
+        dq, dv, du, dp = seeds
+        assert self.method.alpha is not None
+        am, af, gamma, beta = self.method.alpha
+        c, dq_a, dv_a = alpha_coefficients(am, gamma, beta, h)
+        gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c
+        dyn = self.dynamics
+        d, da_dp, dW_dp = self._stage(q, v, u)
+        f, M, K, D = dyn.implicit_terms(q, v, u)
+        gains = np.zeros(self.scene.n_actuated)
+        dyn.factor(M, K, D, gp, gains, gains, bp)
+        start = (q, v, cho_factor(M + gp * D + bp * K), M, K)
+        a_true = cho_solve(cho_factor(M), f)  # q̈ at the start (f = M q̈), as the integrator's fresh start takes it
+        da_true = _acceleration_derivative(d, da_dp, dq, dv, du, dp)
+        a, da = self._carry if self._carry is not None else (a_true, da_true)
+        A0, dA0 = dv_a * a, dv_a * da  # v⁺ = v + A0 + γc x̂
+        B0, dB0 = h * v + dq_a * a, h * dv + dq_a * da  # q⁺ = q ⊕ (B0 + βhc x̂)
+        f_q, df_q = (1.0 - af) * (B0 - (bp / gp) * A0), (1.0 - af) * (dB0 - (bp / gp) * dA0)
+        _, y = dyn.solve(f_q, (1.0 - af) * (M @ A0) + gp * f)
+        y_v, dy_v = (1.0 - af) * A0 + gp * a_true, (1.0 - af) * dA0 + gp * da_true  # (M y_v: the solve's right-hand side)
+        dy = self._solve_derivative(start, (gp, bp), f_q, y, y_v, dy_v, df_q, seeds)
+        xh, dxh = (y - (1.0 - af) * A0) / gp, (dy - (1.0 - af) * dA0) / gp
+        q1, dq1 = self._integrate(q, B0 + (beta * h * c) * xh, dq, dB0 + (beta * h * c) * dxh)
+        v1, dv1 = v + A0 + (gamma * c) * xh, dv + dA0 + (gamma * c) * dxh
+        e, da_dp1, _ = self._stage(q1, v1, u)  # the Newton correction: S dx = M((1 − α_f) q̈(q⁺, v⁺) − x̂) + α_f f
+        a1, da1 = e.acceleration, _acceleration_derivative(e, da_dp1, dq1, dv1, du, dp)
+        _, dx = dyn.solve(np.zeros_like(v), M @ ((1.0 - af) * a1 - xh) + af * f)
+        y2, dy2 = (1.0 - af) * a1 - xh + af * a_true, (1.0 - af) * da1 - dxh + af * da_true
+        zero = np.zeros_like(dq)
+        ddx = self._solve_derivative(start, (gp, bp), np.zeros_like(v), dx, y2, dy2, zero, seeds)
+        xh, dxh = xh + dx, dxh + ddx
+        q1, dq1 = self._integrate(q, B0 + (beta * h * c) * xh, dq, dB0 + (beta * h * c) * dxh)
+        v1, dv1 = v + A0 + (gamma * c) * xh, dv + dA0 + (gamma * c) * dxh
+        self._carry = ((xh - am * a) / (1.0 - am), (dxh - am * da) / (1.0 - am))
+        return q1, v1, dq1, dv1, d, dW_dp
+
+    def _solve_derivative(
+        self,
+        start: tuple[np.ndarray, np.ndarray, Any, np.ndarray, np.ndarray],
+        coefficients: tuple[float, float],
+        f_q: np.ndarray,
+        k_v: np.ndarray,
+        y: np.ndarray,
+        dy: np.ndarray,
+        df_q: np.ndarray,
+        seeds: tuple[np.ndarray, ...],
+    ) -> np.ndarray:
+        """dk_v along the seed columns for a stage solve ``S k_v = M y − γ' K̃ f_q`` with M, K̃, D̃
+        and ``S = M + γ' D̃ + β' K̃`` at the step's start ``start = (q, v, cho_factor(S), M, K̃)``
+        (``coefficients = (γ', β')``; γh and (γh)² but for generalized-α), given dy and df_q:
+        ``S dk_v = M dy − γ' K̃ df_q − dG`` with ``G = M (k_v − y) + γ' D̃ k_v + K̃ (β' k_v + γ' f_q)``
+        — the matrices' own variation with the start
+        (:class:`~coopdyn.dynamics.derivatives.MatrixDerivatives`) and with the parameters."""
+        q, v, S, M, K = start
+        gp, bp = coefficients
+        dq0, dv0, _, dp = seeds
+        assert self.matrices is not None
+        w_M, w_D, w_K = k_v - y, gp * k_v, bp * k_v + gp * f_q
+        dG_dq, dG_dv, at_D, at_K = self.matrices(q, v, w_M, w_D, w_K)
+        self.exact = self.exact and self.matrices.exact
+        dG = dG_dq @ dq0 + dG_dv @ dv0
+        if len(self.params):
+            dG = dG + self._matrix_parameters(q, w_M, at_D, at_K) @ dp
+        return np.asarray(cho_solve(S, M @ dy - gp * (K @ df_q) - dG))
+
+    def _matrix_parameters(self, q: np.ndarray, w_M: np.ndarray, at_D: list[Any], at_K: list[Any]) -> np.ndarray:
+        """∂G/∂p (nv, n_p) for :meth:`_solve_derivative`'s G: a stiffness or damping entry's is the
+        unit law's ``Jrᵀ (S_K ξ_K + S_D ξ_D)`` (K̃ and D̃ are linear in them; ξ_K = Jr w_K, ξ_D =
+        Jr w_D); the object's mass scales its inertia, so ∂(M w_M)/∂m is the object's columns of
+        the joint-torque regressor at (q, 0, w_M) without gravity times its inertial parameters / m."""
+        assert self.matrices is not None
+        out = np.zeros((self.nv, len(self.params)))
+        for k, (p, law) in enumerate(zip(self.params, self.units, strict=True)):
+            if law is None or p.link is None:
+                matrices = self.matrices
+                Y = pin.computeJointTorqueRegressor(matrices.free, matrices.free_data, q, np.zeros(self.nv), w_M)
+                out[:, k] = Y[:, self.object_columns] @ self.object_pi
+                continue
+            i = [link[0] for link in self.matrices.links].index(p.link)
+            X, _, _, Jr, _, _ = at_K[i]
+            ev = law.evaluate(X, np.zeros(6), True)
+            out[:, k] = Jr.T @ (ev.S_K @ at_K[i][4] + ev.S_D @ at_D[i][4])
+        return out
 
     def _run(
         self,
@@ -481,6 +641,7 @@ class Sensitivity:
                 applied[k] = U[k] + self.system.torque(t_k, q, v)
                 du_k = du + _controller_derivative(self.system, t_k, q, v, dq, dv)
                 self.exact = False
+            self._carry = None  # (a new held torque: generalized-α starts afresh, as the integrators do)
             for s in range(per):
                 try:
                     q1, v1, dq1, dv1, d, dW_dp = self._step(q, v, applied[k], h, (dq, dv, du_k, dp))
@@ -520,27 +681,59 @@ def _method_name(method: Integrator) -> str:
     return f"{method.name!r}" if isinstance(getattr(method, "name", None), str) else type(method).__name__
 
 
-def explicit_tableau(integrator: Any) -> tuple[Any, ...] | None:
-    """``(A, b)`` of an explicit Runge–Kutta method (rk4, dopri5's step, a user's tableau), None
-    for symplectic Euler: the methods :class:`Sensitivity` differentiates.
+@dataclass(frozen=True)
+class StepMethod:
+    """What :class:`Sensitivity` differentiates of a method (:func:`step_method`).
+
+    Attributes:
+        tableau: ``(A, b)`` of an explicit Runge–Kutta method, else None.
+        gamma: a linearly implicit method's γ (its step matrix ``M + γh D̃ + (γh)² K̃``), else None;
+            neither: symplectic Euler.
+        stages: a linearly implicit method's stages: 1 (implicit Euler) or 2 (ROS2, the trapezoid).
+        alpha: generalized-α's (α_m, α_f, γ, β), else None.
+    """
+
+    tableau: tuple[Any, ...] | None
+    gamma: float | None = None
+    stages: int = 0
+    alpha: tuple[float, float, float, float] | None = None
+
+    @property
+    def implicit(self) -> bool:
+        """Whether its stages solve with the Gauss–Newton step matrix."""
+        return self.gamma is not None or self.alpha is not None
+
+
+def step_method(integrator: Any) -> StepMethod:
+    """The differentiated form of a method: an explicit Runge–Kutta method (rk4, dopri5's step, a
+    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid (ros2_adaptive: a step
+    of ROS2 at the h given) or generalized-α.
 
     Raises:
         SimulationError: any other method, with the reason.
     """
     method = get_integrator(integrator)
     if isinstance(method, ExplicitRungeKutta | DormandPrince):
-        return (method.tableau.A, method.tableau.b)
+        return StepMethod((method.tableau.A, method.tableau.b))
     if type(method) is SymplecticEuler:
-        return None
-    why = (
-        "its step is built on the Gauss–Newton Jacobian (an implicit method solves with it, the exponential one "
-        "exponentiates it), whose own derivative coopdyn does not have"
-        if method.a_stable
-        else "only the explicit Runge–Kutta methods and symplectic Euler are"
-    )
+        return StepMethod(None)
+    if type(method) is LinearlyImplicitEuler and method.jacobian_every == 1:
+        return StepMethod(None, 1.0, 1)
+    if type(method) in (ROS2, AdaptiveROS2):
+        return StepMethod(None, GAMMA, 2)
+    if type(method) is Trapezoid:
+        return StepMethod(None, method.gamma, 2)
+    if type(method) is GeneralizedAlpha:
+        return StepMethod(None, alpha=(method.alpha_m, method.alpha_f, method.gamma, method.beta))
+    if type(method) is LinearlyImplicitEuler:
+        why = "with jacobian_every > 1 a step reuses an earlier step's matrices, so it is not a function of its own start"
+    elif method.a_stable:
+        why = "its step exponentiates the Gauss–Newton Jacobian, and the matrix exponential's derivative is not taken here"
+    else:
+        why = "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods are"
     raise SimulationError(
-        f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', "
-        "'symplectic_euler' or an explicit tableau (ExplicitRungeKutta)"
+        f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', 'symplectic_euler', "
+        "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha' or an explicit tableau (ExplicitRungeKutta)"
     )
 
 

@@ -257,7 +257,7 @@ class _AlphaState:
         self.v: np.ndarray | None = None
 
 
-def _alpha_step(am: float, gamma: float, beta: float, h: float) -> tuple[float, float, float]:
+def alpha_coefficients(am: float, gamma: float, beta: float, h: float) -> tuple[float, float, float]:
     """What one step of ``h`` [s] knows at its start, with x̂ = (1 − α_m)a⁺ + α_m a the unknown:
     a⁺ = (x̂ − α_m a)/(1 − α_m), so ``q⁺ = q ⊕ (h v + dq_a·a + βhc x̂)`` and
     ``v⁺ = v + dv_a·a + γc x̂``; returns (c = h/(1 − α_m), dq_a, dv_a)."""
@@ -273,7 +273,7 @@ def alpha_amplification(Aq: np.ndarray, Av: np.ndarray, h: float, rho_inf: float
     Aq, Av = np.asarray(Aq), np.asarray(Av)
     n = Aq.shape[-1]
     eye = np.broadcast_to(np.eye(n), Aq.shape)
-    c, dq_a, dv_a = _alpha_step(am, gamma, beta, h)  # and x̂ = (1 − α_f) q̈(q⁺, v⁺) + α_f q̈(q, v) here
+    c, dq_a, dv_a = alpha_coefficients(am, gamma, beta, h)  # and x̂ = (1 − α_f) q̈(q⁺, v⁺) + α_f q̈(q, v) here
     lhs = eye - (1.0 - af) * (beta * h * c * Aq + gamma * c * Av)
     # x̂ − (1 − α_f)(βhc Aq + γc Av) x̂ = Aq q + ((1 − α_f)h Aq + Av) v + (1 − α_f)(dq_a Aq + dv_a Av) a
     rhs = np.concatenate([Aq, (1.0 - af) * h * Aq + Av, (1.0 - af) * (dq_a * Aq + dv_a * Av)], axis=-1)
@@ -331,7 +331,7 @@ class GeneralizedAlpha(Integrator):
             raise SimulationError(f"generalized_alpha needs a step h > 0, got {h!r}")
         f, M, K, D = system.implicit_terms(t, q, v)  # f = M q̈ at the step's start
         # v⁺ = v + dv0 + γc x̂ and q⁺ = q ⊕ (dq0 + βhc x̂), dv0 and dq0 the parts known at the start
-        c, dq_a, dv_a = _alpha_step(am, gamma, beta, h)
+        c, dq_a, dv_a = alpha_coefficients(am, gamma, beta, h)
         gp, bp = (1.0 - af) * gamma * c, (1.0 - af) * beta * h * c  # γ', β'
         system.factor(M, K, D, gp, bp)  # first: a state that is not finite is a StepMatrixError
         # the loop hands back the arrays this step returned: same objects, same state (as FSAL)
