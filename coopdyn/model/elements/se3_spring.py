@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from ... import _validate
 from .base import Element, ElementEval, SpringDamper
-from .lie import jlog6, jlog6_of_log, log6
+from .lie import jlog6, jlog6_of_log, jlog6_of_logs, log6
 
 #: complex step [m, rad]: far below round-off, so the derivative carries no truncation error
 COMPLEX_STEP = 1e-30
@@ -88,16 +88,12 @@ class SE3Spring(SpringDamper):
         (see :meth:`Element.matrix_tangent`): along ``e + i·h·Jlog6 δ`` by complex step; they do
         not depend on ξ."""
         e, theta = log6(T_M_G)
-        J = jlog6(T_M_G, e, theta)
-        G_d = np.empty((6, 6))
-        for k in range(6):
-            e_c = e + (1j * COMPLEX_STEP) * J[:, k]
-            J_c = jlog6_of_log(e_c)
-            w = self.hessian(e_c) @ (J_c @ w_K)
-            if self._damped:
-                w = w + self.D @ (J_c @ w_D)
-            G_d[:, k] = (J_c.T @ w).imag / COMPLEX_STEP
-        return G_d, np.zeros((6, 6))
+        E = e + (1j * COMPLEX_STEP) * jlog6(T_M_G, e, theta).T  # row k: e + i·h·Jlog6[:, k]
+        J_c = jlog6_of_logs(E)  # (6, 6, 6): Jlog6 at each row, in one pass
+        w = np.stack([self.hessian(E[k]) @ (J_c[k] @ w_K) for k in range(6)])
+        if self._damped:
+            w = w + (J_c @ w_D) @ self.D.T
+        return np.einsum("kji,kj->ik", J_c, w).imag / COMPLEX_STEP, np.zeros((6, 6))
 
     def tangent(self, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact ``(∂G_f_G/∂δ, ∂G_f_G/∂ξ)`` (see :meth:`Element.tangent`): ``G_f_G =
