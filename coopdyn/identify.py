@@ -240,8 +240,9 @@ def identify(
         initial: start values by name (default: the scene's values).
         integrator: the method the model runs with, a fixed-step one with sensitivities
             (``"rk4"``, ``"symplectic_euler"``, an explicit tableau, or for stiff grasps
-            ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``) for either Jacobian, so that both fit
-            the same model; ``dt`` [s] its step, a divisor of the period (default the period).
+            ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``, ``"generalized_alpha"``) for either
+            Jacobian, so that both fit the same model; ``dt`` [s] its step, a divisor of the period
+            (default the period).
         jacobian: ``"exact"`` (default) or ``"finite-differences"`` (forward differences of
             compiled rollouts, for comparison).
         max_iterations: the optimiser's budget of runs (residual evaluations).

@@ -52,13 +52,14 @@ from .closed_loop import Controller, System
 from .compiled import controller_settings
 from .dynamics import Dynamics
 from .dynamics.backend import kernel_module
-from .dynamics.derivatives import MatrixDerivatives
-from .errors import KernelError, SceneError, SimulationError
+from .dynamics.derivatives import MatrixDerivatives, RelativeTwist
+from .errors import KernelError, SceneError, SimulationError, StepMatrixError
 from .integrators import (
     ROS2,
     AdaptiveROS2,
     DormandPrince,
     ExplicitRungeKutta,
+    Exponential,
     Integrator,
     LinearlyImplicitEuler,
     SymplecticEuler,
@@ -79,6 +80,8 @@ from .parameters import parameters as scene_parameters
 __all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "Transitions", "step_sensitivity", "trajectory_sensitivity"]
 
 LOCAL = pin.ReferenceFrame.LOCAL
+#: what a step carries to the next: generalized-α's algorithmic acceleration and its derivative
+Carry = tuple[np.ndarray, np.ndarray] | None
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
 MAX_SPEED = 1e4
 #: complex step [m, rad] of the chart-rate derivative (far below round-off: no truncation error)
@@ -231,7 +234,6 @@ class Sensitivity:
             self.object_pi = self.model.inertias[j].toDynamicParameters() / scene.object.mass_and_com()[0]
         self.native = None  # the kernel's twin (src/native/sensitivity.hpp), on the native backend
         self.matrices: MatrixDerivatives | None = None  # a linearly implicit step's: ∂(M, K̃, D̃)
-        self._carry: tuple[np.ndarray, np.ndarray] | None = None  # generalized-α's (a, da) within a period
         if self.method.implicit:
             links = self.dynamics.force_links
             self.matrices = MatrixDerivatives(self.model, links, [element.has_damping for *_, element in links])
@@ -408,21 +410,22 @@ class Sensitivity:
 
     # -- one step -----------------------------------------------------------------------------
     def _step(
-        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...], carry: Carry = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray, Carry]:
         """One step from (q, v) under u, with the derivatives of (δq⁺, v⁺) along the seed columns
-        ``(dq, dv, du, dp)`` (each (n, m)); also the start's derivatives and ∂W/∂p there."""
+        ``(dq, dv, du, dp)`` (each (n, m)); also the start's derivatives and ∂W/∂p there, and what
+        the method carries to the next step (generalized-α's acceleration; None: a fresh start)."""
         dq0, dv0, du, dp = seeds
         if self.method.alpha is not None:
-            return self._alpha_step(q, v, u, h, seeds)
+            return self._alpha_step(q, v, u, h, seeds, carry)
         if self.method.gamma is not None:
-            return self._implicit_step(q, v, u, h, seeds)
+            return (*self._implicit_step(q, v, u, h, seeds), None)
         if self.method.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
             d, da_dp, dW_dp = self._stage(q, v, u)
             v1 = v + h * d.acceleration
             dv1 = dv0 + h * _acceleration_derivative(d, da_dp, dq0, dv0, du, dp)
             q1, dq1 = self._integrate(q, h * v1, dq0, h * dv1)
-            return q1, v1, dq1, dv1, d, dW_dp
+            return q1, v1, dq1, dv1, d, dW_dp, None
         A, b = self.method.tableau
         kd: list[np.ndarray] = []
         ka: list[np.ndarray] = []
@@ -454,7 +457,7 @@ class Sensitivity:
         dv1 = dv0 + h * combine(b, dka)
         q1, dq1 = self._integrate(q, Delta, dq0, dDelta)
         assert start is not None
-        return q1, v1, dq1, dv1, start[0], start[1]
+        return q1, v1, dq1, dv1, start[0], start[1], None
 
     def _implicit_step(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
@@ -492,12 +495,12 @@ class Sensitivity:
         return q1, v + h * (1.5 * kv1 + 0.5 * kv2), dq1, dv0 + h * (1.5 * dkv1 + 0.5 * dkv2), d, dW_dp
 
     def _alpha_step(
-        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...], carry: Carry
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray, Carry]:
         """A generalized-α step (:class:`coopdyn.integrators.GeneralizedAlpha`: one linearised solve
         for x̂ = (1 − α_m)a⁺ + α_m a, one Newton correction with the same S) and its derivative, as
-        :meth:`_step`; the algorithmic acceleration a and its derivative are carried in
-        ``self._carry`` from step to step within a period (None: a fresh start, a = q̈)."""
+        :meth:`_step`; ``carry`` is the algorithmic acceleration a and its derivative from the step
+        before (None: a fresh start, a = q̈), and the step returns its own."""
         dq, dv, du, dp = seeds
         assert self.method.alpha is not None
         am, af, gamma, beta = self.method.alpha
@@ -511,7 +514,7 @@ class Sensitivity:
         start = (q, v, cho_factor(M + gp * D + bp * K), M, K)
         a_true = cho_solve(cho_factor(M), f)  # q̈ at the start (f = M q̈), as the integrator's fresh start takes it
         da_true = _acceleration_derivative(d, da_dp, dq, dv, du, dp)
-        a, da = self._carry if self._carry is not None else (a_true, da_true)
+        a, da = carry if carry is not None else (a_true, da_true)
         A0, dA0 = dv_a * a, dv_a * da  # v⁺ = v + A0 + γc x̂
         B0, dB0 = h * v + dq_a * a, h * dv + dq_a * da  # q⁺ = q ⊕ (B0 + βhc x̂)
         f_q, df_q = (1.0 - af) * (B0 - (bp / gp) * A0), (1.0 - af) * (dB0 - (bp / gp) * dA0)
@@ -530,8 +533,7 @@ class Sensitivity:
         xh, dxh = xh + dx, dxh + ddx
         q1, dq1 = self._integrate(q, B0 + (beta * h * c) * xh, dq, dB0 + (beta * h * c) * dxh)
         v1, dv1 = v + A0 + (gamma * c) * xh, dv + dA0 + (gamma * c) * dxh
-        self._carry = ((xh - am * a) / (1.0 - am), (dxh - am * da) / (1.0 - am))
-        return q1, v1, dq1, dv1, d, dW_dp
+        return q1, v1, dq1, dv1, d, dW_dp, ((xh - am * a) / (1.0 - am), (dxh - am * da) / (1.0 - am))
 
     def _solve_derivative(
         self,
@@ -562,7 +564,9 @@ class Sensitivity:
             dG = dG + self._matrix_parameters(q, w_M, at_D, at_K) @ dp
         return np.asarray(cho_solve(S, M @ dy - gp * (K @ df_q) - dG))
 
-    def _matrix_parameters(self, q: np.ndarray, w_M: np.ndarray, at_D: list[Any], at_K: list[Any]) -> np.ndarray:
+    def _matrix_parameters(
+        self, q: np.ndarray, w_M: np.ndarray, at_D: list[RelativeTwist], at_K: list[RelativeTwist]
+    ) -> np.ndarray:
         """∂G/∂p (nv, n_p) for :meth:`_solve_derivative`'s G: a stiffness or damping entry's is the
         unit law's ``Jrᵀ (S_K ξ_K + S_D ξ_D)`` (K̃ and D̃ are linear in them; ξ_K = Jr w_K, ξ_D =
         Jr w_D); the object's mass scales its inertia, so ∂(M w_M)/∂m is the object's columns of
@@ -570,15 +574,14 @@ class Sensitivity:
         assert self.matrices is not None
         out = np.zeros((self.nv, len(self.params)))
         for k, (p, law) in enumerate(zip(self.params, self.units, strict=True)):
-            if law is None or p.link is None:
+            if p.link is None:  # the object's mass
                 matrices = self.matrices
                 Y = pin.computeJointTorqueRegressor(matrices.free, matrices.free_data, q, np.zeros(self.nv), w_M)
                 out[:, k] = Y[:, self.object_columns] @ self.object_pi
                 continue
             i = [link[0] for link in self.matrices.links].index(p.link)
-            X, _, _, Jr, _, _ = at_K[i]
-            ev = law.evaluate(X, np.zeros(6), True)
-            out[:, k] = Jr.T @ (ev.S_K @ at_K[i][4] + ev.S_D @ at_D[i][4])
+            ev = law.evaluate(at_K[i].X, np.zeros(6), True)
+            out[:, k] = at_K[i].Jr.T @ (ev.S_K @ at_K[i].xi + ev.S_D @ at_D[i].xi)
         return out
 
     def _run(
@@ -641,11 +644,11 @@ class Sensitivity:
                 applied[k] = U[k] + self.system.torque(t_k, q, v)
                 du_k = du + _controller_derivative(self.system, t_k, q, v, dq, dv)
                 self.exact = False
-            self._carry = None  # (a new held torque: generalized-α starts afresh, as the integrators do)
+            carry: Carry = None  # (a new held torque: generalized-α starts afresh, as the integrators do)
             for s in range(per):
                 try:
-                    q1, v1, dq1, dv1, d, dW_dp = self._step(q, v, applied[k], h, (dq, dv, du_k, dp))
-                except KernelError as exc:  # (a stage's state is no longer finite)
+                    q1, v1, dq1, dv1, d, dW_dp, carry = self._step(q, v, applied[k], h, (dq, dv, du_k, dp), carry)
+                except (KernelError, StepMatrixError) as exc:  # (a stage's state, or its step matrix, is no longer finite)
                     raise SimulationError(
                         f"sensitivities: diverged in the step from t = {t0 + (k * per + s) * h:.6g} s ({exc})"
                     ) from exc
@@ -706,8 +709,7 @@ class StepMethod:
 
 def step_method(integrator: Any) -> StepMethod:
     """The differentiated form of a method: an explicit Runge–Kutta method (rk4, dopri5's step, a
-    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid (ros2_adaptive: a step
-    of ROS2 at the h given) or generalized-α.
+    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid or generalized-α.
 
     Raises:
         SimulationError: any other method, with the reason.
@@ -719,20 +721,29 @@ def step_method(integrator: Any) -> StepMethod:
         return StepMethod(None)
     if type(method) is LinearlyImplicitEuler and method.jacobian_every == 1:
         return StepMethod(None, 1.0, 1)
-    if type(method) in (ROS2, AdaptiveROS2):
+    if type(method) is ROS2:
         return StepMethod(None, GAMMA, 2)
     if type(method) is Trapezoid:
         return StepMethod(None, method.gamma, 2)
     if type(method) is GeneralizedAlpha:
         return StepMethod(None, alpha=(method.alpha_m, method.alpha_f, method.gamma, method.beta))
+    name = _method_name(method)
     if type(method) is LinearlyImplicitEuler:
-        why = "with jacobian_every > 1 a step reuses an earlier step's matrices, so it is not a function of its own start"
-    elif method.a_stable:
+        why = (
+            f"with jacobian_every = {method.jacobian_every} a step reuses an earlier step's matrices, so it is not a function "
+            "of its own start; use jacobian_every=1"
+        )
+        name = repr(method)
+    elif type(method) is AdaptiveROS2:
+        why = "it adapts its step in a run; 'ros2' is the same step at a fixed h"
+    elif isinstance(method, Exponential):
         why = "its step exponentiates the Gauss–Newton Jacobian, and the matrix exponential's derivative is not taken here"
+    elif isinstance(method, LinearlyImplicitEuler | ROS2 | Trapezoid | GeneralizedAlpha | SymplecticEuler):
+        why = f"it is a subclass of a built-in method ({type(method).__name__}) whose step may differ from the one differentiated"
     else:
         why = "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods are"
     raise SimulationError(
-        f"sensitivities: {_method_name(method)} is not differentiated: {why}; use 'rk4', 'dopri5', 'symplectic_euler', "
+        f"sensitivities: {name} is not differentiated: {why}; use 'rk4', 'dopri5', 'symplectic_euler', "
         "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha' or an explicit tableau (ExplicitRungeKutta)"
     )
 

@@ -101,6 +101,36 @@ def test_element_matrix_tangent_is_the_derivative_of_its_gauss_newton_matrices(n
         assert np.max(np.abs(a - b)) < 1e-7 * scale
 
 
+class _HardBall(BallSpring):
+    """A user's ball law with a cubic term: its own evaluate, no derivatives of its own."""
+
+    def evaluate(self, T_M_G: pin.SE3, xi: np.ndarray, jacobians: bool = False) -> ElementEval:
+        ev = super().evaluate(T_M_G, xi, jacobians)
+        p = T_M_G.translation
+        f = ev.G_f_G.copy()
+        f[:3] -= T_M_G.rotation.T @ (1e6 * (p @ p) * p)
+        S_K = None if ev.S_K is None else ev.S_K + np.diag([1e6 * 3 * (p @ p)] * 3 + [0.0] * 3)
+        return ev._replace(G_f_G=f, S_K=S_K)
+
+
+class _MismatchedHessian(SE3Spring):
+    """A user's SE(3) law whose hessian is not the Hessian its S_K is built from."""
+
+    def hessian(self, e: np.ndarray) -> np.ndarray:
+        return np.asarray(self.K) * 2.0
+
+
+def test_user_laws_get_differences_or_a_clear_error_not_the_built_ins_closed_forms() -> None:
+    X = pin.SE3(pin.exp3(np.array([0.3, -0.2, 0.5])), np.array([0.02, -0.01, 0.03]))
+    xi, w_K, w_D = np.random.default_rng(3).normal(size=(3, 6))
+    ball = _HardBall(np.diag([1e4, 2e4, 3e4]), np.eye(3))
+    assert not ball.exact_tangent and type(ball).matrix_tangent is Element.matrix_tangent
+    ref = richardson(lambda s: ball.evaluate(X * pin.exp6(s * np.eye(6)[0]), xi).G_f_G, 1e-3)
+    assert _rel(ball.tangent(X, xi)[0][:, 0], ref) < 1e-7
+    with pytest.raises(cd.SceneError, match=r"_MismatchedHessian: its Gauss–Newton stiffness S_K is not Jlog6ᵀ·hessian"):
+        _MismatchedHessian(cd.diagonal(1e4, 50.0)).matrix_tangent(X, xi, w_K, w_D)
+
+
 def test_the_logarithm_jacobian_as_a_function_of_the_logarithm_is_jlog6() -> None:
     rng = np.random.default_rng(2)
     for theta in (0.0, 1e-7, 0.1, 0.249, 0.251, 1.5, 3.0):

@@ -302,14 +302,22 @@ def test_with_parameters_changes_only_what_it_names(pandas: cd.Scene) -> None:
 
 
 def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
+    class MyTrapezoid(cd.integrators.Trapezoid):
+        pass
+
     refused = {
-        "exponential": "exponentiates the Gauss–Newton Jacobian",
-        cd.integrators.LinearlyImplicitEuler(jacobian_every=2): "reuses an earlier step's matrices",
+        "exponential": "'exponential' is not differentiated: its step exponentiates the Gauss–Newton Jacobian",
+        cd.integrators.LinearlyImplicitEuler(jacobian_every=2): r"LinearlyImplicitEuler\(jacobian_every=2\) is not .*"
+        "reuses an earlier step's matrices.*use jacobian_every=1",
+        "ros2_adaptive": "adapts its step in a run; 'ros2' is the same step at a fixed h",
+        MyTrapezoid(): r"a subclass of a built-in method \(MyTrapezoid\)",
         "scipy": "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods",
     }
     for method, why in refused.items():
         with pytest.raises(SimulationError, match=f"{why}.*'rk4'.*'implicit_euler'"):
             step_sensitivity(pandas, integrator=method)
+    with pytest.raises(SimulationError, match=r"sensitivities: diverged in the step from t = 0 s \(the step matrix"):
+        step_sensitivity(pandas, dt=1e300, integrator="implicit_euler")
     with pytest.raises(SceneError, match="rigid grasps"):
         step_sensitivity(cd.rigid_limit(pandas))
     with pytest.raises(SceneError, match=r"unknown parameter 'left\.k'.*'left\.<kind>'.*k_linear.*'object\.mass'"):

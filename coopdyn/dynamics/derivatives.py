@@ -25,7 +25,7 @@ pin.integrate(model, q, δq)`` (LOCAL for a free-flyer: δq = body twist · time
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -66,14 +66,20 @@ def force_cross_map(f: np.ndarray) -> np.ndarray:
     return out
 
 
-def relative_twist(
-    model: pin.Model, data: pin.Data, t_id: int, g_id: int
-) -> tuple[pin.SE3, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(X, J_G, J_T, Jr, ξ, ∂ξ/∂q)`` of the frame pair (T, G) after
-    ``computeForwardKinematicsDerivatives``, ``computeJointJacobians`` and
-    ``updateFramePlacements`` at (q, v): X = T_M_G, the frames' LOCAL Jacobians (6, nv), the
-    relative Jacobian ``Jr = J_G − Ad(X⁻¹) J_T``, the relative twist ξ = Jr v and its derivative
-    with respect to q at fixed v (6, nv)."""
+class RelativeTwist(NamedTuple):
+    """A frame pair's (T, G) relative kinematics at (q, v) (:func:`relative_twist`)."""
+
+    X: pin.SE3  #: T_M_G
+    J_G: np.ndarray  #: G's LOCAL Jacobian (6, nv)
+    J_T: np.ndarray  #: T's LOCAL Jacobian (6, nv)
+    Jr: np.ndarray  #: the relative Jacobian J_G − Ad(X⁻¹) J_T (6, nv)
+    xi: np.ndarray  #: the relative twist ξ = Jr v (6,)
+    dxi_dq: np.ndarray  #: ∂ξ/∂q at fixed v (6, nv)
+
+
+def relative_twist(model: pin.Model, data: pin.Data, t_id: int, g_id: int) -> RelativeTwist:
+    """The relative kinematics of the frame pair (T, G) after ``computeForwardKinematicsDerivatives``,
+    ``computeJointJacobians`` and ``updateFramePlacements`` at (q, v)."""
     nv = model.nv
     X = data.oMf[t_id].actInv(data.oMf[g_id])
     J_G = pin.getFrameJacobian(model, data, g_id, LOCAL).reshape(6, nv)
@@ -84,7 +90,7 @@ def relative_twist(
     dVT_dq, _ = pin.getFrameVelocityDerivatives(model, data, t_id, LOCAL)
     V_T = Ad_inv @ pin.getFrameVelocity(model, data, t_id, LOCAL).vector  # V_T in G axes
     xi = pin.getFrameVelocity(model, data, g_id, LOCAL).vector - V_T
-    return X, J_G, J_T, Jr, xi, dVG_dq - motion_cross(V_T) @ Jr - Ad_inv @ dVT_dq
+    return RelativeTwist(X, J_G, J_T, Jr, xi, dVG_dq - motion_cross(V_T) @ Jr - Ad_inv @ dVT_dq)
 
 
 def dynamics_derivatives(
@@ -199,7 +205,7 @@ class MatrixDerivatives:
         self.links, self.damped = list(links), list(damped)
         self.exact = all(type(el).matrix_tangent is not Element.matrix_tangent for *_, el in self.links)
 
-    def kinematics(self, q: np.ndarray, *velocities: np.ndarray) -> list[list[tuple[Any, ...]]]:
+    def kinematics(self, q: np.ndarray, *velocities: np.ndarray) -> list[list[RelativeTwist]]:
         """:func:`relative_twist` of every link at q for each velocity (one pass each)."""
         model, data, zero = self.model, self.data, np.zeros(self.model.nv)
         out = []
@@ -212,7 +218,7 @@ class MatrixDerivatives:
 
     def __call__(
         self, q: np.ndarray, v: np.ndarray, w_M: np.ndarray, w_D: np.ndarray, w_K: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, list[tuple[Any, ...]], list[tuple[Any, ...]]]:
+    ) -> tuple[np.ndarray, np.ndarray, list[RelativeTwist], list[RelativeTwist]]:
         """``(∂G/∂q, ∂G/∂v)`` (nv, nv) at (q, v) in tangent coordinates, and the links'
         :func:`relative_twist` at w_D and at w_K (for the parameters' columns)."""
         model, free, nv = self.model, self.free, self.model.nv
@@ -226,7 +232,7 @@ class MatrixDerivatives:
 
         for (_, t_id, g_id, element), damped, kin_v, kin_D, kin_K in zip(self.links, self.damped, at_v, at_D, at_K, strict=True):
             X, J_G, J_T, Jr, xi, dxi_dq = kin_v
-            xi_K, dxiK_dq, xi_D, dxiD_dq = kin_K[4], kin_K[5], kin_D[4], kin_D[5]
+            xi_K, dxiK_dq, xi_D, dxiD_dq = kin_K.xi, kin_K.dxi_dq, kin_D.xi, kin_D.dxi_dq
             if not damped:
                 xi_D, dxiD_dq = np.zeros(6), np.zeros((6, nv))
             ev = element.evaluate(X, xi, True)

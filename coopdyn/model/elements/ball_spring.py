@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from ... import _validate
 from ...errors import SceneError
-from .base import ElementEval, SpringDamper
+from .base import Element, ElementEval, SpringDamper
 
 
 def _spd3(value: Any, name: str, unit: str) -> np.ndarray:
@@ -50,6 +50,18 @@ class BallSpring(SpringDamper):
     deformation_size: ClassVar[int] = 3
     linear: ClassVar[bool] = True  # with translations only, the deformation is the relative translation
     exact_tangent: ClassVar[bool] = True
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass that changes :meth:`evaluate` without its own :meth:`tangent` or
+        :meth:`matrix_tangent` gets the base class's central differences for it, not this law's
+        closed forms."""
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.keys()
+        if "evaluate" in own and "tangent" not in own:
+            cls.exact_tangent = False
+            cls.tangent = Element.tangent  # type: ignore[method-assign]
+        if "evaluate" in own and "matrix_tangent" not in own:
+            cls.matrix_tangent = Element.matrix_tangent  # type: ignore[method-assign]
 
     def __init__(self, stiffness: Any, damping: Any = None, name: str = "interconnection") -> None:
         D = np.zeros((3, 3)) if damping is None else _spd3(damping, f"{name}: damping", "N·s/m")

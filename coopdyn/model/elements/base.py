@@ -59,6 +59,22 @@ class Parameter(NamedTuple):
 _FD_STEP = 6e-6
 
 
+def _differences(f: Any, T_M_G: pin.SE3, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences (6, 6) of ``f(pose, twist)`` (6,) along ``T_M_G·exp6(δ)`` and ξ: the
+    default :meth:`Element.tangent` and :meth:`Element.matrix_tangent`."""
+    xi = np.asarray(xi, dtype=float)
+    D_d, D_x = np.zeros((6, 6)), np.zeros((6, 6))
+    h_d = _FD_STEP * max(1.0, float(np.linalg.norm(T_M_G.translation)))
+    h_x = _FD_STEP * max(1.0, float(np.linalg.norm(xi)))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = h_d
+        D_d[:, k] = (f(T_M_G * pin.exp6(d), xi) - f(T_M_G * pin.exp6(-d), xi)) / (2.0 * h_d)
+        d[k] = h_x
+        D_x[:, k] = (f(T_M_G, xi + d) - f(T_M_G, xi - d)) / (2.0 * h_x)
+    return D_d, D_x
+
+
 def read_only(array: np.ndarray) -> np.ndarray:
     """``array`` with its write flag cleared (a parameter of an immutable element)."""
     array.setflags(write=False)
@@ -109,19 +125,7 @@ class Element(ABC):
         This default takes central differences of :meth:`evaluate` (about 1e-8 relative; the
         element's :attr:`exact_tangent` stays False and :func:`coopdyn.linearize` says so);
         the built-in elements override it with exact derivatives."""
-        xi = np.asarray(xi, dtype=float)
-        F_d, F_x = np.zeros((6, 6)), np.zeros((6, 6))
-        h_d = _FD_STEP * max(1.0, float(np.linalg.norm(T_M_G.translation)))
-        h_x = _FD_STEP * max(1.0, float(np.linalg.norm(xi)))
-        for k in range(6):
-            d = np.zeros(6)
-            d[k] = h_d
-            plus = self.evaluate(T_M_G * pin.exp6(d), xi).G_f_G
-            minus = self.evaluate(T_M_G * pin.exp6(-d), xi).G_f_G
-            F_d[:, k] = (plus - minus) / (2.0 * h_d)
-            d[k] = h_x
-            F_x[:, k] = (self.evaluate(T_M_G, xi + d).G_f_G - self.evaluate(T_M_G, xi - d).G_f_G) / (2.0 * h_x)
-        return F_d, F_x
+        return _differences(lambda pose, twist: self.evaluate(pose, twist).G_f_G, T_M_G, xi)
 
     def matrix_tangent(self, T_M_G: pin.SE3, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The derivatives of ``S_K w_K + S_D w_D`` (6,) — the Gauss–Newton matrices applied to two
@@ -129,24 +133,14 @@ class Element(ABC):
         the relative twist ξ, each (6, 6): what the derivative of a linearly implicit step needs
         (:mod:`coopdyn.sensitivity`).
 
-        This default takes central differences of :meth:`evaluate` (its :attr:`exact_tangent`
-        stays False); the built-in elements override it with exact derivatives."""
-        xi = np.asarray(xi, dtype=float)
+        This default takes central differences of :meth:`evaluate` (the sensitivities built on it
+        report ``exact = False``); the built-in elements override it with exact derivatives."""
 
         def applied(pose: pin.SE3, twist: np.ndarray) -> np.ndarray:
             ev = self.evaluate(pose, twist, True)
             return np.asarray(ev.S_K @ w_K + ev.S_D @ w_D)
 
-        G_d, G_x = np.zeros((6, 6)), np.zeros((6, 6))
-        h_d = _FD_STEP * max(1.0, float(np.linalg.norm(T_M_G.translation)))
-        h_x = _FD_STEP * max(1.0, float(np.linalg.norm(xi)))
-        for k in range(6):
-            d = np.zeros(6)
-            d[k] = h_d
-            G_d[:, k] = (applied(T_M_G * pin.exp6(d), xi) - applied(T_M_G * pin.exp6(-d), xi)) / (2.0 * h_d)
-            d[k] = h_x
-            G_x[:, k] = (applied(T_M_G, xi + d) - applied(T_M_G, xi - d)) / (2.0 * h_x)
-        return G_d, G_x
+        return _differences(applied, T_M_G, xi)
 
     @property
     def has_damping(self) -> bool:

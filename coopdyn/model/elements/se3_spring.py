@@ -19,6 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from ... import _validate
+from ...errors import SceneError
 from .base import Element, ElementEval, SpringDamper
 from .lie import jlog6, jlog6_of_log, jlog6_of_logs, log6
 
@@ -80,15 +81,30 @@ class SE3Spring(SpringDamper):
         return self.K @ e
 
     def hessian(self, e: np.ndarray) -> np.ndarray:
-        """∂²U/∂e² (6, 6) at the logarithm e (S_K = Jlog6ᵀ·hessian·Jlog6); analytic in e."""
+        """∂²U/∂e² (6, 6) at the logarithm e; analytic in e (a complex e is passed). The law's
+        Gauss–Newton stiffness must be ``S_K = Jlog6ᵀ·hessian(e)·Jlog6`` (:meth:`matrix_tangent`
+        checks it)."""
         return np.asarray(self.K)
 
     def matrix_tangent(self, T_M_G: pin.SE3, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact derivatives of ``S_K w_K + S_D w_D = Jlog6ᵀ (hessian(e) Jlog6 w_K + D Jlog6 w_D)``
         (see :meth:`Element.matrix_tangent`): along ``e + i·h·Jlog6 δ`` by complex step; they do
-        not depend on ξ."""
+        not depend on ξ.
+
+        Raises:
+            SceneError: the law's S_K (from :meth:`evaluate`) is not ``Jlog6ᵀ·hessian(e)·Jlog6``
+                (a subclass whose ``hessian`` does not match its own stiffness)."""
         e, theta = log6(T_M_G)
-        E = e + (1j * COMPLEX_STEP) * jlog6(T_M_G, e, theta).T  # row k: e + i·h·Jlog6[:, k]
+        J = jlog6(T_M_G, e, theta)
+        S_K = self.evaluate(T_M_G, xi, True).S_K
+        assert S_K is not None
+        if not np.allclose(S_K, J.T @ self.hessian(e) @ J, rtol=1e-9, atol=1e-12 * max(1.0, float(np.max(np.abs(S_K))))):
+            raise SceneError(
+                f"{type(self).__name__}: its Gauss–Newton stiffness S_K is not Jlog6ᵀ·hessian(e)·Jlog6, so the "
+                "exact derivative of an implicit step cannot be taken from its hessian; make hessian(e) the Hessian of "
+                "its energy in e (as S_K), or define matrix_tangent"
+            )
+        E = e + (1j * COMPLEX_STEP) * J.T  # row k: e + i·h·Jlog6[:, k]
         J_c = jlog6_of_logs(E)  # (6, 6, 6): Jlog6 at each row, in one pass
         w = np.stack([self.hessian(E[k]) @ (J_c[k] @ w_K) for k in range(6)])
         if self._damped:
