@@ -40,8 +40,9 @@ from .parameters import Parameter, with_parameters
 from .parameters import parameters as scene_parameters
 from .result import Result
 from .rollout import rollout
-from .sensitivity import step_method, step_of, trajectory_sensitivity
+from .sensitivity import step_of, trajectory_sensitivity
 from .simulate import simulate
+from .step_derivative import step_method
 
 __all__ = ["Identification", "Measurements", "identify"]
 
