@@ -124,8 +124,8 @@ class Sensitivity:
             fifth-order solution at the h given — a fixed step: rollout and simulate adapt
             theirs), an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`, or for stiff
             grasps a linearly implicit method: ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``,
-            ``"generalized_alpha"`` (any ρ∞) — stable at steps where the explicit ones diverge;
-            their derivative runs in Python (no compiled twin yet).
+            ``"generalized_alpha"`` (any ρ∞) — stable at steps where the explicit ones diverge —
+            or on a linear scene ``"exponential"``; these run in Python (no compiled twin yet).
         parameters: names as :func:`coopdyn.parameters.parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
             whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
@@ -165,7 +165,7 @@ class Sensitivity:
         self.dynamics, self.nv = self.stepper.dynamics, scene.nv
         self.native = None  # the kernel's twin (src/native/sensitivity.hpp), on the native backend
         kernel = getattr(self.dynamics, "_kernel", None)
-        if kernel is not None and not self.method.implicit:
+        if kernel is not None and self.method.explicit:
             A, b = self.method.tableau if self.method.tableau is not None else ((), ())
             specs = [
                 ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))

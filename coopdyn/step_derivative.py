@@ -26,8 +26,12 @@ differentiated as it stands: ``S dk_v = M dy − γ' K̃ df_q − dG`` with ``G 
 :meth:`~coopdyn.model.elements.Element.matrix_tangent`, Pinocchio's frame-velocity and RNEA
 derivatives) — one more solve with the step's own S per stage. Generalized-α's algorithmic
 acceleration and its derivative are carried from step to step within a period. These run in
-Python on either backend (the dynamics' derivatives are the backend's); the exponential method
-and implicit Euler with ``jacobian_every > 1`` are not differentiated.
+Python on either backend (the dynamics' derivatives are the backend's).
+
+The exponential integrator (linear scenes) steps ``x⁺ = Φ x + Γ u + γ``, Φ, Γ, γ from the matrix
+exponential of ``[[hF, hG, hc], 0]``: ∂x⁺/∂x = Φ, ∂x⁺/∂u = Γ, and a parameter's derivative is the
+exponential's Fréchet derivative in the direction of that matrix's own derivative. Implicit Euler
+with ``jacobian_every > 1`` (a W-method reusing an earlier step's matrices) is not differentiated.
 """
 
 from __future__ import annotations
@@ -37,8 +41,10 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 from scipy.linalg import cho_factor, cho_solve
 
+from .closed_loop import System
 from .dynamics import Dynamics
 from .dynamics.derivatives import MatrixDerivatives, RelativeTwist
 from .errors import SceneError, SimulationError
@@ -55,6 +61,7 @@ from .integrators import (
     get_integrator,
 )
 from .integrators.explicit import combine
+from .integrators.exponential import linear_form
 from .integrators.implicit import GAMMA, GeneralizedAlpha, alpha_coefficients
 from .model.elements.ball_spring import BallSpring
 from .model.elements.lie import dexp_inv_rate
@@ -117,6 +124,8 @@ class StepDerivative:
         if self.method.implicit:
             links = self.dynamics.force_links
             self.matrices = MatrixDerivatives(self.model, links, [element.has_damping for *_, element in links])
+        if self.method.exponential is not None:
+            self._exponential_setup()
 
     def _unit_law(self, p: Parameter) -> Any:
         """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass."""
@@ -183,6 +192,8 @@ class StepDerivative:
             return self._alpha_step(q, v, u, h, seeds, carry)
         if self.method.gamma is not None:
             return (*self._implicit_step(q, v, u, h, seeds), None)
+        if self.method.exponential is not None:
+            return (*self._exponential_step(q, v, u, h, seeds), None)
         if self.method.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
             d, da_dp, dW_dp = self.stage(q, v, u)
             v1 = v + h * d.acceleration
@@ -221,6 +232,67 @@ class StepDerivative:
         q1, dq1 = self.integrate(q, Delta, dq0, dDelta)
         assert start is not None
         return q1, v1, dq1, dv1, start[0], start[1], None
+
+    def _exponential_setup(self) -> None:
+        """The exponential integrator's system (the torque held in ``self._held``), its linear form
+        ``ẋ = F x + G u + c`` and the form's derivatives along each parameter: the acceleration is
+        affine in (q, v, u) for every parameter value, so ∂q̈/∂p is too, and its differences at unit
+        states (from :meth:`stage`, exact) are its coefficients."""
+        self._held = np.zeros(self.scene.n_actuated)
+        self.system = System(self.dynamics, lambda t, q, v: self._held)
+        self.form = linear_form(self.system)  # (refuses a scene that is not linear)
+        self._workspace = self.method.exponential.workspace(self.system)  # type: ignore[union-attr]
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        nv, na, n_p = self.nv, self.scene.n_actuated, len(self.params)
+        q0, zero_v, zero_u = self.system.q0, np.zeros(nv), np.zeros(na)
+
+        def da_dp(q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+            return self.stage(q, v, u)[1]
+
+        base = da_dp(q0, zero_v, zero_u)
+        dA_q = np.stack([da_dp(q0 + e, zero_v, zero_u) - base for e in np.eye(nv)], axis=1)  # (nv, nv, n_p)
+        dA_v = np.stack([da_dp(q0, e, zero_u) - base for e in np.eye(nv)], axis=1)
+        dB = np.stack([da_dp(q0, zero_v, e) - base for e in np.eye(na)], axis=1) if na else np.zeros((nv, 0, n_p))
+        self._form_derivatives = []  # (dF, dG, dc) per parameter
+        for k in range(n_p):
+            dF = np.zeros((2 * nv, 2 * nv))
+            dF[nv:, :nv], dF[nv:, nv:] = dA_q[..., k], dA_v[..., k]
+            dG = np.vstack([np.zeros((nv, na)), dB[..., k]])
+            dc = np.concatenate([np.zeros(nv), base[:, k] - dA_q[..., k] @ q0])
+            self._form_derivatives.append((dF, dG, dc))
+
+    def _exponential_step(
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        """The exponential integrator's step (the integrator's own, the torque held at u) and its
+        derivative: ``x⁺ = Φ x + Γ u + γ`` with Φ, Γ, γ from ``expm`` of ``E = [[hF, hG, hc], 0]``,
+        so ∂x⁺/∂x = Φ, ∂x⁺/∂u = Γ, and along a parameter the Fréchet derivative of ``expm`` at E
+        in the direction of E's own derivative (:func:`scipy.linalg.expm_frechet`)."""
+        dq, dv, du, dp = seeds
+        method = self.method.exponential
+        assert method is not None
+        nv, na, nx = self.nv, self.scene.n_actuated, 2 * self.nv
+        if h not in self._steps:
+            step, _, inner, _ = method.discretisation(self.system, h, self._workspace)
+            Phi, Gamma = step[:, :nx], step[:, nx : nx + na].copy()
+            if inner is not None and na:  # (the inner nodes' torques: the same held u)
+                Gamma += inner.reshape(nx, -1, na).sum(axis=1)
+            F, G, c = self.form
+            E = np.zeros((nx + na + 1, nx + na + 1))
+            E[:nx, :nx], E[:nx, nx : nx + na], E[:nx, -1] = h * F, h * G, h * c
+            rows = []
+            for dF, dG, dc in self._form_derivatives:
+                dE = np.zeros_like(E)
+                dE[:nx, :nx], dE[:nx, nx : nx + na], dE[:nx, -1] = h * dF, h * dG, h * dc
+                rows.append(scipy.linalg.expm_frechet(E, dE, compute_expm=False)[:nx])
+            self._steps[h] = (Phi, Gamma, np.array(rows).reshape(len(rows), nx, nx + na + 1))
+        Phi, Gamma, frechet = self._steps[h]
+        self._held = np.asarray(u, dtype=float)
+        q1, v1 = method.step(self.system, 0.0, q, v, h, self._workspace)
+        d, _, dW_dp = self.stage(q, v, u)
+        z = np.concatenate([q, v, u, [1.0]])
+        dx = Phi @ np.vstack([dq, dv]) + Gamma @ du + np.einsum("pij,j->ip", frechet, z) @ dp
+        return q1, v1, dx[:nv], dx[nv:], d, dW_dp
 
     def _implicit_step(
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
@@ -369,22 +441,30 @@ class StepMethod:
             neither: symplectic Euler.
         stages: a linearly implicit method's stages: 1 (implicit Euler) or 2 (ROS2, the trapezoid).
         alpha: generalized-α's (α_m, α_f, γ, β), else None.
+        exponential: the exponential integrator (linear scenes), else None.
     """
 
     tableau: tuple[Any, ...] | None
     gamma: float | None = None
     stages: int = 0
     alpha: tuple[float, float, float, float] | None = None
+    exponential: Exponential | None = None
 
     @property
     def implicit(self) -> bool:
         """Whether its stages solve with the Gauss–Newton step matrix."""
         return self.gamma is not None or self.alpha is not None
 
+    @property
+    def explicit(self) -> bool:
+        """Whether it is an explicit Runge–Kutta method or symplectic Euler (the kernel's twin's)."""
+        return not self.implicit and self.exponential is None
+
 
 def step_method(integrator: Any) -> StepMethod:
     """The differentiated form of a method: an explicit Runge–Kutta method (rk4, dopri5's step, a
-    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid or generalized-α.
+    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid, generalized-α or the
+    exponential integrator.
 
     Raises:
         SimulationError: any other method, with the reason.
@@ -402,6 +482,8 @@ def step_method(integrator: Any) -> StepMethod:
         return StepMethod(None, method.gamma, 2)
     if type(method) is GeneralizedAlpha:
         return StepMethod(None, alpha=(method.alpha_m, method.alpha_f, method.gamma, method.beta))
+    if type(method) is Exponential:
+        return StepMethod(None, exponential=method)
     name = _method_name(method)
     if type(method) is LinearlyImplicitEuler:
         why = (
@@ -411,15 +493,14 @@ def step_method(integrator: Any) -> StepMethod:
         name = repr(method)
     elif type(method) is AdaptiveROS2:
         why = "it adapts its step in a run; 'ros2' is the same step at a fixed h"
-    elif isinstance(method, Exponential):
-        why = "its step exponentiates the Gauss–Newton Jacobian, and the matrix exponential's derivative is not taken here"
-    elif isinstance(method, LinearlyImplicitEuler | ROS2 | Trapezoid | GeneralizedAlpha | SymplecticEuler):
+    elif isinstance(method, LinearlyImplicitEuler | ROS2 | Trapezoid | GeneralizedAlpha | SymplecticEuler | Exponential):
         why = f"it is a subclass of a built-in method ({type(method).__name__}) whose step may differ from the one differentiated"
     else:
         why = "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods are"
     raise SimulationError(
         f"sensitivities: {name} is not differentiated: {why}; use 'rk4', 'dopri5', 'symplectic_euler', "
-        "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha' or an explicit tableau (ExplicitRungeKutta)"
+        "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha', 'exponential' (linear scenes) or an explicit "
+        "tableau (ExplicitRungeKutta)"
     )
 
 

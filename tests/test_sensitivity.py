@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 import pytest
+import scipy.linalg
 from test_linearize import _rel, richardson
 
 import coopdyn as cd
@@ -201,6 +202,34 @@ def test_the_book_system_steps_are_their_closed_forms(book: cd.Scene) -> None:
     s = step_sensitivity(book, dt=h, integrator="symplectic_euler")
     G = np.block([[np.eye(n) + h * h * A[n:, :n], h * (np.eye(n) + h * A[n:, n:])], [h * A[n:, :n], np.eye(n) + h * A[n:, n:]]])
     np.testing.assert_allclose(s.dx_dx, G, rtol=0, atol=1e-15 * np.max(np.abs(G)))
+    s = step_sensitivity(book, dt=h, integrator="exponential")  # the exact flow: e^{hA} and ∫₀ʰ e^{sA} ds B
+    E = scipy.linalg.expm(np.block([[hA, h * B], [np.zeros((B.shape[1], len(A) + B.shape[1]))]]))
+    np.testing.assert_allclose(s.dx_dx, E[: len(A), : len(A)], rtol=0, atol=1e-14 * np.max(np.abs(R)))
+    np.testing.assert_allclose(s.dx_du, E[: len(A), len(A) :], rtol=0, atol=1e-14 * np.max(np.abs(RB)))
+
+
+def test_the_exponential_integrators_parameter_sensitivities_are_the_derivatives_of_its_rollouts(book: cd.Scene) -> None:
+    """The book system's grasp stiffness, damping and the object's mass, through the Fréchet
+    derivative of the step's matrix exponential, against differences of compiled rollouts."""
+    names = ["tip1.k_z", "tip2.d_z", "object.mass"]
+    U = 5.0 * np.random.default_rng(2).normal(size=(12, book.n_actuated))
+    tr = trajectory_sensitivity(book, U, 1e-2, dt=5e-3, parameters=names, integrator="exponential", initial_state=True)
+    assert tr.exact and tr.dx_dx0 is not None
+
+    def run(s: cd.Scene, x0: np.ndarray | None = None) -> np.ndarray:
+        x0 = np.zeros(2 * book.nv) if x0 is None else x0
+        out = cd.rollout(
+            s, U[None], period=1e-2, dt=5e-3, q0=book.q0 + x0[: book.nv], v0=x0[book.nv :], integrator="exponential", threads=1
+        )
+        return np.concatenate([out.q[0] - tr.q, out.v[0] - tr.v], axis=1)
+
+    np.testing.assert_allclose(run(book), 0.0, atol=1e-13)
+    for k, p in enumerate(tr.parameters):
+        ref = richardson(lambda x, p=p: run(with_parameters(book, {p.name: p.value + x})), 1e-2 * p.value)
+        assert _rel(tr.dx_dp[..., k], ref) < 1e-7, p.name
+    for k in range(2 * book.nv):
+        ref = richardson(lambda x, k=k: run(book, x * np.eye(2 * book.nv)[k]), 1e-3)
+        assert _rel(tr.dx_dx0[..., k], ref) < 1e-7
 
 
 @pytest.mark.parametrize("method", ["rk4", "symplectic_euler", "implicit_euler", "ros2", "trapezoid", "generalized_alpha"])
@@ -305,8 +334,9 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
     class MyTrapezoid(cd.integrators.Trapezoid):
         pass
 
+    with pytest.raises(SimulationError, match="the exponential integrator needs a linear scene; this one is not"):
+        step_sensitivity(pandas, integrator="exponential")
     refused = {
-        "exponential": "'exponential' is not differentiated: its step exponentiates the Gauss–Newton Jacobian",
         cd.integrators.LinearlyImplicitEuler(jacobian_every=2): r"LinearlyImplicitEuler\(jacobian_every=2\) is not .*"
         "reuses an earlier step's matrices.*use jacobian_every=1",
         "ros2_adaptive": "adapts its step in a run; 'ros2' is the same step at a fixed h",
