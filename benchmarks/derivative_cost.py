@@ -8,7 +8,7 @@ one rollout per parameter).
    exact (``Sensitivity.step`` on the compiled kernel), and central differences of compiled
    one-step rollouts (2·(2nv + nu) of them, one ``cd.rollout`` call, one thread) with their
    error against the exact derivative. Then the same for implicit Euler and the trapezoid on
-   grasps of 1e6 N/m (their derivative runs in Python).
+   grasps of 1e6 N/m (the kernel's twin of their derivative).
 2. **A trajectory's Jacobian** (examples/gauss_newton_lift.py's, with respect to 280 torques):
    chained exact step sensitivities against forward differences of compiled rollouts.
 3. **Identification** (examples/identify_stiffness.py's experiment, 2 s at 1 kHz, closed loop):

@@ -54,7 +54,7 @@ class Kernel:
     def rotation_alarm_angle(self) -> float: ...
 
 class Sensitivity:
-    """Exact sensitivities of explicit steps, open loop or closed (src/native/sensitivity.hpp); see coopdyn.sensitivity."""
+    """Exact sensitivities of a method's steps, open loop or closed (src/native/sensitivity.hpp); see coopdyn.sensitivity."""
 
     def __init__(
         self,
@@ -62,6 +62,7 @@ class Sensitivity:
         A: list[list[float]],
         b: list[float],
         symplectic: bool,
+        implicit: tuple[float, ...],
         charts: list[tuple[int, int]],
         parameters: list[Any],
     ) -> None: ...

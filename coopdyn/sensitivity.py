@@ -9,7 +9,7 @@ parameters of the scene (:func:`coopdyn.parameters.parameters`).
 The derivative is that of the discrete map the method computes, not of the continuous flow; one
 step's is :class:`coopdyn.step_derivative.StepDerivative` (how each method's stages are
 differentiated), and a trajectory chains the steps' (forward sensitivities), in Python or in the
-kernel's twin (``src/native/sensitivity.hpp``, the explicit methods).
+kernel's twin (``src/native/sensitivity.hpp``: every method but the exponential one).
 
 ``tests/test_sensitivity.py`` checks every sensitivity against central finite differences of
 the step and of the compiled loop's rollout.
@@ -125,7 +125,7 @@ class Sensitivity:
             theirs), an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`, or for stiff
             grasps a linearly implicit method: ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``,
             ``"generalized_alpha"`` (any ρ∞) — stable at steps where the explicit ones diverge —
-            or on a linear scene ``"exponential"``; these run in Python (no compiled twin yet).
+            or on a linear scene ``"exponential"`` (in Python: it has no compiled twin).
         parameters: names as :func:`coopdyn.parameters.parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
             whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
@@ -165,8 +165,10 @@ class Sensitivity:
         self.dynamics, self.nv = self.stepper.dynamics, scene.nv
         self.native = None  # the kernel's twin (src/native/sensitivity.hpp), on the native backend
         kernel = getattr(self.dynamics, "_kernel", None)
-        if kernel is not None and self.method.explicit:
+        if kernel is not None and self.method.exponential is None:
             A, b = self.method.tableau if self.method.tableau is not None else ((), ())
+            method = self.method
+            implicit = (method.gamma, float(method.stages)) if method.gamma is not None else (method.alpha or ())
             specs = [
                 ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
                 if law is None
@@ -174,8 +176,10 @@ class Sensitivity:
                 for p, law in zip(params, self.stepper.units, strict=True)
             ]
             rows = [list(map(float, row)) for row in A]
-            symplectic = self.method.tableau is None
-            self.native = kernel_module().Sensitivity(kernel, rows, list(map(float, b)), symplectic, self.stepper.charts, specs)
+            symplectic = method.explicit and method.tableau is None
+            self.native = kernel_module().Sensitivity(
+                kernel, rows, list(map(float, b)), symplectic, tuple(map(float, implicit)), self.stepper.charts, specs
+            )
         self.controller = controller
         self.system: System | None = None
         self._callback: Any = None

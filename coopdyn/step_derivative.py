@@ -25,8 +25,8 @@ differentiated as it stands: ``S dk_v = M dy − γ' K̃ df_q − dG`` with ``G 
 (:class:`coopdyn.dynamics.derivatives.MatrixDerivatives`: the elements'
 :meth:`~coopdyn.model.elements.Element.matrix_tangent`, Pinocchio's frame-velocity and RNEA
 derivatives) — one more solve with the step's own S per stage. Generalized-α's algorithmic
-acceleration and its derivative are carried from step to step within a period. These run in
-Python on either backend (the dynamics' derivatives are the backend's).
+acceleration and its derivative are carried from step to step within a period. The kernel's twin
+(``src/native/sensitivity.hpp``) computes the same for every method but the exponential one.
 
 The exponential integrator (linear scenes) steps ``x⁺ = Φ x + Γ u + γ``, Φ, Γ, γ from the matrix
 exponential of ``[[hF, hG, hc], 0]``: ∂x⁺/∂x = Φ, ∂x⁺/∂u = Γ, and a parameter's derivative is the

@@ -295,17 +295,29 @@ def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts(metho
         assert _rel(tr.dx_dx0[..., k].ravel(), ref) < 1e-6
 
 
-@pytest.mark.parametrize("method", ["rk4", "implicit_euler", "trapezoid"])
+@pytest.mark.parametrize("method", ["rk4", "symplectic_euler", "implicit_euler", "ros2", "trapezoid", "generalized_alpha"])
 def test_both_backends_give_the_same_sensitivities(method: str) -> None:
+    """The kernel's twin against the Python reference: a step, and a trajectory of three steps a
+    period (generalized-α's carried acceleration), with the start's columns."""
     if not cd.backend.native_available():
         pytest.skip("coopdyn._native is not built")
     scene = _damped_pandas()
     q, v, tau = _start(scene)
-    names = ["left.k_linear", "object.mass"]
+    names = ["left.k_linear", "right.d_angular", "object.mass"]
     a, b = (
         step_sensitivity(scene, q, v, tau, 2e-3, integrator=method, parameters=names, backend=x) for x in ("python", "native")
     )
     for x, y in ((a.dx_dx, b.dx_dx), (a.dx_du, b.dx_du), (a.dx_dp, b.dx_dp)):
+        assert _rel(x, y) < 1e-10
+    assert cd.Sensitivity(scene, method).native is not None  # (the native backend runs the twin)
+    U = tau + np.random.default_rng(5).normal(size=(4, scene.n_actuated))
+    a, b = (
+        trajectory_sensitivity(scene, U, 3e-3, dt=1e-3, integrator=method, parameters=names, initial_state=True, backend=x)
+        for x in ("python", "native")
+    )
+    np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-13)
+    assert a.dx_dx0 is not None and b.dx_dx0 is not None
+    for x, y in ((a.dx_dp, b.dx_dp), (a.dx_dx0, b.dx_dx0), (a.dwrench_dp, b.dwrench_dp)):
         assert _rel(x, y) < 1e-10
 
 
@@ -346,8 +358,11 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
     for method, why in refused.items():
         with pytest.raises(SimulationError, match=f"{why}.*'rk4'.*'implicit_euler'"):
             step_sensitivity(pandas, integrator=method)
-    with pytest.raises(SimulationError, match=r"sensitivities: diverged in the step from t = 0 s \(the step matrix"):
-        step_sensitivity(pandas, dt=1e300, integrator="implicit_euler")
+    for backend in ("python", "native"):
+        message = r"sensitivities: diverged(.*the step matrix.*not finite.*t = 0 s| in the step from t = 0 s \(the step matrix)"
+        with pytest.raises(SimulationError, match=message), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # (the Python reference's arithmetic on an infinite step)
+            step_sensitivity(pandas, dt=1e300, integrator="implicit_euler", backend=backend)
     with pytest.raises(SceneError, match="rigid grasps"):
         step_sensitivity(cd.rigid_limit(pandas))
     with pytest.raises(SceneError, match=r"unknown parameter 'left\.k'.*'left\.<kind>'.*k_linear.*'object\.mass'"):
@@ -431,6 +446,35 @@ def test_one_period_and_one_parameter_with_the_start_give_the_references_derivat
         assert _rel(a.dx_dp, b.dx_dp) < 1e-10
         if start:
             assert a.dx_dx0 is not None and b.dx_dx0 is not None and _rel(a.dx_dx0, b.dx_dx0) < 1e-10
+
+
+def test_a_python_law_in_an_implicit_step_crosses_into_python_and_is_not_exact(pandas: cd.Scene) -> None:
+    """A user's SE(3) law with its own evaluate (no C++ twin): its tangents are the base class's
+    differences, in both twins alike; the derivative is that of the step to the differences'
+    accuracy, and says it is not exact."""
+    from coopdyn.model.elements import SE3Spring
+
+    class Mine(SE3Spring):
+        kind = "mine_implicit_test"
+
+        def evaluate(self, T_M_G: Any, xi: Any, jacobians: bool = False) -> Any:
+            return super().evaluate(T_M_G, xi, jacobians)
+
+    links = [
+        cd.Interconnection(ic.arm, stiffness=1e4, damping=cd.diagonal(20.0, 0.2), element=Mine)
+        for ic in pandas.interconnection_specs
+    ]
+    with warnings.catch_warnings():  # (no C++ twin: the kernel calls the Python law)
+        warnings.simplefilter("ignore")
+        scene = cd.Scene(pandas.arm_specs, pandas.object, links)
+        q, v, tau = _start(scene)
+        a, b = (step_sensitivity(scene, q, v, tau, 2e-3, integrator="trapezoid", backend=x) for x in ("python", "native"))
+    assert not a.exact and not b.exact
+    assert _rel(a.dx_dx, b.dx_dx) < 1e-9
+    exact = step_sensitivity(pandas.__class__(pandas.arm_specs, pandas.object, [
+        cd.Interconnection(ic.arm, stiffness=1e4, damping=cd.diagonal(20.0, 0.2)) for ic in pandas.interconnection_specs
+    ]), q, v, tau, 2e-3, integrator="trapezoid")  # fmt: skip
+    assert exact.exact and _rel(b.dx_dx, exact.dx_dx) < 1e-6
 
 
 def test_a_python_elements_own_error_reaches_the_user_from_the_kernels_twin(pandas: cd.Scene) -> None:

@@ -203,7 +203,7 @@ class MatrixDerivatives:
         self.free.gravity = pin.Motion.Zero()
         self.free_data = self.free.createData()
         self.links, self.damped = list(links), list(damped)
-        self.exact = all(type(el).matrix_tangent is not Element.matrix_tangent for *_, el in self.links)
+        self.exact = all(element.exact_matrix_tangent for *_, element in self.links)
 
     def kinematics(self, q: np.ndarray, *velocities: np.ndarray) -> list[list[RelativeTwist]]:
         """:func:`relative_twist` of every link at q for each velocity (one pass each)."""

@@ -173,9 +173,9 @@ BOOST_PYTHON_MODULE(_native) {
     .add_property("rotation_alarm", &Kernel::rotation_alarm)
     .add_property("rotation_alarm_angle", &Kernel::rotation_alarm_angle);
   bp::class_<cn::Sensitivity, boost::noncopyable>(
-    "Sensitivity", "Exact sensitivities of explicit steps, open loop or closed (see coopdyn.sensitivity).",
-    bp::init<bp::object, bp::list, bp::list, bool, bp::list, bp::list>(
-      bp::args("self", "kernel", "A", "b", "symplectic", "charts", "parameters")))
+    "Sensitivity", "Exact sensitivities of a method's steps, open loop or closed (see coopdyn.sensitivity).",
+    bp::init<bp::object, bp::list, bp::list, bool, bp::tuple, bp::list, bp::list>(
+      bp::args("self", "kernel", "A", "b", "symplectic", "implicit", "charts", "parameters")))
     .def("run", &cn::Sensitivity::run, bp::args("self", "q0", "v0", "U", "per", "h", "dq0", "dv0", "dU", "dP", "end_wrench", "max_speed", "t0"))
     .def("set_controller", &sensitivity_controller, bp::args("self", "kernel", "controller"));
   bp::class_<Loop, std::shared_ptr<Loop>, boost::noncopyable>(

@@ -1,6 +1,10 @@
-// Exact sensitivities of explicit steps, open loop or closed under a sampled controller: the C++
-// twin of coopdyn/sensitivity.py (same recursion, see its docstring). Each stage's derivatives
-// come from Kernel::compute_derivatives;
+// Exact sensitivities of a method's steps, open loop or closed under a sampled controller: the
+// C++ twin of coopdyn/sensitivity.py and coopdyn/step_derivative.py (same recursion, see their
+// docstrings) for the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit
+// methods (implicit Euler, the two-stage Rosenbrock-W scheme, generalized-α). Each stage's
+// derivatives come from Kernel::compute_derivatives; an implicit stage's solve is differentiated
+// with the step matrix plus the Gauss–Newton matrices' own variation (matrix_derivatives:
+// derivatives.py's MatrixDerivatives);
 // a parameter's ∂q̈/∂p is M⁻¹ ∂Q/∂p, ∂Q/∂p the generalized force of a unit law (an element
 // built from the Python side's unit K or D: the law is linear in them) or, for the object's
 // mass, −J_jᵀ (I·a_gf + v ×* I v)/m with the object's body inertia I (RNEA's body force of the
@@ -10,6 +14,8 @@
 
 #include "controllers/controller.hpp"
 #include "kernel.hpp"
+
+#include <pinocchio/algorithm/rnea-derivatives.hpp>
 
 #include <complex>
 #include <iomanip>
@@ -24,12 +30,28 @@ public:
   // diagonal), or `symplectic` for symplectic Euler; charts: (idx_v, size) of the free-flyer (6)
   // and spherical (3) blocks; parameters: one tuple per parameter, ("element", link, kind,
   // {K, D, ...}) for a unit law, or ("mass", joint, mass) for the object's mass.
-  Sensitivity(bp::object kernel_obj, bp::list A, bp::list b, bool symplectic, bp::list charts, bp::list parameters)
+  // implicit: () for an explicit method, (γ, stages) for a linearly implicit one (1: implicit
+  // Euler, 2: ROS2 or the trapezoid), (α_m, α_f, γ, β) for generalized-α.
+  Sensitivity(bp::object kernel_obj, bp::list A, bp::list b, bool symplectic, bp::tuple implicit, bp::list charts,
+              bp::list parameters)
     : kernel_obj_(kernel_obj), kernel_(bp::extract<Kernel &>(kernel_obj)), model_(kernel_.model()),
-      data_(model_), symplectic_(symplectic) {
+      data_(model_), symplectic_(symplectic), free_model_(model_), mdata_(model_) {
     for (bp::ssize_t i = 0; i < bp::len(A); ++i) A_.push_back(to_doubles(A[i]));
     b_ = to_doubles(b);
-    if (!symplectic_ && (A_.empty() || b_.size() != A_.size()))
+    const std::vector<double> c = to_doubles(implicit);
+    if (c.size() == 2) {
+      gamma_ = c[0];
+      stages_ = static_cast<int>(c[1]);
+      if (!(gamma_ > 0.0) || (stages_ != 1 && stages_ != 2)) throw std::invalid_argument("Sensitivity: bad implicit method");
+    } else if (c.size() == 4) {
+      alpha_ = true;
+      am_ = c[0], af_ = c[1], ag_ = c[2], ab_ = c[3];
+    } else if (!c.empty())
+      throw std::invalid_argument("Sensitivity: bad implicit method");
+    if (implicit_method()) {
+      free_model_.gravity.setZero();
+      free_data_ = std::make_unique<Data>(free_model_);
+    } else if (!symplectic_ && (A_.empty() || b_.size() != A_.size()))
       throw std::invalid_argument("Sensitivity: inconsistent tableau");
     for (bp::ssize_t i = 0; i < bp::len(charts); ++i)
       charts_.emplace_back(bp::extract<Eigen::Index>(charts[i][0]), bp::extract<int>(charts[i][1]));
@@ -96,10 +118,15 @@ public:
         applied.row(k) = u.transpose();
         dUk += dU;
       }
+      carried_ = false;  // (a new held torque: generalized-α starts afresh, as the integrators do)
       for (long s = 0; s < per; ++s) {
-        step(q, v, u, h, dq, dv, dUk, dP, s == 0, q1, v1, dq1, dv1);
-        if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
         const double t_step = t0 + double(k * per + s) * h;
+        try {
+          step(q, v, u, h, dq, dv, dUk, dP, s == 0, q1, v1, dq1, dv1);
+        } catch (const StepMatrixError & e) {  // (an implicit step's matrix: no longer finite, or not definite)
+          throw std::runtime_error(std::string(e.what()) + " in the step from t = " + number(t_step, 6) + " s");
+        }
+        if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
         if (!q1.allFinite() || !v1.allFinite() || !dq1.allFinite() || !dv1.allFinite())
           throw std::runtime_error("the state is not finite after the step from t = " + number(t_step, 6) + " s");
         if (v1.cwiseAbs().maxCoeff() > max_speed)
@@ -232,6 +259,14 @@ private:
             const MatrixXd & dv0, const RefMat & dU, const RefMat & dP, bool sampled, VectorXd & q1, VectorXd & v1,
             MatrixXd & dq1, MatrixXd & dv1) {
     const Eigen::Index nv = model_.nv;
+    if (alpha_) {
+      alpha_step(q, v, u, h, dq0, dv0, dU, dP, sampled, q1, v1, dq1, dv1);
+      return;
+    }
+    if (stages_ > 0) {
+      implicit_step(q, v, u, h, dq0, dv0, dU, dP, sampled, q1, v1, dq1, dv1);
+      return;
+    }
     if (symplectic_) {  // v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
       stage(q, v, u);
       if (sampled) keep_start();
@@ -288,6 +323,236 @@ private:
       dv1 += (h * b_[i]) * dka_[i];
     }
     integrate(q, Delta, dq0, dDelta, q1, dq1);
+  }
+
+  bool implicit_method() const { return stages_ > 0 || alpha_; }
+
+  // f = M q̈, M, K̃, D̃ at the step's start (copies: later stages reuse the kernel's buffers), the
+  // kernel's factorisation of S = M + gp D̃ + bp K̃ (no gains: the torque is held) for the forward
+  // solves, and S's own Cholesky factor for the derivatives' many right-hand sides.
+  void start_matrices(const VectorXd & q, const VectorXd & v, const VectorXd & u, double gp, double bp) {
+    kernel_.kinematics(q, v, true);
+    kernel_.terms(q, v, u);
+    f_ = kernel_.f_terms();
+    M_ = kernel_.mass();
+    K_ = kernel_.stiffness();
+    D_ = kernel_.damping_matrix();
+    const VectorXd gains = VectorXd::Zero(kernel_.actuated().size());
+    kernel_.factor(M_, K_, D_, gp, gains, gains, bp);
+    llt_S_.compute(M_ + gp * D_ + bp * K_);
+  }
+
+  // A linearly implicit step (step_derivative.py: _implicit_step): implicit Euler is the first
+  // stage at γ = 1; the two-stage scheme adds (I − γhJ) k₂ = f(q ⊕ hk_q1, v + hk_v1) − 2k₁.
+  void implicit_step(const VectorXd & q, const VectorXd & v, const VectorXd & u, double h, const MatrixXd & dq0,
+                     const MatrixXd & dv0, const RefMat & dU, const RefMat & dP, bool sampled, VectorXd & q1, VectorXd & v1,
+                     MatrixXd & dq1, MatrixXd & dv1) {
+    const double gh = gamma_ * h;
+    stage(q, v, u);
+    if (sampled) keep_start();
+    const VectorXd a1 = d_.a;
+    MatrixXd da1;
+    acceleration_derivative(dq0, dv0, dU, dP, da1);
+    start_matrices(q, v, u, gh, gh * gh);
+    VectorXd kq1, kv1;
+    kernel_.solve_into(v, f_, kq1, kv1);
+    MatrixXd dkv1;
+    solve_derivative(q, v, gh, gh * gh, v, kv1, a1, da1, dv0, dq0, dv0, dP, dkv1);
+    const MatrixXd dkq1 = dv0 + gh * dkv1;
+    if (stages_ == 1) {
+      integrate(q, h * kq1, dq0, h * dkq1, q1, dq1);
+      v1 = v + h * kv1;
+      dv1 = dv0 + h * dkv1;
+      return;
+    }
+    const VectorXd d2 = h * kq1, v2 = v + h * kv1;
+    const MatrixXd dd2 = h * dkq1, dv2 = dv0 + h * dkv1;
+    VectorXd q2, rate;
+    MatrixXd dq2, drate, da2;
+    integrate(q, d2, dq0, dd2, q2, dq2);
+    stage(q2, v2, u);
+    acceleration_derivative(dq2, dv2, dU, dP, da2);
+    chart(d2, v2, dd2, dv2, rate, drate);
+    const VectorXd fq2 = rate - 2.0 * kq1, y2 = d_.a - 2.0 * kv1;
+    const MatrixXd dfq2 = drate - 2.0 * dkq1, dy2 = da2 - 2.0 * dkv1;
+    VectorXd kq2, kv2;
+    kernel_.solve_into(fq2, M_ * y2, kq2, kv2);
+    MatrixXd dkv2;
+    solve_derivative(q, v, gh, gh * gh, fq2, kv2, y2, dy2, dfq2, dq0, dv0, dP, dkv2);
+    const MatrixXd dkq2 = dfq2 + gh * dkv2;
+    integrate(q, h * (1.5 * kq1 + 0.5 * kq2), dq0, h * (1.5 * dkq1 + 0.5 * dkq2), q1, dq1);
+    v1 = v + h * (1.5 * kv1 + 0.5 * kv2);
+    dv1 = dv0 + h * (1.5 * dkv1 + 0.5 * dkv2);
+  }
+
+  // A generalized-α step (step_derivative.py: _alpha_step; implicit.py: GeneralizedAlpha.step):
+  // the algorithmic acceleration and its derivative are carried from step to step within a
+  // period (a_carry_, da_carry_; carried_ false: a fresh start, a = q̈).
+  void alpha_step(const VectorXd & q, const VectorXd & v, const VectorXd & u, double h, const MatrixXd & dq,
+                  const MatrixXd & dv, const RefMat & dU, const RefMat & dP, bool sampled, VectorXd & q1, VectorXd & v1,
+                  MatrixXd & dq1, MatrixXd & dv1) {
+    const double c = h / (1.0 - am_);  // implicit.py: alpha_coefficients
+    const double dq_a = h * h * (0.5 - ab_ - ab_ * am_ / (1.0 - am_)), dv_a = h * (1.0 - ag_ - ag_ * am_ / (1.0 - am_));
+    const double gp = (1.0 - af_) * ag_ * c, bp = (1.0 - af_) * ab_ * h * c;
+    stage(q, v, u);
+    if (sampled) keep_start();
+    MatrixXd da_true;
+    acceleration_derivative(dq, dv, dU, dP, da_true);
+    start_matrices(q, v, u, gp, bp);
+    const VectorXd a_true = M_.llt().solve(f_);  // q̈ at the start, as the integrator's fresh start takes it
+    const VectorXd a = carried_ ? a_carry_ : a_true;
+    const MatrixXd da = carried_ ? da_carry_ : da_true;
+    const VectorXd A0 = dv_a * a, B0 = h * v + dq_a * a;
+    const MatrixXd dA0 = dv_a * da, dB0 = h * dv + dq_a * da;
+    const VectorXd f_q = (1.0 - af_) * (B0 - (bp / gp) * A0);
+    const MatrixXd df_q = (1.0 - af_) * (dB0 - (bp / gp) * dA0);
+    VectorXd k_q, y;
+    kernel_.solve_into(f_q, (1.0 - af_) * (M_ * A0) + gp * f_, k_q, y);
+    MatrixXd dy;
+    solve_derivative(q, v, gp, bp, f_q, y, (1.0 - af_) * A0 + gp * a_true, (1.0 - af_) * dA0 + gp * da_true, df_q, dq, dv,
+                     dP, dy);
+    VectorXd xh = (y - (1.0 - af_) * A0) / gp;
+    MatrixXd dxh = (dy - (1.0 - af_) * dA0) / gp;
+    integrate(q, B0 + (ab_ * h * c) * xh, dq, dB0 + (ab_ * h * c) * dxh, q1, dq1);
+    v1 = v + A0 + (ag_ * c) * xh;
+    dv1 = dv + dA0 + (ag_ * c) * dxh;
+    stage(q1, v1, u);  // the Newton correction: S dx = M((1 − α_f) q̈(q⁺, v⁺) − x̂) + α_f f
+    MatrixXd da1;
+    acceleration_derivative(dq1, dv1, dU, dP, da1);
+    const VectorXd zero = VectorXd::Zero(model_.nv);
+    VectorXd k_q2, dx;
+    kernel_.solve_into(zero, M_ * ((1.0 - af_) * d_.a - xh) + af_ * f_, k_q2, dx);
+    MatrixXd ddx;
+    solve_derivative(q, v, gp, bp, zero, dx, (1.0 - af_) * d_.a - xh + af_ * a_true, (1.0 - af_) * da1 - dxh + af_ * da_true,
+                     MatrixXd::Zero(model_.nv, dq.cols()), dq, dv, dP, ddx);
+    xh += dx;
+    dxh += ddx;
+    integrate(q, B0 + (ab_ * h * c) * xh, dq, dB0 + (ab_ * h * c) * dxh, q1, dq1);
+    v1 = v + A0 + (ag_ * c) * xh;
+    dv1 = dv + dA0 + (ag_ * c) * dxh;
+    a_carry_ = (xh - am_ * a) / (1.0 - am_);
+    da_carry_ = (dxh - am_ * da) / (1.0 - am_);
+    carried_ = true;
+  }
+
+  // dk_v of a stage solve S k_v = M y − gp K̃ f_q (the step's start's matrices, S = M + gp D̃ +
+  // bp K̃) given dy and df_q (step_derivative.py: _solve_derivative):
+  // S dk_v = M dy − gp K̃ df_q − dG, G = M (k_v − y) + gp D̃ k_v + K̃ (bp k_v + gp f_q).
+  void solve_derivative(const VectorXd & q, const VectorXd & v, double gp, double bp, const VectorXd & f_q,
+                        const VectorXd & k_v, const VectorXd & y, const MatrixXd & dy, const MatrixXd & df_q,
+                        const MatrixXd & dq0, const MatrixXd & dv0, const RefMat & dP, MatrixXd & dk_v) {
+    const VectorXd w_M = k_v - y, w_D = gp * k_v, w_K = bp * k_v + gp * f_q;
+    matrix_derivatives(q, v, w_M, w_D, w_K);
+    MatrixXd rhs = M_ * dy;
+    rhs.noalias() -= gp * (K_ * df_q);
+    rhs.noalias() -= dG_dq_ * dq0;
+    rhs.noalias() -= dG_dv_ * dv0;
+    if (dP.size() && !dP.isZero(0.0)) rhs.noalias() -= matrix_parameters(q, w_M) * dP;
+    dk_v = llt_S_.solve(rhs);
+  }
+
+  // ∂(M w_M + D̃ w_D + K̃ w_K)/∂(q, v) into dG_dq_, dG_dv_ (derivatives.py: MatrixDerivatives):
+  // the body wrenches g = S_K (Jr w_K) + S_D (Jr w_D) on G and −X.dual g on T, their own variation
+  // through Element::matrix_tangent and the twists' derivatives at w_K and w_D, and their motion
+  // with the bodies with ∂(M w_M)/∂q from one RNEA derivative without gravity.
+  void matrix_derivatives(const VectorXd & q, const VectorXd & v, const VectorXd & w_M, const VectorXd & w_D,
+                          const VectorXd & w_K) {
+    const Eigen::Index nv = model_.nv;
+    relative_twists(q, v, at_v_);
+    relative_twists(q, w_D, at_D_);
+    relative_twists(q, w_K, at_K_);
+    ForceList fext(model_.njoints, pinocchio::Force::Zero());
+    dG_dq_.setZero(nv, nv);
+    dG_dv_.setZero(nv, nv);
+    Matrix6 G_d, G_x;
+    auto add_wrench = [&](FrameIndex frame, const Vector6 & f) {
+      const pinocchio::Frame & fr = model_.frames[frame];
+      fext[fr.parentJoint] -= fr.placement.act(pinocchio::Force(f));  // (−: RNEA subtracts Jᵀ fext)
+    };
+    const auto & links = kernel_.links();
+    for (std::size_t i = 0; i < links.size(); ++i) {
+      const Link & lk = links[i];
+      const Twist & tv = at_v_[i];
+      const bool damped = lk.element->damped();
+      const Vector6 xi_D = damped ? at_D_[i].xi : Vector6::Zero().eval();
+      lk.element->evaluate(tv.X, tv.xi, true, ev_);
+      const Vector6 g = ev_.SK * at_K_[i].xi + ev_.SD * xi_D;
+      exact_ = lk.element->matrix_tangent(tv.X, tv.xi, at_K_[i].xi, xi_D, G_d, G_x) && exact_;
+      Matrix6x dg_dq = G_d * tv.Jr + G_x * tv.dxi_dq + ev_.SK * at_K_[i].dxi_dq;
+      if (damped) dg_dq.noalias() += ev_.SD * at_D_[i].dxi_dq;
+      const Matrix6x dg_dv = G_x * tv.Jr;
+      const Matrix6 dual = tv.X.toDualActionMatrix();
+      dG_dq_.noalias() += tv.J_G.transpose() * dg_dq - tv.J_T.transpose() * (dual * (dg_dq + Kernel::force_cross_map(g) * tv.Jr));
+      dG_dv_.noalias() += tv.J_G.transpose() * dg_dv - tv.J_T.transpose() * (dual * dg_dv);
+      add_wrench(lk.grasp, g);
+      add_wrench(lk.tip, -dual * g);
+    }
+    const VectorXd zero = VectorXd::Zero(nv);
+    pinocchio::computeRNEADerivatives(free_model_, *free_data_, q, zero, w_M, fext);
+    dG_dq_ += free_data_->dtau_dq;
+  }
+
+  struct Twist {
+    SE3 X;
+    Matrix6x J_G, J_T, Jr, dxi_dq;
+    Vector6 xi;
+  };
+
+  // Every link's relative kinematics at (q, w) (derivatives.py: relative_twist).
+  void relative_twists(const VectorXd & q, const VectorXd & w, std::vector<Twist> & out) {
+    const Eigen::Index nv = model_.nv;
+    const VectorXd zero = VectorXd::Zero(nv);
+    pinocchio::computeForwardKinematicsDerivatives(model_, mdata_, q, w, zero);
+    pinocchio::computeJointJacobians(model_, mdata_, q);
+    pinocchio::updateFramePlacements(model_, mdata_);
+    const auto & links = kernel_.links();
+    out.resize(links.size());
+    Matrix6x dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
+    for (std::size_t i = 0; i < links.size(); ++i) {
+      const Link & lk = links[i];
+      Twist & t = out[i];
+      t.X = mdata_.oMf[lk.tip].actInv(mdata_.oMf[lk.grasp]);
+      t.J_G.setZero(6, nv);
+      t.J_T.setZero(6, nv);
+      pinocchio::getFrameJacobian(model_, mdata_, lk.grasp, pinocchio::LOCAL, t.J_G);
+      pinocchio::getFrameJacobian(model_, mdata_, lk.tip, pinocchio::LOCAL, t.J_T);
+      const Matrix6 Ad_inv = t.X.toActionMatrixInverse();
+      t.Jr = t.J_G - Ad_inv * t.J_T;
+      dVG_dq.setZero();
+      dVG_dv.setZero();
+      dVT_dq.setZero();
+      dVT_dv.setZero();
+      pinocchio::getFrameVelocityDerivatives(model_, mdata_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
+      pinocchio::getFrameVelocityDerivatives(model_, mdata_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
+      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, mdata_, lk.tip, pinocchio::LOCAL).toVector();
+      t.xi = pinocchio::getFrameVelocity(model_, mdata_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
+      t.dxi_dq = dVG_dq - Kernel::motion_cross(V_T) * t.Jr - Ad_inv * dVT_dq;
+    }
+  }
+
+  // ∂G/∂p (nv, np) at the last matrix_derivatives (step_derivative.py: _matrix_parameters): a unit
+  // law's Jrᵀ (S_K ξ_K + S_D ξ_D); the object's mass, ∂(M w_M)/∂m = J_jᵀ I₁ a_j with a_j the
+  // object's body acceleration for q̈ = w_M at rest and I₁ its inertia per kg.
+  MatrixXd matrix_parameters(const VectorXd & q, const VectorXd & w_M) {
+    const Eigen::Index nv = model_.nv, np = static_cast<Eigen::Index>(params_.size());
+    MatrixXd out = MatrixXd::Zero(nv, np);
+    Matrix6x J(6, nv);
+    const VectorXd zero = VectorXd::Zero(nv);
+    for (Eigen::Index k = 0; k < np; ++k) {
+      const Param & p = params_[static_cast<std::size_t>(k)];
+      if (!p.law) {
+        pinocchio::forwardKinematics(model_, data_, q, zero, w_M);
+        pinocchio::computeJointJacobians(model_, data_, q);
+        J.setZero();
+        pinocchio::getJointJacobian(model_, data_, p.joint, pinocchio::LOCAL, J);
+        out.col(k) = J.transpose() * (p.unit_inertia * data_.a[p.joint]).toVector();
+        continue;
+      }
+      const Twist & tK = at_K_[p.link];
+      p.law->evaluate(tK.X, Vector6::Zero(), true, ev_);
+      out.col(k) = tK.Jr.transpose() * (ev_.SK * tK.xi + ev_.SD * at_D_[p.link].xi);
+    }
+    return out;
   }
 
   // dq̈ = ∂q̈/∂q dq + ∂q̈/∂v dv + ∂q̈/∂τ dU + ∂q̈/∂p dP at the last stage() (a zero dU or dP skipped).
@@ -394,6 +659,21 @@ private:
   MatrixXd J0_, J1_, G_;
   std::unique_ptr<Controller> ctrl_;
   ElementEval ev_;
+  // a linearly implicit method: γ and its stages; generalized-α: (α_m, α_f, γ, β)
+  double gamma_ = 0.0;
+  int stages_ = 0;
+  bool alpha_ = false;
+  double am_ = 0.0, af_ = 0.0, ag_ = 0.0, ab_ = 0.0;
+  Model free_model_;  // the model without gravity: RNEA(q, 0, a) = M a
+  std::unique_ptr<Data> free_data_;
+  Data mdata_;  // scratch: the matrices' kinematics
+  VectorXd f_;
+  MatrixXd M_, K_, D_, dG_dq_, dG_dv_;
+  Eigen::LLT<MatrixXd> llt_S_;
+  std::vector<Twist> at_v_, at_D_, at_K_;
+  bool carried_ = false;  // generalized-α's acceleration, carried within a period
+  VectorXd a_carry_;
+  MatrixXd da_carry_;
 };
 
 }  // namespace coopdyn_native

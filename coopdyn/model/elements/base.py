@@ -143,6 +143,11 @@ class Element(ABC):
         return _differences(applied, T_M_G, xi)
 
     @property
+    def exact_matrix_tangent(self) -> bool:
+        """Whether :meth:`matrix_tangent` is exact: an element's own, not the default differences."""
+        return type(self).matrix_tangent is not Element.matrix_tangent
+
+    @property
     def has_damping(self) -> bool:
         """Whether the element dissipates (``False`` lets the dynamics skip its S_D term)."""
         return True

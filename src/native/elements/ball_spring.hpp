@@ -56,6 +56,19 @@ public:
     return true;
   }
 
+  // Exact, closed form (ball_spring.py: BallSpring.matrix_tangent): R → R·exp(δ_ω^) turns P w
+  // (P = Rᵀ K R) by [P w]^ δ_ω − P [w]^ δ_ω.
+  bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 &, const Vector6 & w_K, const Vector6 & w_D,
+                      Matrix6 & G_d, Matrix6 & G_x) const override {
+    const Matrix3 & R = T_M_G.rotation();
+    G_d.setZero();
+    G_x.setZero();
+    const Matrix3 PK = R.transpose() * K_ * R, PD = R.transpose() * D_ * R;
+    const Vector3 wK = w_K.head<3>(), wD = w_D.head<3>();
+    G_d.topRightCorner<3, 3>() = skew(Vector3(PK * wK)) - PK * skew(wK) + skew(Vector3(PD * wD)) - PD * skew(wD);
+    return true;
+  }
+
 private:
   Matrix3 K_, D_;
   bool damped_;

@@ -54,6 +54,28 @@ public:
     }
     return false;
   }
+  // The derivatives of SK w_K + SD w_D — the Gauss–Newton matrices applied to two fixed twists —
+  // with respect to T_M_G·exp6(δ) (G_d) and to ξ (G_x), as Element.matrix_tangent in Python; true
+  // when exact. This default takes central differences of evaluate (base.py's, same steps).
+  virtual bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, const Vector6 & w_K, const Vector6 & w_D,
+                              Matrix6 & G_d, Matrix6 & G_x) const {
+    constexpr double step = 6e-6;  // base.py's _FD_STEP
+    const double h_d = step * std::max(1.0, T_M_G.translation().norm()), h_x = step * std::max(1.0, xi.norm());
+    ElementEval plus, minus;
+    auto applied = [&](const ElementEval & ev) -> Vector6 { return ev.SK * w_K + ev.SD * w_D; };
+    for (int k = 0; k < 6; ++k) {
+      Vector6 d = Vector6::Zero();
+      d[k] = h_d;
+      evaluate(T_M_G * pinocchio::exp6(pinocchio::Motion(d)), xi, true, plus);
+      evaluate(T_M_G * pinocchio::exp6(pinocchio::Motion(-d)), xi, true, minus);
+      G_d.col(k) = (applied(plus) - applied(minus)) / (2.0 * h_d);
+      d[k] = h_x;
+      evaluate(T_M_G, xi + d, true, plus);
+      evaluate(T_M_G, xi - d, true, minus);
+      G_x.col(k) = (applied(plus) - applied(minus)) / (2.0 * h_x);
+    }
+    return false;
+  }
 };
 
 // An element's parameters as its Python twin gives them (Element.native_parameters(): a dict of

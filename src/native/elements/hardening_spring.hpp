@@ -37,6 +37,15 @@ protected:
     return g;
   }
 
+  // K + κ (|p|² I₃ + 2 p pᵀ) ⊕ 0₃ at a complex e (hardening_spring.py: HardeningSpring.hessian).
+  Eigen::Matrix<std::complex<double>, 6, 6> hessian(const Eigen::Matrix<std::complex<double>, 6, 1> & e) const override {
+    Eigen::Matrix<std::complex<double>, 6, 6> H = SE3Spring::hessian(e);
+    const Eigen::Matrix<std::complex<double>, 3, 1> p = e.head<3>();
+    const std::complex<double> p2 = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+    H.topLeftCorner<3, 3>() += kappa_ * (p2 * Eigen::Matrix<std::complex<double>, 3, 3>::Identity() + 2.0 * p * p.transpose());
+    return H;
+  }
+
 private:
   double kappa_;
 };

@@ -80,6 +80,27 @@ public:
     }
   }
 
+  // Its Python matrix_tangent (its own, or base.py's central differences) and whether that is exact.
+  bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, const Vector6 & w_K, const Vector6 & w_D,
+                      Matrix6 & G_d, Matrix6 & G_x) const override {
+    namespace bp = boost::python;
+    const struct Gil {
+      PyGILState_STATE state = PyGILState_Ensure();
+      ~Gil() { PyGILState_Release(state); }
+    } gil;
+    try {
+      const bp::object out =
+        element_.attr("matrix_tangent")(T_M_G, Eigen::VectorXd(xi), Eigen::VectorXd(w_K), Eigen::VectorXd(w_D));
+      G_d = matrix6(out[0], "matrix_tangent returned a derivative with respect to the pose");
+      G_x = matrix6(out[1], "matrix_tangent returned a derivative with respect to the twist");
+      return bp::extract<bool>(element_.attr("exact_matrix_tangent"))();
+    } catch (const bp::error_already_set &) {
+      throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent raised " + fetch_error());
+    } catch (const std::invalid_argument & e) {
+      throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent: " + e.what());
+    }
+  }
+
 private:
   static Matrix6 matrix6(const boost::python::object & value, const char * name) {
     const Eigen::MatrixXd m = boost::python::extract<Eigen::MatrixXd>(value);

@@ -59,7 +59,35 @@ public:
     return true;
   }
 
+  // Exact, by complex step of Jlog6ᵀ (hessian(e) Jlog6 w_K + D Jlog6 w_D) along e + i·h·Jlog6 δ
+  // (se3_spring.py: SE3Spring.matrix_tangent); nothing depends on ξ.
+  bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, const Vector6 & w_K, const Vector6 & w_D,
+                      Matrix6 & G_d, Matrix6 & G_x) const override {
+    using Complex = std::complex<double>;
+    using Vector6c = Eigen::Matrix<Complex, 6, 1>;
+    constexpr double h = 1e-30;
+    Vector6 e;
+    const double theta = log6(T_M_G, e);
+    Matrix6 J;
+    jlog6(T_M_G, e, theta, J);
+    const Vector6c wK = w_K.cast<Complex>(), wD = w_D.cast<Complex>();
+    for (int k = 0; k < 6; ++k) {
+      const Vector6c e_c = e.cast<Complex>() + Complex(0.0, h) * J.col(k).cast<Complex>();
+      const Eigen::Matrix<Complex, 6, 6> J_c = jlog6_of_log(e_c);
+      Vector6c w = hessian(e_c) * (J_c * wK);
+      if (damped_) w += D_.cast<Complex>() * (J_c * wD);
+      G_d.col(k) = (J_c.transpose() * w).imag() / h;
+    }
+    G_x.setZero();
+    return true;
+  }
+
 protected:
+  // ∂²U/∂e² at a complex e (analytic in e): SK = Jlog6ᵀ·hessian·Jlog6.
+  virtual Eigen::Matrix<std::complex<double>, 6, 6> hessian(const Eigen::Matrix<std::complex<double>, 6, 1> &) const {
+    return K_.cast<std::complex<double>>();
+  }
+
   // ∂U/∂e at a complex e (analytic in e).
   virtual Eigen::Matrix<std::complex<double>, 6, 1> gradient(const Eigen::Matrix<std::complex<double>, 6, 1> & e) const {
     return K_.cast<std::complex<double>>() * e;
