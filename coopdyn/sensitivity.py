@@ -40,6 +40,7 @@ __all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "Transitio
 
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
 MAX_SPEED = 1e4
+_DIVERGED_HINT = "; a smaller step or a method that resolves the scene's modes"
 
 
 @dataclass(frozen=True)
@@ -128,8 +129,9 @@ class Sensitivity:
             or on a linear scene ``"exponential"`` (in Python: it has no compiled twin).
         parameters: names as :func:`coopdyn.parameters.parameters` takes them (e.g. ``["left.k_linear"]``).
         backend: the dynamics' backend, as for :class:`coopdyn.Dynamics`: ``"native"`` runs the
-            whole recursion in the compiled kernel, ``"python"`` the reference; they agree to
-            round-off.
+            whole recursion in the compiled kernel (the exponential method: in Python),
+            ``"python"`` the reference; they agree to round-off open loop, to ~1e-9 closed (the
+            controller's derivative is differences of it).
         controller: a closed loop's controller ``controller(t, q, v) -> τ``, sampled at every
             period's start and held over it (a digital controller; :meth:`trajectory` only). A
             built-in one built for a twin of the scene (the nominal one: same arms and frames,
@@ -321,10 +323,9 @@ class Sensitivity:
                     self._callback.error = None
                     raise error from None
                 self.dynamics.reraise_python_error()  # a Python element's own failure (or Ctrl-C in it)
-                diverged = "not finite" in str(exc) or "a speed of" in str(exc)
-                what = "diverged" if diverged else "the kernel stopped the run"
-                hint = "; a smaller step, or a method that resolves the scene's modes" if diverged else ""
-                raise SimulationError(f"sensitivities: {what}: {exc}{hint}") from exc
+                if str(exc).startswith("diverged"):  # (the twin's divergences: the Python loop's messages)
+                    raise SimulationError(f"sensitivities: {exc}{_DIVERGED_HINT}") from exc
+                raise SimulationError(f"sensitivities: the kernel stopped the run: {exc}") from exc
             Q, V, W, dX, dW, exact, applied = raw
             N, L, m = len(U), len(self.scene.elements), seeds[0].shape[1]
             self.exact = self.exact and bool(exact)
@@ -361,19 +362,17 @@ class Sensitivity:
                     q1, v1, dq1, dv1, d, dW_dp, carry = self.stepper.step(q, v, applied[k], h, (dq, dv, du_k, dp), carry)
                 except (KernelError, StepMatrixError) as exc:  # (a stage's state, or its step matrix, is no longer finite)
                     raise SimulationError(
-                        f"sensitivities: diverged in the step from t = {t0 + (k * per + s) * h:.6g} s ({exc})"
+                        f"sensitivities: diverged in the step from t = {t0 + (k * per + s) * h:.6g} s ({exc}){_DIVERGED_HINT}"
                     ) from exc
                 if s == 0:
                     sample(k, d, dW_dp)
                 if not all(np.all(np.isfinite(x)) for x in (q1, v1, dq1, dv1)):
-                    raise SimulationError(
-                        f"sensitivities: diverged: the state is not finite at t = {t0 + (k * per + s + 1) * h:.6g} s"
-                    )
+                    t1 = t0 + (k * per + s + 1) * h
+                    raise SimulationError(f"sensitivities: diverged: the state is not finite at t = {t1:.6g} s{_DIVERGED_HINT}")
                 if np.max(np.abs(v1)) > MAX_SPEED:
                     raise SimulationError(
                         f"sensitivities: diverged: a speed of {np.max(np.abs(v1)):.3g} rad/s or m/s (above {MAX_SPEED:.6g}) "
-                        f"after the step from t = {t0 + (k * per + s) * h:.6g} s; a smaller step, or a method that resolves "
-                        "the scene's modes"
+                        f"after the step from t = {t0 + (k * per + s) * h:.6g} s{_DIVERGED_HINT}"
                     )
                 q, v, dq, dv = q1, v1, dq1, dv1
         if end_wrench:

@@ -240,7 +240,12 @@ class StepDerivative:
         states (from :meth:`stage`, exact) are its coefficients."""
         self._held = np.zeros(self.scene.n_actuated)
         self.system = System(self.dynamics, lambda t, q, v: self._held)
-        self.form = linear_form(self.system)  # (refuses a scene that is not linear)
+        try:
+            self.form = linear_form(self.system)
+        except SimulationError as exc:  # (a scene that is not linear)
+            raise SimulationError(
+                f"sensitivities: {exc}; a non-linear scene's stiff grasps: 'trapezoid' or 'implicit_euler'"
+            ) from exc
         self._workspace = self.method.exponential.workspace(self.system)  # type: ignore[union-attr]
         self._steps: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         nv, na, n_p = self.nv, self.scene.n_actuated, len(self.params)
@@ -298,7 +303,7 @@ class StepDerivative:
         self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
         """A linearly implicit step (:mod:`coopdyn.integrators.implicit`) and its derivative along
-        the seed columns, as :meth:`_step`. Implicit Euler is the first stage at γ = 1
+        the seed columns, as :meth:`step`. Implicit Euler is the first stage at γ = 1
         (``δ = h k_q``, ``v⁺ = v + h k_v``); the two-stage scheme (ROS2, the trapezoid) adds
         ``(I − γhJ) k₂ = f(q ⊕ hk_q1, v + hk_v1) − 2k₁`` with the same matrices, and
         ``δ = h(3k₁ + k₂)/2``."""
@@ -334,7 +339,7 @@ class StepDerivative:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray, Carry]:
         """A generalized-α step (:class:`coopdyn.integrators.GeneralizedAlpha`: one linearised solve
         for x̂ = (1 − α_m)a⁺ + α_m a, one Newton correction with the same S) and its derivative, as
-        :meth:`_step`; ``carry`` is the algorithmic acceleration a and its derivative from the step
+        :meth:`step`; ``carry`` is the algorithmic acceleration a and its derivative from the step
         before (None: a fresh start, a = q̈), and the step returns its own."""
         dq, dv, du, dp = seeds
         assert self.method.alpha is not None

@@ -22,7 +22,7 @@ import coopdyn as cd
 from coopdyn.closed_loop import System
 from coopdyn.dynamics import Dynamics
 from coopdyn.dynamics.derivatives import MatrixDerivatives
-from coopdyn.errors import SceneError, SimulationError
+from coopdyn.errors import KernelError, SceneError, SimulationError
 from coopdyn.integrators import get_integrator
 from coopdyn.model.elements.lie import dexp_inv_rate, jlog6_of_log
 from coopdyn.parameters import parameters, with_parameters
@@ -475,6 +475,55 @@ def test_a_python_law_in_an_implicit_step_crosses_into_python_and_is_not_exact(p
         cd.Interconnection(ic.arm, stiffness=1e4, damping=cd.diagonal(20.0, 0.2)) for ic in pandas.interconnection_specs
     ]), q, v, tau, 2e-3, integrator="trapezoid")  # fmt: skip
     assert exact.exact and _rel(b.dx_dx, exact.dx_dx) < 1e-6
+
+
+def test_ctrl_c_stops_the_kernels_twin_mid_run(book: cd.Scene) -> None:
+    """A SIGINT while the twin runs in C++ stops it there (it checks for signals every step), not
+    when the whole run is done: the interrupted run takes a small part of the whole one's time."""
+    import os
+    import subprocess
+    import time
+
+    sens = cd.Sensitivity(book, "trapezoid", parameters=["tip1.k_z"])
+    assert sens.native is not None
+    short = np.zeros((2000, book.n_actuated))
+    t0 = time.perf_counter()
+    sens.trajectory(short, 1e-3)
+    per_period = (time.perf_counter() - t0) / len(short)
+    # (from another process: a thread of this one would wait for the GIL the run holds)
+    sender = subprocess.Popen(["sh", "-c", f"sleep 0.2; kill -INT {os.getpid()}"])
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        sens.trajectory(np.zeros((100 * len(short), book.n_actuated)), 1e-3)
+    took = time.perf_counter() - t0
+    sender.wait()
+    assert took < 0.25 * 100 * len(short) * per_period  # (the whole run: 100× the short one)
+
+
+def test_a_python_laws_own_error_in_its_matrix_tangent_reaches_the_user(pandas: cd.Scene) -> None:
+    """What a user's law raises in matrix_tangent inside the kernel's twin is kept and re-raised,
+    named, with the law's own exception as its cause (not a bare kernel message)."""
+    from coopdyn.model.elements import SE3Spring
+
+    class Broken(SE3Spring):
+        kind = "broken_matrix_tangent_test"
+
+        def evaluate(self, T_M_G: Any, xi: Any, jacobians: bool = False) -> Any:
+            return super().evaluate(T_M_G, xi, jacobians)
+
+        def matrix_tangent(self, T_M_G: Any, xi: Any, w_K: Any, w_D: Any) -> Any:
+            raise ValueError("no matrix tangent today")
+
+    links = [cd.Interconnection(ic.arm, stiffness=1e4, element=Broken) for ic in pandas.interconnection_specs]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = cd.Scene(pandas.arm_specs, pandas.object, links)
+        for backend in ("python", "native"):
+            with pytest.raises((ValueError, KernelError), match="no matrix tangent today") as caught:
+                step_sensitivity(scene, integrator="implicit_euler", backend=backend)
+            assert "kernel stopped" not in str(caught.value)
+            if backend == "native":
+                assert "Broken raised ValueError" in str(caught.value) and isinstance(caught.value.__cause__, ValueError)
 
 
 def test_a_python_elements_own_error_reaches_the_user_from_the_kernels_twin(pandas: cd.Scene) -> None:

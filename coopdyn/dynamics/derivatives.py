@@ -78,8 +78,8 @@ class RelativeTwist(NamedTuple):
 
 
 def relative_twist(model: pin.Model, data: pin.Data, t_id: int, g_id: int) -> RelativeTwist:
-    """The relative kinematics of the frame pair (T, G) after ``computeForwardKinematicsDerivatives``,
-    ``computeJointJacobians`` and ``updateFramePlacements`` at (q, v)."""
+    """The relative kinematics of the frame pair (T, G) after ``computeForwardKinematicsDerivatives``
+    and ``updateFramePlacements`` at (q, v) (the first fills the joint Jacobians too)."""
     nv = model.nv
     X = data.oMf[t_id].actInv(data.oMf[g_id])
     J_G = pin.getFrameJacobian(model, data, g_id, LOCAL).reshape(6, nv)
@@ -210,8 +210,7 @@ class MatrixDerivatives:
         model, data, zero = self.model, self.data, np.zeros(self.model.nv)
         out = []
         for w in velocities:
-            pin.computeForwardKinematicsDerivatives(model, data, q, w, zero)
-            pin.computeJointJacobians(model, data, q)
+            pin.computeForwardKinematicsDerivatives(model, data, q, w, zero)  # (fills the joint Jacobians too)
             pin.updateFramePlacements(model, data)
             out.append([relative_twist(model, data, t_id, g_id) for _, t_id, g_id, _ in self.links])
         return out

@@ -183,8 +183,9 @@ __all__ = ["NativeDynamics"]
 
 
 class _ElementCallback:
-    """A Python-only element's ``evaluate`` as the kernel calls it (src/native/elements/
-    python_element.hpp): its evaluation, or None after keeping what it raised in the dynamics'
+    """A Python-only element as the kernel calls it (src/native/elements/python_element.hpp): its
+    ``evaluate`` (calling the callback), ``tangent`` and ``matrix_tangent``, each returning the
+    element's result, or None after keeping what it raised in the dynamics'
     :attr:`NativeDynamics.python_error`, for Python to re-raise once the kernel has returned."""
 
     def __init__(self, element: Any, dynamics: NativeDynamics) -> None:
@@ -192,8 +193,17 @@ class _ElementCallback:
         self.dynamics = weakref.ref(dynamics)
 
     def __call__(self, T_M_G: Any, xi: np.ndarray, jacobians: bool) -> Any:
+        return self._kept(self.element.evaluate, T_M_G, xi, jacobians)
+
+    def tangent(self, T_M_G: Any, xi: np.ndarray) -> Any:
+        return self._kept(self.element.tangent, T_M_G, xi)
+
+    def matrix_tangent(self, T_M_G: Any, xi: np.ndarray, w_K: np.ndarray, w_D: np.ndarray) -> Any:
+        return self._kept(self.element.matrix_tangent, T_M_G, xi, w_K, w_D)
+
+    def _kept(self, method: Any, *args: Any) -> Any:
         try:
-            return self.element.evaluate(T_M_G, xi, jacobians)
+            return method(*args)
         except BaseException as exc:  # Ctrl-C and coopdyn's own errors as they are; the rest named
             if not isinstance(exc, KeyboardInterrupt | CoopdynError):
                 named = KernelError(f"the Python element {type(self.element).__name__} raised {type(exc).__name__}: {exc}")

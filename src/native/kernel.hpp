@@ -54,6 +54,11 @@ struct StepMatrixError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The dynamics' derivatives are not finite at a state (a run that diverged).
+struct NotFiniteError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // Above this rotation of a deformation [rad] the SE(3) logarithm nears its jump at π.
 constexpr double ROTATION_ALARM = 0.9 * M_PI;
 
@@ -521,7 +526,7 @@ public:
     out.da_dtau.resize(nv, na);
     for (Eigen::Index i = 0; i < na; ++i) out.da_dtau.col(i) = Minv.col(actuated_[i]);
     if (!out.da_dq.allFinite() || !out.da_dv.allFinite() || !full_data_.ddq.allFinite())
-      throw std::runtime_error("the dynamics' derivatives are not finite at this state");
+      throw NotFiniteError("the dynamics' derivatives are not finite at this state");
     out.a = full_data_.ddq;
     out.exact = exact;
   }

@@ -12,6 +12,7 @@
 // step of jlog6_of_log (exact to round-off).
 #pragma once
 
+#include "alpha.hpp"
 #include "controllers/controller.hpp"
 #include "kernel.hpp"
 
@@ -35,7 +36,7 @@ public:
   Sensitivity(bp::object kernel_obj, bp::list A, bp::list b, bool symplectic, bp::tuple implicit, bp::list charts,
               bp::list parameters)
     : kernel_obj_(kernel_obj), kernel_(bp::extract<Kernel &>(kernel_obj)), model_(kernel_.model()),
-      data_(model_), symplectic_(symplectic), free_model_(model_), mdata_(model_) {
+      symplectic_(symplectic) {
     for (bp::ssize_t i = 0; i < bp::len(A); ++i) A_.push_back(to_doubles(A[i]));
     b_ = to_doubles(b);
     const std::vector<double> c = to_doubles(implicit);
@@ -48,9 +49,11 @@ public:
       am_ = c[0], af_ = c[1], ag_ = c[2], ab_ = c[3];
     } else if (!c.empty())
       throw std::invalid_argument("Sensitivity: bad implicit method");
-    if (implicit_method()) {
-      free_model_.gravity.setZero();
-      free_data_ = std::make_unique<Data>(free_model_);
+    if (implicit_method()) {  // (a Data is O(nv³): only what the method needs)
+      free_model_ = std::make_unique<Model>(model_);
+      free_model_->gravity.setZero();
+      free_data_ = std::make_unique<Data>(*free_model_);
+      mdata_ = std::make_unique<Data>(model_);
     } else if (!symplectic_ && (A_.empty() || b_.size() != A_.size()))
       throw std::invalid_argument("Sensitivity: inconsistent tableau");
     for (bp::ssize_t i = 0; i < bp::len(charts); ++i)
@@ -71,6 +74,7 @@ public:
         const pinocchio::Inertia & I = model_.inertias[out.joint];
         const Eigen::Matrix<double, 10, 1> pi = I.toDynamicParameters() / mass;  // (linear in them)
         out.unit_inertia = pinocchio::Inertia::FromDynamicParameters(pi);
+        if (!data_) data_ = std::make_unique<Data>(model_);
       } else
         throw std::invalid_argument("Sensitivity: unknown parameter kind " + kind);
       params_.push_back(std::move(out));
@@ -121,16 +125,20 @@ public:
       carried_ = false;  // (a new held torque: generalized-α starts afresh, as the integrators do)
       for (long s = 0; s < per; ++s) {
         const double t_step = t0 + double(k * per + s) * h;
+        if (PyErr_CheckSignals() != 0) throw bp::error_already_set();  // (Ctrl-C: the run holds the GIL)
+        // A divergence's message starts with "diverged" (coopdyn/sensitivity.py reads it so).
         try {
           step(q, v, u, h, dq, dv, dUk, dP, s == 0, q1, v1, dq1, dv1);
         } catch (const StepMatrixError & e) {  // (an implicit step's matrix: no longer finite, or not definite)
-          throw std::runtime_error(std::string(e.what()) + " in the step from t = " + number(t_step, 6) + " s");
+          throw std::runtime_error("diverged in the step from t = " + number(t_step, 6) + " s (" + e.what() + ")");
+        } catch (const NotFiniteError & e) {
+          throw std::runtime_error("diverged in the step from t = " + number(t_step, 6) + " s (" + e.what() + ")");
         }
         if (s == 0) sample(k, q, v, dq, dv, dP, Q, V, W, dX, dW);
         if (!q1.allFinite() || !v1.allFinite() || !dq1.allFinite() || !dv1.allFinite())
-          throw std::runtime_error("the state is not finite after the step from t = " + number(t_step, 6) + " s");
+          throw std::runtime_error("diverged: the state is not finite at t = " + number(t_step + h, 6) + " s");
         if (v1.cwiseAbs().maxCoeff() > max_speed)
-          throw std::runtime_error("a speed of " + number(v1.cwiseAbs().maxCoeff(), 3) + " rad/s or m/s (above " +
+          throw std::runtime_error("diverged: a speed of " + number(v1.cwiseAbs().maxCoeff(), 3) + " rad/s or m/s (above " +
                                    number(max_speed, 6) + ") after the step from t = " + number(t_step, 6) + " s");
         q.swap(q1);
         v.swap(v1);
@@ -169,7 +177,7 @@ private:
       out.resize(na);
       if (ctrl_->reads_kernel()) kernel_.kinematics(qq, vv, false);
       ctrl_->torque(t, qq, vv, out);
-      if (!out.allFinite()) throw std::runtime_error("the controller's torque is not finite at t = " + std::to_string(t) + " s");
+      if (!out.allFinite()) throw std::runtime_error("the controller's torque is not finite at t = " + number(t, 6) + " s");
     };
     torque(q, v, tau);
     VectorXd qq(model_.nq), vv, e, plus, minus;
@@ -230,10 +238,10 @@ private:
     for (Eigen::Index k = 0; k < np; ++k) {
       const Param & p = params_[static_cast<std::size_t>(k)];
       if (!p.law) {  // the object's mass: −J_jᵀ (I a_gf + v ×* I v) per kg
-        if (!kinematics) pinocchio::forwardKinematics(model_, data_, q, v, d_.a);
+        if (!kinematics) pinocchio::forwardKinematics(model_, *data_, q, v, d_.a);
         kinematics = true;
-        const pinocchio::Motion a_gf = data_.a[p.joint] - data_.oMi[p.joint].actInv(model_.gravity);
-        const pinocchio::Force f = p.unit_inertia * a_gf + data_.v[p.joint].cross(p.unit_inertia * data_.v[p.joint]);
+        const pinocchio::Motion a_gf = data_->a[p.joint] - data_->oMi[p.joint].actInv(model_.gravity);
+        const pinocchio::Force f = p.unit_inertia * a_gf + data_->v[p.joint].cross(p.unit_inertia * data_->v[p.joint]);
         J_G.setZero();
         pinocchio::getJointJacobian(model_, data, p.joint, pinocchio::LOCAL, J_G);
         dQ.col(k) = -J_G.transpose() * f.toVector();
@@ -340,6 +348,7 @@ private:
     const VectorXd gains = VectorXd::Zero(kernel_.actuated().size());
     kernel_.factor(M_, K_, D_, gp, gains, gains, bp);
     llt_S_.compute(M_ + gp * D_ + bp * K_);
+    at_v_current_ = false;
   }
 
   // A linearly implicit step (step_derivative.py: _implicit_step): implicit Euler is the first
@@ -391,9 +400,8 @@ private:
   void alpha_step(const VectorXd & q, const VectorXd & v, const VectorXd & u, double h, const MatrixXd & dq,
                   const MatrixXd & dv, const RefMat & dU, const RefMat & dP, bool sampled, VectorXd & q1, VectorXd & v1,
                   MatrixXd & dq1, MatrixXd & dv1) {
-    const double c = h / (1.0 - am_);  // implicit.py: alpha_coefficients
-    const double dq_a = h * h * (0.5 - ab_ - ab_ * am_ / (1.0 - am_)), dv_a = h * (1.0 - ag_ - ag_ * am_ / (1.0 - am_));
-    const double gp = (1.0 - af_) * ag_ * c, bp = (1.0 - af_) * ab_ * h * c;
+    const AlphaCoefficients co = alpha_coefficients(am_, af_, ag_, ab_, h);
+    const double c = co.c, dq_a = co.dq_a, dv_a = co.dv_a, gp = co.gp, bp = co.bp;
     stage(q, v, u);
     if (sampled) keep_start();
     MatrixXd da_true;
@@ -458,7 +466,8 @@ private:
   void matrix_derivatives(const VectorXd & q, const VectorXd & v, const VectorXd & w_M, const VectorXd & w_D,
                           const VectorXd & w_K) {
     const Eigen::Index nv = model_.nv;
-    relative_twists(q, v, at_v_);
+    if (!at_v_current_) relative_twists(q, v, at_v_);  // (once per step: the start's, for every stage solve)
+    at_v_current_ = true;
     relative_twists(q, w_D, at_D_);
     relative_twists(q, w_K, at_K_);
     ForceList fext(model_.njoints, pinocchio::Force::Zero());
@@ -488,7 +497,7 @@ private:
       add_wrench(lk.tip, -dual * g);
     }
     const VectorXd zero = VectorXd::Zero(nv);
-    pinocchio::computeRNEADerivatives(free_model_, *free_data_, q, zero, w_M, fext);
+    pinocchio::computeRNEADerivatives(*free_model_, *free_data_, q, zero, w_M, fext);
     dG_dq_ += free_data_->dtau_dq;
   }
 
@@ -502,30 +511,30 @@ private:
   void relative_twists(const VectorXd & q, const VectorXd & w, std::vector<Twist> & out) {
     const Eigen::Index nv = model_.nv;
     const VectorXd zero = VectorXd::Zero(nv);
-    pinocchio::computeForwardKinematicsDerivatives(model_, mdata_, q, w, zero);
-    pinocchio::computeJointJacobians(model_, mdata_, q);
-    pinocchio::updateFramePlacements(model_, mdata_);
+    Data & data = *mdata_;
+    pinocchio::computeForwardKinematicsDerivatives(model_, data, q, w, zero);  // (fills the joint Jacobians too)
+    pinocchio::updateFramePlacements(model_, data);
     const auto & links = kernel_.links();
     out.resize(links.size());
     Matrix6x dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
     for (std::size_t i = 0; i < links.size(); ++i) {
       const Link & lk = links[i];
       Twist & t = out[i];
-      t.X = mdata_.oMf[lk.tip].actInv(mdata_.oMf[lk.grasp]);
+      t.X = data.oMf[lk.tip].actInv(data.oMf[lk.grasp]);
       t.J_G.setZero(6, nv);
       t.J_T.setZero(6, nv);
-      pinocchio::getFrameJacobian(model_, mdata_, lk.grasp, pinocchio::LOCAL, t.J_G);
-      pinocchio::getFrameJacobian(model_, mdata_, lk.tip, pinocchio::LOCAL, t.J_T);
+      pinocchio::getFrameJacobian(model_, data, lk.grasp, pinocchio::LOCAL, t.J_G);
+      pinocchio::getFrameJacobian(model_, data, lk.tip, pinocchio::LOCAL, t.J_T);
       const Matrix6 Ad_inv = t.X.toActionMatrixInverse();
       t.Jr = t.J_G - Ad_inv * t.J_T;
       dVG_dq.setZero();
       dVG_dv.setZero();
       dVT_dq.setZero();
       dVT_dv.setZero();
-      pinocchio::getFrameVelocityDerivatives(model_, mdata_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
-      pinocchio::getFrameVelocityDerivatives(model_, mdata_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
-      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, mdata_, lk.tip, pinocchio::LOCAL).toVector();
-      t.xi = pinocchio::getFrameVelocity(model_, mdata_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
+      pinocchio::getFrameVelocityDerivatives(model_, data, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
+      pinocchio::getFrameVelocityDerivatives(model_, data, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
+      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, data, lk.tip, pinocchio::LOCAL).toVector();
+      t.xi = pinocchio::getFrameVelocity(model_, data, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
       t.dxi_dq = dVG_dq - Kernel::motion_cross(V_T) * t.Jr - Ad_inv * dVT_dq;
     }
   }
@@ -541,11 +550,11 @@ private:
     for (Eigen::Index k = 0; k < np; ++k) {
       const Param & p = params_[static_cast<std::size_t>(k)];
       if (!p.law) {
-        pinocchio::forwardKinematics(model_, data_, q, zero, w_M);
-        pinocchio::computeJointJacobians(model_, data_, q);
+        pinocchio::forwardKinematics(model_, *data_, q, zero, w_M);
+        pinocchio::computeJointJacobians(model_, *data_, q);
         J.setZero();
-        pinocchio::getJointJacobian(model_, data_, p.joint, pinocchio::LOCAL, J);
-        out.col(k) = J.transpose() * (p.unit_inertia * data_.a[p.joint]).toVector();
+        pinocchio::getJointJacobian(model_, *data_, p.joint, pinocchio::LOCAL, J);
+        out.col(k) = J.transpose() * (p.unit_inertia * data_->a[p.joint]).toVector();
         continue;
       }
       const Twist & tK = at_K_[p.link];
@@ -644,7 +653,7 @@ private:
   bp::object kernel_obj_;  // keeps the kernel alive
   Kernel & kernel_;
   const Model & model_;
-  Data data_;  // scratch: the mass parameter's kinematics
+  std::unique_ptr<Data> data_;  // scratch: the mass parameter's kinematics (only with one)
   bool symplectic_;
   std::vector<std::vector<double>> A_;
   std::vector<double> b_;
@@ -664,13 +673,14 @@ private:
   int stages_ = 0;
   bool alpha_ = false;
   double am_ = 0.0, af_ = 0.0, ag_ = 0.0, ab_ = 0.0;
-  Model free_model_;  // the model without gravity: RNEA(q, 0, a) = M a
+  std::unique_ptr<Model> free_model_;  // the model without gravity: RNEA(q, 0, a) = M a (implicit methods)
   std::unique_ptr<Data> free_data_;
-  Data mdata_;  // scratch: the matrices' kinematics
+  std::unique_ptr<Data> mdata_;  // scratch: the matrices' kinematics (implicit methods)
   VectorXd f_;
   MatrixXd M_, K_, D_, dG_dq_, dG_dv_;
   Eigen::LLT<MatrixXd> llt_S_;
   std::vector<Twist> at_v_, at_D_, at_K_;
+  bool at_v_current_ = false;  // at_v_ is the current step's start's
   bool carried_ = false;  // generalized-α's acceleration, carried within a period
   VectorXd a_carry_;
   MatrixXd da_carry_;

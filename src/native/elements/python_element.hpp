@@ -2,8 +2,9 @@
 // its dynamics and the compiled loop stay in C++, and each evaluation of this element calls its
 // Python `evaluate` (coopdyn/model/elements/base.py), taking the GIL for the call (the compiled
 // loop runs without it). coopdyn/dynamics/native.py passes {"element": the Python element,
-// "evaluate": a wrapper that returns its evaluation, or None after keeping what it raised — a
-// Ctrl-C too — for Python to re-raise once the kernel has returned}.
+// "evaluate": a wrapper that returns its evaluation (and its tangent, matrix_tangent), or None
+// after keeping what it raised — a Ctrl-C too — for Python to re-raise once the kernel has
+// returned}.
 #pragma once
 
 #include "element.hpp"
@@ -61,7 +62,8 @@ public:
     }
   }
 
-  // Its Python tangent (its own, or base.py's central differences) and its exact_tangent.
+  // Its Python tangent (its own, or base.py's central differences) and its exact_tangent; what it
+  // raises is kept for Python, as evaluate's.
   bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const override {
     namespace bp = boost::python;
     const struct Gil {
@@ -69,7 +71,8 @@ public:
       ~Gil() { PyGILState_Release(state); }
     } gil;
     try {
-      const bp::object out = element_.attr("tangent")(T_M_G, Eigen::VectorXd(xi));
+      const bp::object out = evaluate_.attr("tangent")(T_M_G, Eigen::VectorXd(xi));
+      if (out.is_none()) throw std::runtime_error("the Python element " + describe() + "'s tangent raised (re-raised by Python)");
       F_d = matrix6(out[0], "tangent returned a derivative with respect to the pose");
       F_x = matrix6(out[1], "tangent returned a derivative with respect to the twist");
       return bp::extract<bool>(element_.attr("exact_tangent"))();
@@ -80,7 +83,8 @@ public:
     }
   }
 
-  // Its Python matrix_tangent (its own, or base.py's central differences) and whether that is exact.
+  // Its Python matrix_tangent (its own, or base.py's central differences) and whether that is
+  // exact; what it raises is kept for Python, as evaluate's.
   bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, const Vector6 & w_K, const Vector6 & w_D,
                       Matrix6 & G_d, Matrix6 & G_x) const override {
     namespace bp = boost::python;
@@ -90,7 +94,9 @@ public:
     } gil;
     try {
       const bp::object out =
-        element_.attr("matrix_tangent")(T_M_G, Eigen::VectorXd(xi), Eigen::VectorXd(w_K), Eigen::VectorXd(w_D));
+        evaluate_.attr("matrix_tangent")(T_M_G, Eigen::VectorXd(xi), Eigen::VectorXd(w_K), Eigen::VectorXd(w_D));
+      if (out.is_none())
+        throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent raised (re-raised by Python)");
       G_d = matrix6(out[0], "matrix_tangent returned a derivative with respect to the pose");
       G_x = matrix6(out[1], "matrix_tangent returned a derivative with respect to the twist");
       return bp::extract<bool>(element_.attr("exact_matrix_tangent"))();

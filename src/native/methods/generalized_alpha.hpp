@@ -2,6 +2,7 @@
 // linearised Newton iteration per step, the algorithmic acceleration carried between steps.
 #pragma once
 
+#include "../alpha.hpp"
 #include "../loop.hpp"
 
 #include <vector>
@@ -27,9 +28,10 @@ public:
       a_ = M_.llt().solve(f1_);
       ready_ = true;
     }
-    const double c = h / (1.0 - am), gp = (1.0 - af) * g * c, bp = (1.0 - af) * b * h * c;
-    dv0_ = (h * (1.0 - g - g * am / (1.0 - am))) * a_;
-    dq0_ = h * v + (h * h * (0.5 - b - b * am / (1.0 - am))) * a_;
+    const AlphaCoefficients co = alpha_coefficients(am, af, g, b, h);
+    const double c = co.c, gp = co.gp, bp = co.bp;
+    dv0_ = co.dv_a * a_;
+    dq0_ = h * v + co.dq_a * a_;
     L.factor(M_, k.stiffness(), k.damping_matrix(), gp, bp);
     kq1_ = (1.0 - af) * (dq0_ - (bp / gp) * dv0_);
     tmp_.noalias() = M_ * dv0_;
