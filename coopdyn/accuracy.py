@@ -37,10 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from .closed_loop import System
 from .integrators import AdaptiveIntegrator, AdaptiveROS2, DormandPrince, Integrator, Trapezoid
-from .linearize import linearize
+from .linearize import controller_gain, linearize
 from .stability import state_matrix
 
 FORCE_ERROR_LIMIT = 0.1  #: a force error, relative to the peak force, above which a run is not trusted
@@ -319,6 +320,52 @@ def unstable_mode(system: System, q: np.ndarray, v: np.ndarray, duration: float)
     if not top.real * duration > 1.0:
         return ""
     return f"a {abs(top.imag) / (2 * math.pi):.4g} Hz mode growing at {top.real:.3g} /s (×e every {1e3 / top.real:.3g} ms)"
+
+
+def sampled_instability(system: System, t: float, q: np.ndarray, v: np.ndarray) -> str:
+    """What makes a run whose controller is sampled (``control_dt``) diverge whatever the method,
+    or "": its loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`; the controller's
+    gain G by differences, calling it 4·nv more times) and discretised exactly over the period T
+    with the torque held (``[Φ Γ] = expm([[AT, BT], [0, 0]])``), ``Φ + Γ G``, has a spectral radius
+    above 1 where the same gains applied continuously (``A + B G``) keep it smaller — a digital
+    controller too slow for its gains. The sentence gives the growth per period and the longest
+    period that is stable there. "" without a hold, when the sampled loop is stable, or when it
+    cannot be linearised (a diagnosis: this never turns a run into an error)."""
+    period = system.control_dt
+    if period is None or system.controller is None:
+        return ""
+    try:
+        wrench = None if system.object_wrench is None else system.object_wrench(t)
+        continuous = System(system.dynamics, system.controller, system.object_wrench)  # (no hold: its gain)
+        tau = continuous.torque(t, q, v)
+        lin = linearize(system.dynamics.scene, q, v, tau, t=t, object_wrench=wrench)
+        G = controller_gain(continuous, t, q, v)
+    except Exception:  # (whatever the controller raises when probed, the error being reported stands)
+        return ""
+    A, B = lin.A, lin.B
+    n, m = B.shape
+
+    def radius(T: float) -> float:
+        E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
+        return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
+
+    sampled = radius(period)
+    growth = float(np.exp(np.max(np.linalg.eigvals(A + B @ G).real) * period))  # per period, applied continuously
+    if not (sampled > 1.0 + 1e-3 and sampled > growth * (1.0 + 1e-3)):
+        return ""
+    lo, hi = 1e-3 * period, period  # the longest stable period: bisection in log scale
+    if radius(lo) > 1.0 + 1e-9:
+        return ""
+    for _ in range(30):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if radius(mid) <= 1.0 + 1e-9 else (lo, mid)
+    applied = "decays" if growth < 1.0 else f"grows ×{growth:.4g} a period"
+    return (
+        f"the controller, sampled every control_dt = {period * 1e3:.4g} ms and held, makes the loop unstable: linearised "
+        f"exactly at t = {t:.6g} s and discretised exactly over a period it grows ×{sampled:.3g} a period (applied "
+        f"continuously it {applied}). No integrator makes that stable: sample every {lo * 1e3:.3g} ms or faster, or "
+        "lower the gains"
+    )
 
 
 def growth_text(system: System, q: np.ndarray, v: np.ndarray, duration: float) -> str:

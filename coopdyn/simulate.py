@@ -813,10 +813,17 @@ class _Run:
         mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t)
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
+        # (the sampled loop at the start: by the blow-up the state is far from any linearisation)
+        sampled = screening.sampled_instability(self.system, 0.0, self.start[0], self.start[1])
+        cause = (
+            f"The {sampled.removeprefix('the ')}. As for the method, at the last saved state"
+            if sampled
+            else "At the last saved state"
+        )
         partial = self.result("diverged")
         raise DivergenceError(
             f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
-            f"At the last saved state, {diagnosis}",
+            f"{cause}, {diagnosis}",
             result=partial,
             advice=advice,
         )
