@@ -1,5 +1,5 @@
-"""``coopdyn.identify``: interconnection stiffness and damping (and the object's mass) fitted to
-measured joint angles and grasp wrenches.
+"""``coopdyn.identify``: interconnection stiffness and damping (and where the grasps sit on the
+object, and the object's mass) fitted to measured joint angles and grasp wrenches.
 
 The fit is output error: the scene is run from the known start — open loop under the measured
 torques (each held for one period, as :func:`coopdyn.rollout` plays them), or closed loop under
@@ -8,7 +8,8 @@ angles and grasp wrenches are compared with the measured ones, each divided by i
 An arm under constant torques is unstable (it falls away from any pose it does not hold), so an
 open-loop replay drifts away exponentially from a record longer than a fraction of a second
 whatever the parameters; a record of normal, closed-loop operation is fitted with its controller.
-``scipy.optimize.least_squares`` (trust-region reflective, parameters kept ≥ 0) minimises the sum
+``scipy.optimize.least_squares`` (trust-region reflective; stiffness, damping and mass kept ≥ 0,
+grasp positions free) minimises the sum
 of squares with the exact Jacobian of every sample with respect to the parameters
 (:func:`coopdyn.sensitivity.trajectory_sensitivity`) — or, for comparison, by finite
 differences of compiled rollouts (``jacobian="finite-differences"``: one rollout per parameter
@@ -271,14 +272,20 @@ def identify(
     unknown = set(start) - set(names)
     if unknown:
         raise SimulationError(f"identify: initial names {sorted(unknown)}, which are not among the parameters {names}")
-    for p in params:
-        if p.name not in start and p.value == 0.0:
+    positions = np.array([p.unit == "m" for p in params])  # grasp positions: any sign, no bound
+    for p, position in zip(params, positions, strict=True):
+        if p.name not in start and p.value == 0.0 and not position:
             raise SimulationError(
                 f"identify: {p.name} is 0 {p.unit} in the scene, which cannot start the fit (its scale); give a positive guess: "
                 f"initial={{{p.name!r}: ...}}"
             )
     x0 = np.array(
-        [_validate.positive(start.get(p.name, p.value), f"initial value of {p.name}", p.unit, SimulationError) for p in params]
+        [
+            (_validate.number if position else _validate.positive)(
+                start.get(p.name, p.value), f"initial value of {p.name}", p.unit, SimulationError
+            )
+            for p, position in zip(params, positions, strict=True)
+        ]
     )
     U, joints, wrench, q0, v0 = _checked(scene, measurements, controller is not None)
     period = _validate.positive(measurements.period, "measurements.period", "s", SimulationError)
@@ -355,8 +362,8 @@ def identify(
             fun,
             x0,
             jac=exact_jac if jacobian == "exact" else "2-point",
-            bounds=(np.zeros(len(x0)), np.full(len(x0), np.inf)),
-            x_scale=np.abs(x0),
+            bounds=(np.where(positions, -np.inf, 0.0), np.full(len(x0), np.inf)),
+            x_scale=np.where(positions, np.maximum(np.abs(x0), POSITION_SCALE), np.abs(x0)),
             max_nfev=max_iterations,
             method="trf",
         )
@@ -374,7 +381,7 @@ def identify(
     except np.linalg.LinAlgError:
         cov = np.full((len(x0), len(x0)), np.inf)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    _warn_if_untrustworthy(names, fit.x, std, math.sqrt(s2), [p.unit for p in params], fit.active_mask)
+    _warn_if_untrustworthy(names, fit.x, std, math.sqrt(s2), [p.unit for p in params], fit.active_mask, positions)
     best = model_scene(fit.x)
     n_joint = (U.shape[0]) * len(q_idx)
     joint_rms = math.sqrt(float(np.mean((r[:n_joint] / w_joint) ** 2)))
@@ -402,13 +409,17 @@ def identify(
 
 #: a weighted residual RMS above this says the model does not explain the data (≈ 1 when it does)
 MISFIT = 3.0
+#: [m] a grasp position's scale: the fit's step scale for one near 0, and the uncertainty above
+#: which it counts as not determined by the data
+POSITION_SCALE = 0.01
 
 
 def _warn_if_untrustworthy(
-    names: list[str], x: np.ndarray, std: np.ndarray, rms: float, units: list[str], active: np.ndarray
+    names: list[str], x: np.ndarray, std: np.ndarray, rms: float, units: list[str], active: np.ndarray, positions: np.ndarray
 ) -> None:
     """FitWarning: the model does not explain the data, or a parameter is not determined by them
-    (its uncertainty as large as its value, or the fit stopped at its bound 0)."""
+    (its uncertainty as large as its value — a grasp position's: above :data:`POSITION_SCALE` —, or
+    the fit stopped at its bound 0)."""
     bound = [n for n, a in zip(names, active, strict=True) if a]
     if bound:
         warnings.warn(
@@ -427,12 +438,13 @@ def _warn_if_untrustworthy(
         )
     loose = [
         f"{n} = {v:.3g} ± {e:.3g} {u}"
-        for n, v, e, u, a in zip(names, x, std, units, active, strict=True)
-        if not a and not e < abs(v)
+        for n, v, e, u, a, position in zip(names, x, std, units, active, positions, strict=True)
+        if not a and not e < (POSITION_SCALE if position else abs(v))
     ]
     if loose:
         warnings.warn(
-            f"identify: not determined by these data (the uncertainty is as large as the value): {', '.join(loose)}; a record "
+            f"identify: not determined by these data (the uncertainty is as large as the value, or above "
+            f"{POSITION_SCALE * 100:g} cm for a grasp position): {', '.join(loose)}; a record "
             "that excites it (motion across that axis, a load on it) or fewer parameters",
             FitWarning,
             stacklevel=3,

@@ -1,6 +1,6 @@
-"""Named physical parameters of a scene — grasp stiffness and damping entries, the object's mass
-— and the scene with other values: what :mod:`coopdyn.sensitivity` differentiates with respect to
-and :func:`coopdyn.identify` fits.
+"""Named physical parameters of a scene — grasp stiffness and damping entries, where the grasps
+sit on the object, the object's mass — and the scene with other values: what
+:mod:`coopdyn.sensitivity` differentiates with respect to and :func:`coopdyn.identify` fits.
 
 A name is ``"<interconnection>.<kind>"`` or ``"object.mass"`` (:func:`parameters` says which
 kinds); :func:`with_parameters` rebuilds the scene with new values, its grasps kept where they were.
@@ -36,6 +36,8 @@ def _kinds() -> dict[str, tuple[str, tuple[int, ...], str, str]]:
         out[f"{m}_angular"] = (matrix, (3, 4, 5), units[1], f"rotational {matrix} (rx, ry, rz alike)")
         for j, axis in enumerate(AXES):
             out[f"{m}_{axis}"] = (matrix, (j,), units[j // 3], f"{matrix} along {axis}")
+    for j, axis in enumerate(AXES[:3]):
+        out[f"grasp_{axis}"] = ("grasp", (j,), "m", f"the grasp frame's position along the object frame's {axis}")
     return out
 
 
@@ -54,7 +56,7 @@ class Parameter:
     value: float  #: its value in the scene [unit]
     unit: str  #: e.g. ``"N/m"``
     link: int | None  #: the interconnection's index in ``scene.links``; None for the object's mass
-    kind: str  #: ``k_linear``, ``k_angular``, ``d_linear``, ``d_angular`` or ``mass``
+    kind: str  #: a key of :data:`KINDS` (``k_linear``, ``d_x``, ``grasp_z``, …) or ``mass``
 
 
 def _names_help(scene: Scene) -> str:
@@ -76,12 +78,15 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
     [N·s/m, N·m·s/rad], one entry each; or ``k_linear``, ``k_angular``, ``d_linear``,
     ``d_angular``: one value for the three entries of a block, which must then be k·I₃ (isotropic).
     The other entries stay as they are. A ball spring has the translational ones only.
+    ``grasp_x``, ``grasp_y``, ``grasp_z`` [m]: where the grasp frame G sits on a rigid object, its
+    position along the object frame's axes (its orientation kept; any element law).
     ``object.mass`` [kg] is a rigid object's mass, its rotational inertia scaled with it (the same
     shape, a different density).
 
     Raises:
         SceneError: an unknown name, a repeated one, an element whose law is not linear in K and D
-            (a beam, a user's law), or a block that is not isotropic.
+            (a beam, a user's law) for a stiffness or damping, a block that is not isotropic, or a
+            grasp position on an elastic object (its grasps ride on nodes).
     """
     if not isinstance(scene, Scene):
         raise SceneError(f"parameters: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -105,6 +110,14 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
             raise SceneError(f"unknown parameter {name!r}; this scene has {_names_help(scene)}")
         i = links[owner]
         element = scene.links[i].element
+        if KINDS[kind][0] == "grasp":
+            if scene.object.with_mass(1.0) is None:  # (not one body on one joint: the protocol's answer)
+                raise SceneError(
+                    f"parameter {name!r}: the object is a {type(scene.object).__name__}; a grasp position is a parameter "
+                    "on a rigid object only (on an elastic one the grasp rides on its nearest node)"
+                )
+            out.append(Parameter(name, float(_grasp_pose(scene, i).translation[KINDS[kind][1][0]]), "m", i, kind))
+            continue
         if type(element) not in _LINEAR_IN_KD:  # (a subclass may change the law: not known to be linear)
             raise SceneError(
                 f"parameter {name!r}: the {type(element).__name__} law is not known to be linear in its stiffness and damping; "
@@ -137,14 +150,15 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
 def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
     """A new scene, equal to ``scene`` but for the named parameters' values (see :func:`parameters`).
 
-    The grasps, the start state and everything else are kept; a grasp that was placed at an arm's
-    tool (``grasp=None``) is kept where it was.
+    The grasps (but a named grasp position), the start state and everything else are kept; a grasp
+    that was placed at an arm's tool (``grasp=None``) is kept where it was.
     """
     names = list(values)
     params = parameters(scene, names)
     specs = list(scene.interconnection_specs)
     obj = scene.object
     matrices: dict[int, dict[str, np.ndarray]] = {}  # link → its new K and D
+    grasps: dict[int, pin.SE3] = {}  # link → its grasp frame moved on the object
     for p in params:
         if p.kind == "mass":
             changed = obj.with_mass(_validate.positive(values[p.name], "parameter 'object.mass'", "kg"))
@@ -152,16 +166,33 @@ def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
             obj = changed
             continue
         assert p.link is not None
-        value = _validate.non_negative(values[p.name], f"parameter {p.name!r}", p.unit)
         element: Any = scene.links[p.link].element
-        current = matrices.setdefault(p.link, {"stiffness": np.array(element.K, float), "damping": np.array(element.D, float)})
         matrix, idx, _, _ = KINDS[p.kind]
+        if matrix == "grasp":
+            moved = grasps.setdefault(p.link, _grasp_pose(scene, p.link).copy())
+            position = moved.translation.copy()
+            position[idx[0]] = _validate.number(values[p.name], f"parameter {p.name!r}", p.unit, SceneError)
+            moved.translation = position
+            continue
+        value = _validate.non_negative(values[p.name], f"parameter {p.name!r}", p.unit)
+        current = matrices.setdefault(p.link, {"stiffness": np.array(element.K, float), "damping": np.array(element.D, float)})
         current[matrix][np.ix_(idx, idx)] = value * np.eye(len(idx))
-    for i, new in matrices.items():
+    for i in sorted(set(matrices) | set(grasps)):
         spec = specs[i]
-        grasp = spec.grasp if spec.grasp is not None else _grasp_pose(scene, i)
-        specs[i] = dataclasses.replace(spec, grasp=grasp, stiffness=new["stiffness"], damping=new["damping"])
+        grasp = grasps.get(i, spec.grasp if spec.grasp is not None else _grasp_pose(scene, i))
+        new = matrices.get(i, {"stiffness": spec.stiffness, "damping": spec.damping})
+        fixture = spec.fixture
+        if spec.arm is None and fixture is None:  # (a fixture placed at G's start: kept there when G moves)
+            fixture = _world_pose(scene, scene.links[i].tip_frame)
+        specs[i] = dataclasses.replace(spec, grasp=grasp, stiffness=new["stiffness"], damping=new["damping"], fixture=fixture)
     return Scene(list(scene.arm_specs), obj, specs, scene.gravity)
+
+
+def _world_pose(scene: Scene, frame: int) -> pin.SE3:
+    """A frame's world pose at the scene's start."""
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    return data.oMf[frame].copy()
 
 
 def _grasp_pose(scene: Scene, link: int) -> pin.SE3:

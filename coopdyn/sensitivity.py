@@ -172,10 +172,12 @@ class Sensitivity:
             method = self.method
             implicit = (method.gamma, float(method.stages)) if method.gamma is not None else (method.alpha or ())
             specs = [
-                ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
+                ("offset", p.link, list(map(float, self.stepper.offsets[k])))
+                if k in self.stepper.offsets
+                else ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
                 if law is None
                 else ("element", p.link, lookup(type(law)).native, law.native_parameters())
-                for p, law in zip(params, self.stepper.units, strict=True)
+                for k, (p, law) in enumerate(zip(params, self.stepper.units, strict=True))
             ]
             rows = [list(map(float, row)) for row in A]
             symplectic = method.explicit and method.tableau is None

@@ -46,7 +46,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from .closed_loop import System
 from .dynamics import Dynamics
-from .dynamics.derivatives import MatrixDerivatives, RelativeTwist
+from .dynamics.derivatives import MatrixDerivatives, RelativeTwist, motion_cross
 from .errors import SceneError, SimulationError
 from .integrators import (
     ROS2,
@@ -115,6 +115,8 @@ class StepDerivative:
                     )
         self.nv = nv
         self.units = [self._unit_law(p) for p in params]
+        #: a grasp position's direction: the right perturbation of G per metre, (R_OGᵀ e_axis, 0)
+        self.offsets = {k: self._offset(p) for k, p in enumerate(params) if KINDS.get(p.kind, ("",))[0] == "grasp"}
         self.exact = True
         if any(p.kind == "mass" for p in params):
             j = scene.object_joint
@@ -127,9 +129,19 @@ class StepDerivative:
         if self.method.exponential is not None:
             self._exponential_setup()
 
+    def _offset(self, p: Parameter) -> np.ndarray:
+        """A grasp position's direction in G's body twist: moving G by e along the object frame's
+        axis is ``G·exp6((R_OGᵀ e, 0))`` (R_OG: G's orientation in the object frame)."""
+        assert p.link is not None
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, self.scene.q0)
+        R = data.oMf[self.scene.object_frame].actInv(data.oMf[self.scene.links[p.link].grasp_frame]).rotation
+        return np.concatenate([R.T @ np.eye(3)[KINDS[p.kind][1][0]], np.zeros(3)])
+
     def _unit_law(self, p: Parameter) -> Any:
-        """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass."""
-        if p.link is None:
+        """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass and a
+        grasp position."""
+        if p.link is None or KINDS[p.kind][0] == "grasp":
             return None
         element = self.scene.links[p.link].element
         matrix, idx, _, _ = KINDS[p.kind]
@@ -155,22 +167,41 @@ class StepDerivative:
             M = pin.crba(model, data, q)
             M = np.triu(M) + np.triu(M, 1).T
             dQ = np.zeros((self.nv, n_p))
+            mass = [p.kind == "mass" for p in self.params]
             for k, (p, law) in enumerate(zip(self.params, self.units, strict=True)):
-                if law is None:
+                if p.link is None:
                     continue
-                link = self.scene.links[p.link]  # type: ignore[index]
+                link = self.scene.links[p.link]
                 X = data.oMf[link.tip_frame].actInv(data.oMf[link.grasp_frame])
                 J_G = pin.getFrameJacobian(model, data, link.grasp_frame, LOCAL).reshape(6, self.nv)
                 J_T = pin.getFrameJacobian(model, data, link.tip_frame, LOCAL).reshape(6, self.nv)
                 Jr = J_G - X.toActionMatrixInverse() @ J_T
+                if k in self.offsets:
+                    dQ[:, k], dW_dp[p.link, :, k] = self._offset_force(link.element, X, Jr, v, self.offsets[k])
+                    continue
                 f = law.evaluate(X, Jr @ v).G_f_G  # (the law with p's entries alone at 1: ∂G_f_G/∂p)
                 dQ[:, k] = Jr.T @ f
                 dW_dp[p.link, :, k] = f
-            if any(law is None for law in self.units):  # the object's mass: −∂(M q̈ + h)/∂m at q̈
+            if any(mass):  # the object's mass: −∂(M q̈ + h)/∂m at q̈
                 Y = pin.computeJointTorqueRegressor(model, data, q, v, d.acceleration)
-                dQ[:, [law is None for law in self.units]] = -(Y[:, self.object_columns] @ self.object_pi)[:, None]
+                dQ[:, mass] = -(Y[:, self.object_columns] @ self.object_pi)[:, None]
             da_dp = cho_solve(cho_factor(M), dQ)
         return d, da_dp, dW_dp
+
+    def _offset_force(
+        self, element: Any, X: pin.SE3, Jr: np.ndarray, v: np.ndarray, delta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(∂Q/∂p, ∂G_f_G/∂p)`` of a grasp position: G moved as ``G·exp6(δ p)`` turns X into
+        ``X·exp6(δ p)``, its relative Jacobian into ``Ad(exp6(−δ p)) Jr`` and so the twist ξ by
+        ``−ad(δ) ξ`` per unit: ``∂f = F_d δ − F_x ad(δ) ξ`` (the element's tangent) and
+        ``∂Q = Jrᵀ ∂f − (ad(δ) Jr)ᵀ f``."""
+        xi = Jr @ v
+        f = element.evaluate(X, xi).G_f_G
+        F_d, F_x = element.tangent(X, xi)
+        self.exact = self.exact and bool(element.exact_tangent)
+        ad = motion_cross(delta)
+        df = F_d @ delta - F_x @ (ad @ xi)
+        return Jr.T @ df - (ad @ Jr).T @ f, df
 
     def chart(self, delta: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(δ̇ = dexp⁻¹(δ) v, its ∂/∂v, its ∂/∂δ) with exact derivatives (complex step)."""
@@ -397,20 +428,23 @@ class StepDerivative:
         dq0, dv0, _, dp = seeds
         assert self.matrices is not None
         w_M, w_D, w_K = k_v - y, gp * k_v, bp * k_v + gp * f_q
-        dG_dq, dG_dv, at_D, at_K = self.matrices(q, v, w_M, w_D, w_K)
+        dG_dq, dG_dv, twists = self.matrices(q, v, w_M, w_D, w_K)
         self.exact = self.exact and self.matrices.exact
         dG = dG_dq @ dq0 + dG_dv @ dv0
         if len(self.params):
-            dG = dG + self._matrix_parameters(q, w_M, at_D, at_K) @ dp
+            dG = dG + self._matrix_parameters(q, w_M, *twists) @ dp
         return np.asarray(cho_solve(S, M @ dy - gp * (K @ df_q) - dG))
 
     def _matrix_parameters(
-        self, q: np.ndarray, w_M: np.ndarray, at_D: list[RelativeTwist], at_K: list[RelativeTwist]
+        self, q: np.ndarray, w_M: np.ndarray, at_v: list[RelativeTwist], at_D: list[RelativeTwist], at_K: list[RelativeTwist]
     ) -> np.ndarray:
         """∂G/∂p (nv, n_p) for :meth:`_solve_derivative`'s G: a stiffness or damping entry's is the
         unit law's ``Jrᵀ (S_K ξ_K + S_D ξ_D)`` (K̃ and D̃ are linear in them; ξ_K = Jr w_K, ξ_D =
         Jr w_D); the object's mass scales its inertia, so ∂(M w_M)/∂m is the object's columns of
-        the joint-torque regressor at (q, 0, w_M) without gravity times its inertial parameters / m."""
+        the joint-torque regressor at (q, 0, w_M) without gravity times its inertial parameters / m; a
+        grasp position moves X by ``exp6(δ)``, ξ by ``−ad(δ) ξ`` and Jr by ``−ad(δ) Jr`` per unit, so
+        ``g = S_K ξ_K + S_D ξ_D`` by ``G_d δ − G_x ad(δ) ξ − S_K ad(δ) ξ_K − S_D ad(δ) ξ_D`` (the law's
+        matrix_tangent) and ``Jrᵀ g`` by ``Jrᵀ ∂g − (ad(δ) Jr)ᵀ g``."""
         assert self.matrices is not None
         out = np.zeros((self.nv, len(self.params)))
         for k, (p, law) in enumerate(zip(self.params, self.units, strict=True)):
@@ -420,9 +454,25 @@ class StepDerivative:
                 out[:, k] = Y[:, self.object_columns] @ self.object_pi
                 continue
             i = [link[0] for link in self.matrices.links].index(p.link)
+            if k in self.offsets:
+                out[:, k] = self._offset_matrices(i, at_v[i], at_D[i].xi, at_K[i].xi, self.offsets[k])
+                continue
             ev = law.evaluate(at_K[i].X, np.zeros(6), True)
             out[:, k] = at_K[i].Jr.T @ (ev.S_K @ at_K[i].xi + ev.S_D @ at_D[i].xi)
         return out
+
+    def _offset_matrices(self, i: int, at_v: RelativeTwist, xi_D: np.ndarray, xi_K: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """∂(Jrᵀ (S_K ξ_K + S_D ξ_D))/∂p of link i's grasp position (see :meth:`_matrix_parameters`)."""
+        assert self.matrices is not None
+        element, damped = self.matrices.links[i][3], self.matrices.damped[i]
+        xi_D = xi_D if damped else np.zeros(6)
+        ev = element.evaluate(at_v.X, at_v.xi, True)
+        S_K, S_D = np.asarray(ev.S_K), np.asarray(ev.S_D)
+        G_d, G_x = element.matrix_tangent(at_v.X, at_v.xi, xi_K, xi_D)
+        ad = motion_cross(delta)
+        g = S_K @ xi_K + S_D @ xi_D
+        dg = G_d @ delta - G_x @ (ad @ at_v.xi) - S_K @ (ad @ xi_K) - S_D @ (ad @ xi_D)
+        return np.asarray(at_v.Jr.T @ dg - (ad @ at_v.Jr).T @ g)
 
     def integrate(self, q: np.ndarray, delta: np.ndarray, dq: np.ndarray, ddelta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q ⊕ δ and its tangent derivative, from q's (dq) and δ's (ddelta)."""

@@ -12,7 +12,7 @@ import coopdyn as cd
 from coopdyn.dynamics import Dynamics
 from coopdyn.errors import FitWarning, SceneError, SimulationError
 from coopdyn.identify import Measurements, identify
-from coopdyn.parameters import with_parameters
+from coopdyn.parameters import parameters, with_parameters
 
 TRUTH = {"left.k_linear": 1.3e4, "right.k_linear": 0.8e4, "left.d_linear": 150.0, "object.mass": 2.4}
 NOISE = (1e-4, 0.1, 0.01)  # joint angles [rad], forces [N], moments [N·m]
@@ -92,6 +92,38 @@ def test_stiff_grasps_are_identified_through_an_implicit_methods_sensitivities()
         assert lo < value < hi, (name, exact.estimate[name], exact.std[name])
         assert abs(fd.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name]
     assert 0.85 < exact.residual_rms < 1.15
+
+
+def test_grasp_positions_are_identified_with_the_stiffness() -> None:
+    """Where the grasps sit on the object (6 and 4 mm off the nominal) and a stiffness, from
+    500 Hz joint angles and grasp wrenches: the truth within 3σ, exact and finite-difference fits
+    agree, and the positions may be negative (no bound)."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.01)
+    nominal = {p.name: p.value for p in parameters(scene, ["left.grasp_y", "right.grasp_z"])}
+    truth = {
+        "left.grasp_y": nominal["left.grasp_y"] + 0.006,
+        "right.grasp_z": nominal["right.grasp_z"] - 0.004,
+        "left.k_linear": 1.2e4,
+    }
+    hidden = with_parameters(scene, truth)
+    rng = np.random.default_rng(3)
+    n, period = 60, 2e-3
+    g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[scene.actuated]
+    U = g + 3.0 * rng.normal(size=(n, scene.n_actuated))
+    run = cd.rollout(hidden, U[None], period=period, dt=1e-3, q0=scene.q0, integrator="rk4", threads=1)
+    dyn = Dynamics(hidden)
+    W = np.array([[e.G_f_G for e in dyn.element_states(q, v)] for q, v in zip(run.q[0], run.v[0], strict=True)])
+    q_idx = [next(j.idx_q for j in scene.model.joints[1:] if j.idx_v == i) for i in scene.arm_joints]
+    joints = run.q[0][:, q_idx] + NOISE[0] * rng.normal(size=(n + 1, len(q_idx)))
+    W = W + np.concatenate([NOISE[1] * rng.normal(size=(n + 1, 2, 3)), NOISE[2] * rng.normal(size=(n + 1, 2, 3))], axis=2)
+    m = Measurements(period, joints, W, U, *NOISE, q0=scene.q0, v0=scene.v0)
+    exact, fd = (identify(scene, m, list(truth), dt=1e-3, jacobian=j) for j in ("exact", "finite-differences"))
+    assert exact.exact and exact.estimate["left.grasp_y"] < 0.0  # (a negative position: no bound at 0)
+    for name, value in truth.items():
+        lo, hi = exact.interval(name, 3.0)
+        assert lo < value < hi, (name, exact.estimate[name], exact.std[name])
+        assert abs(fd.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name]
+    assert exact.std["left.grasp_y"] < 1e-4 and "grasp_y" in exact.summary() and " m" in exact.summary()
 
 
 @pytest.mark.slow

@@ -62,14 +62,14 @@ def _elastic_joint_pandas() -> cd.Scene:
 CASES: dict[str, tuple[Callable[[], cd.Scene], list[str], float, float]] = {
     "pandas, damped SE(3) grasps": (
         _damped_pandas,
-        ["left.k_linear", "right.k_angular", "left.d_linear", "left.k_rz", "object.mass"],
+        ["left.k_linear", "right.k_angular", "left.d_linear", "left.k_rz", "object.mass", "left.grasp_y", "right.grasp_z"],
         4e-3,
         1.0,
     ),
-    "pandas, ball grasps": (_ball_pandas, ["left.k_linear", "right.d_y"], 4e-3, 1.0),
+    "pandas, ball grasps": (_ball_pandas, ["left.k_linear", "right.d_y", "right.grasp_x"], 4e-3, 1.0),
     "box hung from a hardening fixture": (
         _hardening_box,
-        ["fixture.k_z", "fixture.k_rx", "fixture.d_x", "object.mass"],
+        ["fixture.k_z", "fixture.k_rx", "fixture.d_x", "object.mass", "fixture.grasp_z"],
         4e-3,
         1.0,
     ),
@@ -91,6 +91,12 @@ def _start(scene: cd.Scene, seed: int = 11, spread: float = 1.0) -> tuple[np.nda
     v = 0.5 * spread * rng.normal(size=scene.nv)
     v[scene.object_v[3:6]] = spread * np.array([3.0, -2.0, 1.5])
     return q, v, 3.0 * rng.normal(size=scene.n_actuated)
+
+
+def _step(p: Any, relative: float) -> float:
+    """A difference step for parameter p: ``relative`` of its value, or of 0.1 m for a grasp
+    position (near 0 on these scenes)."""
+    return relative * (0.1 if p.unit == "m" else p.value)
 
 
 def _stepper(
@@ -133,7 +139,7 @@ def test_the_step_sensitivity_is_the_derivative_of_the_step(name: str, method: s
         assert _rel(s.dx_du[:, k], ref) < 1e-7
     for k, p in enumerate(s.parameters):
         ref = richardson(
-            lambda x, p=p: state(*_stepper(with_parameters(scene, {p.name: p.value + x}), method, tau)(q, v, h)), 1e-3 * p.value
+            lambda x, p=p: state(*_stepper(with_parameters(scene, {p.name: p.value + x}), method, tau)(q, v, h)), _step(p, 1e-3)
         )
         assert _rel(s.dx_dp[:, k], ref) < 1e-6, p.name
 
@@ -155,7 +161,7 @@ def test_the_gauss_newton_matrices_derivative_is_exact(name: str) -> None:
         _, M, K, D = dyn.implicit_terms(qq, vv, tau)
         return np.asarray(M @ w_M + D @ w_D + K @ w_K)
 
-    dG_dq, dG_dv, _, _ = matrices(q, v, w_M, w_D, w_K)
+    dG_dq, dG_dv, _ = matrices(q, v, w_M, w_D, w_K)
     scale = np.max(np.abs(dG_dq))
     for k in range(scene.nv):
         e = np.eye(scene.nv)[k]
@@ -255,7 +261,7 @@ def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts(metho
     """rk4 on soft grasps; the linearly implicit methods on grasps of 1e7 N/m at steps where rk4
     diverges (checked): what an MPC on a stiff grasp differentiates."""
     scene = cd.scenes.facing_arms("panda", stiffness=stiffness, damping=0.01, joint_damping=0.5)
-    names = ["left.k_linear", "right.k_angular", "left.d_linear", "object.mass"]
+    names = ["left.k_linear", "right.k_angular", "left.d_linear", "object.mass", "left.grasp_y"]
     rng = np.random.default_rng(4)
     g = pin.computeGeneralizedGravity(scene.model, scene.model.createData(), scene.q0)[scene.actuated]
     U = g + 2.0 * rng.normal(size=(15, scene.n_actuated))
@@ -264,7 +270,7 @@ def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts(metho
         assert "diverged" in cd.rollout(scene, U[None], period=2e-3, dt=dt, v0=v0, integrator="rk4", threads=1).status[0]
     tr = trajectory_sensitivity(scene, U, 2e-3, dt=dt, v0=v0, parameters=names, initial_state=True, integrator=method)
     nv, model = scene.nv, scene.model
-    assert tr.exact and tr.dx_dp.shape == (16, 2 * nv, 4) and tr.dx_dx0 is not None and tr.dx_dx0.shape == (16, 2 * nv, 2 * nv)
+    assert tr.exact and tr.dx_dp.shape == (16, 2 * nv, 5) and tr.dx_dx0 is not None and tr.dx_dx0.shape == (16, 2 * nv, 2 * nv)
 
     def run(s: cd.Scene, q0: np.ndarray = scene.q0, v: np.ndarray = v0) -> np.ndarray:
         out = cd.rollout(s, U[None], period=2e-3, dt=dt, q0=q0, v0=v, integrator=method, threads=1)
@@ -283,11 +289,11 @@ def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts(metho
     np.testing.assert_allclose(base[:n_x], 0.0, atol=1e-11)  # the samples are the rollout's
     np.testing.assert_allclose(tr.wrench.ravel(), base[n_x:], rtol=0, atol=1e-12 * np.max(np.abs(tr.wrench)))
     for k, p in enumerate(tr.parameters):  # (a step of 1 %: the stiff grasps' state moves little with them)
-        ref = richardson(lambda x, p=p: run(with_parameters(scene, {p.name: p.value + x})), 1e-2 * p.value)
+        ref = richardson(lambda x, p=p: run(with_parameters(scene, {p.name: p.value + x})), _step(p, 1e-2))
         assert _rel(tr.dx_dp[..., k].ravel(), ref[:n_x]) < 1e-6, p.name
         # the wrenches' differences carry their round-off (1e-11 of their size) over the step: on grasps of
         # 1e7 N/m their derivative along a stiffness is 1e-7 N per N/m and that floor shows
-        floor = 1e-11 * np.max(np.abs(tr.wrench)) / (1e-2 * p.value)
+        floor = 1e-11 * np.max(np.abs(tr.wrench)) / _step(p, 1e-2)
         assert np.max(np.abs(tr.dwrench_dp[..., k].ravel() - ref[n_x:])) < 1e-6 * np.max(np.abs(ref[n_x:])) + floor, p.name
     for k in (0, 7, nv - 1, nv + 3, 2 * nv - 1):  # some start directions: an arm joint, the object
         e = np.eye(2 * nv)[k]
@@ -303,7 +309,7 @@ def test_both_backends_give_the_same_sensitivities(method: str) -> None:
         pytest.skip("coopdyn._native is not built")
     scene = _damped_pandas()
     q, v, tau = _start(scene)
-    names = ["left.k_linear", "right.d_angular", "object.mass"]
+    names = ["left.k_linear", "right.d_angular", "object.mass", "right.grasp_x"]
     a, b = (
         step_sensitivity(scene, q, v, tau, 2e-3, integrator=method, parameters=names, backend=x) for x in ("python", "native")
     )
@@ -340,6 +346,25 @@ def test_with_parameters_changes_only_what_it_names(pandas: cd.Scene) -> None:
             pandas.model.frames[b.grasp_frame].placement.homogeneous,
             atol=1e-15,
         )
+    # a grasp position moves that grasp frame along the object frame's axis, its orientation and the rest kept
+    y = parameters(pandas, ["left.grasp_y"])[0].value
+    moved = with_parameters(pandas, {"left.grasp_y": y + 0.01})
+    before, after = (s.model.frames[s.links[0].grasp_frame].placement for s in (pandas, moved))
+    np.testing.assert_allclose(after.translation - before.translation, [0.0, 0.01, 0.0], atol=1e-15)
+    np.testing.assert_array_equal(after.rotation, before.rotation)
+    np.testing.assert_allclose(moved.q0, pandas.q0, atol=0)
+    box = _hardening_box()  # a fixture placed at its grasp's start pose stays where it was
+    z = parameters(box, ["fixture.grasp_z"])[0].value
+    shifted = with_parameters(box, {"fixture.grasp_z": z + 0.02})
+
+    def fixture_pose(s: cd.Scene) -> np.ndarray:
+        data = s.model.createData()
+        pin.framesForwardKinematics(s.model, data, s.q0)
+        return np.asarray(data.oMf[s.links[0].tip_frame].homogeneous)
+
+    np.testing.assert_allclose(fixture_pose(shifted), fixture_pose(box), atol=1e-15)
+    with pytest.raises(SceneError, match="a grasp position is a parameter on a rigid object only"):
+        parameters(cd.scenes.held_beam(n_elements=2), ["left.grasp_x"])
 
 
 def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:

@@ -217,9 +217,9 @@ class MatrixDerivatives:
 
     def __call__(
         self, q: np.ndarray, v: np.ndarray, w_M: np.ndarray, w_D: np.ndarray, w_K: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, list[RelativeTwist], list[RelativeTwist]]:
+    ) -> tuple[np.ndarray, np.ndarray, tuple[list[RelativeTwist], ...]]:
         """``(∂G/∂q, ∂G/∂v)`` (nv, nv) at (q, v) in tangent coordinates, and the links'
-        :func:`relative_twist` at w_D and at w_K (for the parameters' columns)."""
+        :func:`relative_twist` at v, w_D and w_K (for the parameters' columns)."""
         model, free, nv = self.model, self.free, self.model.nv
         at_v, at_D, at_K = self.kinematics(q, v, w_D, w_K)
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
@@ -245,4 +245,4 @@ class MatrixDerivatives:
             add_wrench(g_id, g)
             add_wrench(t_id, -(dual @ g))
         dtau_dq, _, _ = pin.computeRNEADerivatives(free, self.free_data, q, np.zeros(nv), w_M, fext)
-        return dG_dq + np.asarray(dtau_dq), dG_dv, at_D, at_K
+        return dG_dq + np.asarray(dtau_dq), dG_dv, (at_v, at_D, at_K)

@@ -66,6 +66,13 @@ public:
         out.link = bp::extract<std::size_t>(p[1]);
         if (out.link >= kernel_.links().size()) throw std::invalid_argument("Sensitivity: no such link");
         out.law = coopdyn::make_element(bp::extract<std::string>(p[2]), bp::extract<bp::dict>(p[3]));
+      } else if (kind == "offset") {  // a grasp position: ("offset", link, δ (6): G's right perturbation per metre)
+        out.link = bp::extract<std::size_t>(p[1]);
+        if (out.link >= kernel_.links().size()) throw std::invalid_argument("Sensitivity: no such link");
+        const std::vector<double> delta = to_doubles(p[2]);
+        if (delta.size() != 6) throw std::invalid_argument("Sensitivity: an offset's direction has 6 entries");
+        out.offset = true;
+        out.delta = Eigen::Map<const Vector6>(delta.data());
       } else if (kind == "mass") {
         out.joint = bp::extract<pinocchio::JointIndex>(p[1]);
         const double mass = bp::extract<double>(p[2]);
@@ -161,7 +168,9 @@ private:
 
   struct Param {
     std::size_t link = 0;
-    std::unique_ptr<coopdyn::Element> law;  // null for the mass
+    std::unique_ptr<coopdyn::Element> law;  // null for the mass and a grasp position
+    bool offset = false;                     // a grasp position, moving G by exp6(delta) per metre
+    Vector6 delta = Vector6::Zero();
     pinocchio::JointIndex joint = 0;
     pinocchio::Inertia unit_inertia = pinocchio::Inertia::Zero();  // the object's inertia per kg of its mass
   };
@@ -237,7 +246,7 @@ private:
     bool kinematics = false;
     for (Eigen::Index k = 0; k < np; ++k) {
       const Param & p = params_[static_cast<std::size_t>(k)];
-      if (!p.law) {  // the object's mass: −J_jᵀ (I a_gf + v ×* I v) per kg
+      if (!p.law && !p.offset) {  // the object's mass: −J_jᵀ (I a_gf + v ×* I v) per kg
         if (!kinematics) pinocchio::forwardKinematics(model_, *data_, q, v, d_.a);
         kinematics = true;
         const pinocchio::Motion a_gf = data_->a[p.joint] - data_->oMi[p.joint].actInv(model_.gravity);
@@ -254,6 +263,17 @@ private:
       pinocchio::getFrameJacobian(model_, data, lk.grasp, pinocchio::LOCAL, J_G);
       pinocchio::getFrameJacobian(model_, data, lk.tip, pinocchio::LOCAL, J_T);
       const Matrix6x Jr = J_G - X.toActionMatrixInverse() * J_T;
+      if (p.offset) {  // X·exp6(δ), ξ by −ad(δ)ξ, Jr by −ad(δ)Jr (step_derivative.py: _offset_force)
+        const Vector6 xi = Jr * v;
+        lk.element->evaluate(X, xi, false, ev_);
+        Matrix6 F_d, F_x;
+        exact_ = lk.element->tangent(X, xi, F_d, F_x) && exact_;
+        const Matrix6 ad = Kernel::motion_cross(p.delta);
+        const Vector6 df = F_d * p.delta - F_x * (ad * xi);
+        dQ.col(k) = Jr.transpose() * df - (ad * Jr).transpose() * ev_.f;
+        dW_dp_.block(6 * static_cast<Eigen::Index>(p.link), k, 6, 1) = df;
+        continue;
+      }
       p.law->evaluate(X, Jr * v, false, ev_);
       dQ.col(k) = Jr.transpose() * ev_.f;
       dW_dp_.block(6 * static_cast<Eigen::Index>(p.link), k, 6, 1) = ev_.f;
@@ -549,12 +569,25 @@ private:
     const VectorXd zero = VectorXd::Zero(nv);
     for (Eigen::Index k = 0; k < np; ++k) {
       const Param & p = params_[static_cast<std::size_t>(k)];
-      if (!p.law) {
+      if (!p.law && !p.offset) {  // the object's mass
         pinocchio::forwardKinematics(model_, *data_, q, zero, w_M);
         pinocchio::computeJointJacobians(model_, *data_, q);
         J.setZero();
         pinocchio::getJointJacobian(model_, *data_, p.joint, pinocchio::LOCAL, J);
         out.col(k) = J.transpose() * (p.unit_inertia * data_->a[p.joint]).toVector();
+        continue;
+      }
+      if (p.offset) {  // (step_derivative.py: _offset_matrices)
+        const coopdyn::Element & element = *kernel_.links()[p.link].element;
+        const Twist & tv = at_v_[p.link];
+        const Vector6 xi_K = at_K_[p.link].xi, xi_D = element.damped() ? at_D_[p.link].xi : Vector6::Zero().eval();
+        element.evaluate(tv.X, tv.xi, true, ev_);
+        Matrix6 G_d, G_x;
+        exact_ = element.matrix_tangent(tv.X, tv.xi, xi_K, xi_D, G_d, G_x) && exact_;
+        const Matrix6 ad = Kernel::motion_cross(p.delta);
+        const Vector6 g = ev_.SK * xi_K + ev_.SD * xi_D;
+        const Vector6 dg = G_d * p.delta - G_x * (ad * tv.xi) - ev_.SK * (ad * xi_K) - ev_.SD * (ad * xi_D);
+        out.col(k) = tv.Jr.transpose() * dg - (ad * tv.Jr).transpose() * g;
         continue;
       }
       const Twist & tK = at_K_[p.link];
