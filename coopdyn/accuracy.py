@@ -298,21 +298,44 @@ def checked_message(
     )
 
 
-def unstable_mode(system: System, q: np.ndarray, v: np.ndarray, duration: float) -> str:
-    """ "a 342.3 Hz mode growing at 63.5 /s (×e every 15.7 ms)" when the closed loop under the
-    system's controller, linearised exactly at (q, v) (the controller's gain by differences,
-    calling it 4·nv more times at t = 0: :func:`coopdyn.linearize`), has an oscillating mode that
-    grows by more than e over ``duration`` [s] — an unstable vibration a damping integrator can
-    hide. "" otherwise: no controller, a growing mode that does not oscillate (arms falling, a
-    drift), or a loop that cannot be linearised (rigid grasps, a joint without tangent
-    coordinates, a controller that fails when probed: this never turns a run into an error)."""
+@dataclass(frozen=True)
+class StartLoop:
+    """A closed loop linearised exactly (:func:`start_loop`): ``ẋ = A x + B τ`` with the open
+    loop's A, B at the controller's torque, and the controller's gain ``τ = G x``."""
+
+    A: np.ndarray  #: (2nv, 2nv)
+    B: np.ndarray  #: (2nv, n_actuated)
+    G: np.ndarray  #: (n_actuated, 2nv)
+
+
+def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> StartLoop | None:
+    """The system's loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`; the
+    controller's gain by central differences, calling it 4·nv more times, without the hold of a
+    ``control_dt``), or None: no controller, or a loop that cannot be linearised (rigid grasps, a
+    joint without tangent coordinates, a controller that fails when probed — a diagnosis never
+    turns a run into an error)."""
     if system.controller is None:
-        return ""
+        return None
     try:
-        wrench = None if system.object_wrench is None else system.object_wrench(0.0)
-        lam = linearize(system.dynamics.scene, q, v, controller=system.controller, object_wrench=wrench).eigenvalues
-    except Exception:  # (a diagnosis: whatever the controller raises when probed, the run stands)
+        wrench = None if system.object_wrench is None else system.object_wrench(t)
+        continuous = System(system.dynamics, system.controller, system.object_wrench)  # (no hold: its gain)
+        tau = continuous.torque(t, q, v)
+        lin = linearize(system.dynamics.scene, q, v, tau, t=t, object_wrench=wrench)
+        return StartLoop(lin.A, lin.B, controller_gain(continuous, t, q, v))
+    except Exception:  # (whatever the controller raises when probed, the run stands)
+        return None
+
+
+def unstable_mode(system: System, q: np.ndarray, v: np.ndarray, duration: float, loop: StartLoop | None = None) -> str:
+    """ "a 342.3 Hz mode growing at 63.5 /s (×e every 15.7 ms)" when the closed loop under the
+    system's controller, linearised exactly at (q, v) (:func:`start_loop`, or ``loop`` when given),
+    has an oscillating mode that grows by more than e over ``duration`` [s] — an unstable vibration
+    a damping integrator can hide. "" otherwise: no controller, a growing mode that does not
+    oscillate (arms falling, a drift), or a loop that cannot be linearised."""
+    loop = start_loop(system, q, v) if loop is None else loop
+    if loop is None:
         return ""
+    lam = np.linalg.eigvals(loop.A + loop.B @ loop.G)
     oscillating = lam[np.abs(lam.imag) > OSCILLATORY * np.abs(lam)]
     if not oscillating.size:
         return ""
@@ -322,50 +345,65 @@ def unstable_mode(system: System, q: np.ndarray, v: np.ndarray, duration: float)
     return f"a {abs(top.imag) / (2 * math.pi):.4g} Hz mode growing at {top.real:.3g} /s (×e every {1e3 / top.real:.3g} ms)"
 
 
-def sampled_instability(system: System, t: float, q: np.ndarray, v: np.ndarray) -> str:
-    """What makes a run whose controller is sampled (``control_dt``) diverge whatever the method,
-    or "": its loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`; the controller's
-    gain G by differences, calling it 4·nv more times) and discretised exactly over the period T
-    with the torque held (``[Φ Γ] = expm([[AT, BT], [0, 0]])``), ``Φ + Γ G``, has a spectral radius
-    above 1 where the same gains applied continuously (``A + B G``) keep it smaller — a digital
-    controller too slow for its gains. The sentence gives the growth per period and the longest
-    period that is stable there. "" without a hold, when the sampled loop is stable, or when it
-    cannot be linearised (a diagnosis: this never turns a run into an error)."""
-    period = system.control_dt
-    if period is None or system.controller is None:
-        return ""
-    try:
-        wrench = None if system.object_wrench is None else system.object_wrench(t)
-        continuous = System(system.dynamics, system.controller, system.object_wrench)  # (no hold: its gain)
-        tau = continuous.torque(t, q, v)
-        lin = linearize(system.dynamics.scene, q, v, tau, t=t, object_wrench=wrench)
-        G = controller_gain(continuous, t, q, v)
-    except Exception:  # (whatever the controller raises when probed, the error being reported stands)
-        return ""
-    A, B = lin.A, lin.B
+#: a sampled loop that grows by this much over a run's time explains its divergence by itself
+HOLD_EXPLAINS = 1e3
+
+
+@dataclass(frozen=True)
+class HoldInstability:
+    """A sampled controller too slow for its gains (:func:`sampled_instability`)."""
+
+    sentence: str  #: what it is and what to do, lower case, no full stop
+    growth: float  #: the sampled loop's growth per period
+    period: float  #: [s]
+
+    def explains(self, duration: float) -> bool:
+        """Whether its growth over ``duration`` [s] explains a divergence by itself."""
+        return self.growth ** (duration / self.period) >= HOLD_EXPLAINS
+
+    def seconds(self) -> float:
+        """[s] the time its growth alone takes to reach ×:data:`HOLD_EXPLAINS`."""
+        return self.period * math.log(HOLD_EXPLAINS) / math.log(self.growth)
+
+
+def sampled_instability(loop: StartLoop, period: float) -> HoldInstability | None:
+    """A controller sampled every ``period`` [s] and held whose loop, discretised exactly over the
+    period (``[Φ Γ] = expm([[AT, BT], [0, 0]])``), ``Φ + Γ G``, has a spectral radius above 1 where
+    the same gains applied continuously (``A + B G``) keep it smaller — a digital controller too
+    slow for its gains —, with its growth per period and the longest stable period; None when the
+    sampled loop is stable, or no stable period is found."""
+    A, B, G = loop.A, loop.B, loop.G
     n, m = B.shape
+    sigma = float(np.max(np.linalg.eigvals(A + B @ G).real))  # the continuous loop's growth rate [1/s]
 
     def radius(T: float) -> float:
         E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
         return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
 
+    def stable(T: float, r: float | None = None) -> bool:  # (a neutral mode, a free spin say, grows as the continuous one)
+        return (radius(T) if r is None else r) <= max(1.0, math.exp(sigma * T)) * (1.0 + 1e-6)
+
     sampled = radius(period)
-    growth = float(np.exp(np.max(np.linalg.eigvals(A + B @ G).real) * period))  # per period, applied continuously
+    growth = math.exp(sigma * period)
     if not (sampled > 1.0 + 1e-3 and sampled > growth * (1.0 + 1e-3)):
-        return ""
-    lo, hi = 1e-3 * period, period  # the longest stable period: bisection in log scale
-    if radius(lo) > 1.0 + 1e-9:
-        return ""
-    for _ in range(30):
+        return None
+    lo = period / 2.0
+    while not stable(lo):
+        lo /= 2.0
+        if lo < 1e-9 * period:
+            return None
+    hi = 2.0 * lo  # (unstable: the halving found lo the first stable one below it)
+    for _ in range(14):  # log-scale bisection: 0.2 % in the period
         mid = math.sqrt(lo * hi)
-        lo, hi = (mid, hi) if radius(mid) <= 1.0 + 1e-9 else (lo, mid)
-    applied = "decays" if growth < 1.0 else f"grows ×{growth:.4g} a period"
-    return (
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    applied = "decays" if growth < 1.0 - 1e-9 else "holds it" if growth <= 1.0 + 1e-6 else f"grows ×{growth:.4g} a period"
+    sentence = (
         f"the controller, sampled every control_dt = {period * 1e3:.4g} ms and held, makes the loop unstable: linearised "
-        f"exactly at t = {t:.6g} s and discretised exactly over a period it grows ×{sampled:.3g} a period (applied "
+        f"exactly at the start and discretised exactly over a period it grows ×{sampled:.4g} a period (applied "
         f"continuously it {applied}). No integrator makes that stable: sample every {lo * 1e3:.3g} ms or faster, or "
         "lower the gains"
     )
+    return HoldInstability(sentence, sampled, period)
 
 
 def growth_text(system: System, q: np.ndarray, v: np.ndarray, duration: float) -> str:

@@ -252,6 +252,9 @@ def identify(
             :class:`coopdyn.sensitivity.Sensitivity`): built for the nominal scene, it keeps its
             own model while the fit changes the plant's parameters. Its gain comes from central
             differences; ``jacobian="finite-differences"`` then runs compiled closed-loop simulations.
+            A fitted grasp position moves a grasp frame, so the candidate scenes are not twins of
+            the nominal one (:func:`coopdyn.compiled.twin_scenes`) and a built-in controller runs
+            as a Python callback there (about 3× slower a run).
 
     Raises:
         SimulationError: bad measurements or arguments, or a model run that diverges at the start.

@@ -3,7 +3,8 @@ sit on the object, the object's mass — and the scene with other values: what
 :mod:`coopdyn.sensitivity` differentiates with respect to and :func:`coopdyn.identify` fits.
 
 A name is ``"<interconnection>.<kind>"`` or ``"object.mass"`` (:func:`parameters` says which
-kinds); :func:`with_parameters` rebuilds the scene with new values, its grasps kept where they were.
+kinds); :func:`with_parameters` rebuilds the scene with new values, its grasps kept where they were
+but a grasp position it names.
 """
 
 from __future__ import annotations

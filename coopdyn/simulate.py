@@ -150,7 +150,10 @@ def simulate(
 
     Raises:
         DivergenceError: when the state stops being finite or exceeds ``max_speed``; it carries
-            the trajectory up to the failure and a stability diagnosis.
+            the trajectory up to the failure and a stability diagnosis — of the method at the last
+            saved state, and of the loop at the start (its controller called 4·nv more times there,
+            at t = 0, for its gain: a stateful controller sees those calls): an unstable mode, or a
+            ``control_dt`` too long for the controller's gains.
         SimulationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), carrying the trajectory so far.
         StepMatrixError: an implicit method's step matrix is not positive definite (with .result).
         EnergyBalanceError: with ``energy_check="raise"``, when the energy balance breaks.
@@ -810,20 +813,26 @@ class _Run:
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
-        mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t)
+        # the loop at the start (by the blow-up the state is far from any linearisation): one
+        # linearisation, its controller probed 4·nv times, for both diagnoses
+        loop = screening.start_loop(self.system, self.start[0], self.start[1])
+        mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t, loop) if loop is not None else ""
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
-        # (the sampled loop at the start: by the blow-up the state is far from any linearisation)
-        sampled = screening.sampled_instability(self.system, 0.0, self.start[0], self.start[1])
-        cause = (
-            f"The {sampled.removeprefix('the ')}. As for the method, at the last saved state"
-            if sampled
-            else "At the last saved state"
-        )
+        period = self.system.control_dt
+        hold = screening.sampled_instability(loop, period) if loop is not None and period else None
+        if hold is not None and hold.explains(t):
+            cause = (
+                f"The {hold.sentence.removeprefix('the ')}. As for the method, for the loop with the controller applied "
+                f"continuously, at the last saved state, {diagnosis}"
+            )
+        else:
+            cause = f"At the last saved state, {diagnosis}"
+            if hold is not None:
+                cause += f". Besides, {hold.sentence} — slowly: alone it takes {hold.seconds():.3g} s to grow ×1000"
         partial = self.result("diverged")
         raise DivergenceError(
-            f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. "
-            f"{cause}, {diagnosis}",
+            f"the simulation diverged at t = {t:.6g} s with {self.method.name} at dt = {h:g} s: the state became {what}. {cause}",
             result=partial,
             advice=advice,
         )

@@ -208,8 +208,8 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
             cd.simulate(scene, 0.5, pd, method, dt=1e-3, control_dt=1e-3)
         message = str(info.value)
         assert "The controller, sampled every control_dt = 1 ms and held, makes the loop unstable" in message
-        assert "grows ×3.05 a period (applied continuously it decays)" in message
-        assert "sample every 0.491 ms or faster, or lower the gains. As for the method" in message
+        assert "grows ×3.055 a period (applied continuously it decays)" in message
+        assert "sample every 0.491 ms or faster, or lower the gains. As for the method, for the loop with the" in message
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         calm = cd.simulate(scene, 1.0, pd, "trapezoid", dt=1.125e-4, control_dt=4.5e-4, accuracy_check="off")
@@ -221,6 +221,26 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
         warnings.simplefilter("ignore")
         cd.simulate(stiff, 0.5, GravityCompensationPD(stiff, kp=100.0, kd=2.0), "rk4", dt=2e-3, control_dt=2e-3)
     assert "sampled every" not in str(info.value) and "rk4 is stable while" in str(info.value)
+    # a hold that is unstable but slowly (×1.022 a period) while rk4 blows up in 5 ms: the method first
+    with warnings.catch_warnings(), pytest.raises(cd.errors.DivergenceError) as info:
+        warnings.simplefilter("ignore")
+        cd.simulate(stiff, 0.5, GravityCompensationPD(stiff, kp=100.0, kd=13.25), "rk4", dt=1e-3, control_dt=1e-3)
+    message = str(info.value)
+    assert message.index("rk4 is stable while") < message.index("Besides, the controller, sampled every control_dt = 1 ms")
+    assert "grows ×1.022 a period" in message and "slowly: alone it takes 0.323 s to grow ×1000" in message
+    # ball grasps leave the object a free spin (a neutral mode): the bound is still the hold's
+    ball = cd.Scene(
+        scene.arm_specs,
+        scene.object,
+        [
+            cd.Interconnection(ic.arm, stiffness=np.eye(3) * 1e4, damping=np.eye(3) * 20.0, element="ball")
+            for ic in scene.interconnection_specs
+        ],
+    )
+    with warnings.catch_warnings(), pytest.raises(cd.errors.DivergenceError) as info:
+        warnings.simplefilter("ignore")
+        cd.simulate(ball, 0.5, GravityCompensationPD(ball, kp=100.0, kd=20.0), "trapezoid", dt=1e-3, control_dt=1e-3)
+    assert "sample every 0.491 ms or faster" in str(info.value)
 
 
 @pytest.mark.parametrize(
