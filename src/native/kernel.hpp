@@ -439,6 +439,33 @@ public:
     return bp::make_tuple(d.a, d.da_dq, d.da_dv, d.da_dtau, d.W, d.dW_dq, d.dW_dv, d.exact);
   }
 
+  // A link's relative kinematics (derivatives.py: RelativeTwist): X = T_M_G, the frames' LOCAL
+  // Jacobians, Ad(X⁻¹), Jr = J_G − Ad(X⁻¹) J_T, the twist ξ and ∂ξ/∂q at the velocity of the data's
+  // last computeForwardKinematicsDerivatives (after updateFramePlacements too).
+  struct RelativeTwist {
+    SE3 X;
+    Matrix6 Ad_inv;
+    Matrix6x J_G, J_T, Jr, dxi_dq;
+    Vector6 xi;
+  };
+  static void relative_twist(const Model & model, Data & data, const Link & lk, RelativeTwist & t) {
+    const Eigen::Index nv = model.nv;
+    Matrix6x dVG_dq = Matrix6x::Zero(6, nv), dVG_dv = Matrix6x::Zero(6, nv), dVT_dq = Matrix6x::Zero(6, nv),
+             dVT_dv = Matrix6x::Zero(6, nv);
+    t.X = data.oMf[lk.tip].actInv(data.oMf[lk.grasp]);
+    t.J_G.setZero(6, nv);
+    t.J_T.setZero(6, nv);
+    pinocchio::getFrameJacobian(model, data, lk.grasp, pinocchio::LOCAL, t.J_G);
+    pinocchio::getFrameJacobian(model, data, lk.tip, pinocchio::LOCAL, t.J_T);
+    t.Ad_inv = t.X.toActionMatrixInverse();
+    t.Jr = t.J_G - t.Ad_inv * t.J_T;
+    pinocchio::getFrameVelocityDerivatives(model, data, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
+    pinocchio::getFrameVelocityDerivatives(model, data, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
+    const Vector6 V_T = t.Ad_inv * pinocchio::getFrameVelocity(model, data, lk.tip, pinocchio::LOCAL).toVector();
+    t.xi = pinocchio::getFrameVelocity(model, data, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
+    t.dxi_dq = dVG_dq - motion_cross(V_T) * t.Jr - t.Ad_inv * dVT_dq;
+  }
+
   // derivatives() into `out`, for C++ callers (sensitivity.hpp); `wrench`: the object's external
   // wrench in world axes, or null. After it, full_data() holds the frames' placements and the
   // joint Jacobians at q.
@@ -457,7 +484,7 @@ public:
     W.resize(L, 6);
     dW_dq.resize(6 * L, nv);
     dW_dv.resize(6 * L, nv);
-    Matrix6x J_G(6, nv), J_T(6, nv), dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
+    RelativeTwist rt;
     Matrix6 F_d, F_x;
     bool exact = true;
     auto add_wrench = [&](FrameIndex frame, const Vector6 & f) {
@@ -466,22 +493,10 @@ public:
     };
     for (Eigen::Index i = 0; i < L; ++i) {
       const Link & lk = links_[static_cast<std::size_t>(i)];
-      const SE3 X = full_data_.oMf[lk.tip].actInv(full_data_.oMf[lk.grasp]);
-      J_G.setZero();
-      J_T.setZero();
-      pinocchio::getFrameJacobian(full_model_, full_data_, lk.grasp, pinocchio::LOCAL, J_G);
-      pinocchio::getFrameJacobian(full_model_, full_data_, lk.tip, pinocchio::LOCAL, J_T);
-      const Matrix6 Ad_inv = X.toActionMatrixInverse();
-      const Matrix6x Jr = J_G - Ad_inv * J_T;
-      dVG_dq.setZero();
-      dVG_dv.setZero();
-      dVT_dq.setZero();
-      dVT_dv.setZero();
-      pinocchio::getFrameVelocityDerivatives(full_model_, full_data_, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
-      pinocchio::getFrameVelocityDerivatives(full_model_, full_data_, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
-      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(full_model_, full_data_, lk.tip, pinocchio::LOCAL).toVector();
-      const Vector6 xi = pinocchio::getFrameVelocity(full_model_, full_data_, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
-      const Matrix6x dxi_dq = dVG_dq - motion_cross(V_T) * Jr - Ad_inv * dVT_dq;
+      relative_twist(full_model_, full_data_, lk, rt);
+      const SE3 & X = rt.X;
+      const Matrix6x &J_G = rt.J_G, &J_T = rt.J_T, &Jr = rt.Jr, &dxi_dq = rt.dxi_dq;
+      const Vector6 & xi = rt.xi;
       lk.element->evaluate(X, xi, false, ev_);
       exact = lk.element->tangent(X, xi, F_d, F_x) && exact;
       const Matrix6x df_dq = F_d * Jr + F_x * dxi_dq, df_dv = F_x * Jr;

@@ -521,42 +521,17 @@ private:
     dG_dq_ += free_data_->dtau_dq;
   }
 
-  struct Twist {
-    SE3 X;
-    Matrix6x J_G, J_T, Jr, dxi_dq;
-    Vector6 xi;
-  };
+  using Twist = Kernel::RelativeTwist;
 
   // Every link's relative kinematics at (q, w) (derivatives.py: relative_twist).
   void relative_twists(const VectorXd & q, const VectorXd & w, std::vector<Twist> & out) {
-    const Eigen::Index nv = model_.nv;
-    const VectorXd zero = VectorXd::Zero(nv);
+    const VectorXd zero = VectorXd::Zero(model_.nv);
     Data & data = *mdata_;
     pinocchio::computeForwardKinematicsDerivatives(model_, data, q, w, zero);  // (fills the joint Jacobians too)
     pinocchio::updateFramePlacements(model_, data);
     const auto & links = kernel_.links();
     out.resize(links.size());
-    Matrix6x dVG_dq(6, nv), dVG_dv(6, nv), dVT_dq(6, nv), dVT_dv(6, nv);
-    for (std::size_t i = 0; i < links.size(); ++i) {
-      const Link & lk = links[i];
-      Twist & t = out[i];
-      t.X = data.oMf[lk.tip].actInv(data.oMf[lk.grasp]);
-      t.J_G.setZero(6, nv);
-      t.J_T.setZero(6, nv);
-      pinocchio::getFrameJacobian(model_, data, lk.grasp, pinocchio::LOCAL, t.J_G);
-      pinocchio::getFrameJacobian(model_, data, lk.tip, pinocchio::LOCAL, t.J_T);
-      const Matrix6 Ad_inv = t.X.toActionMatrixInverse();
-      t.Jr = t.J_G - Ad_inv * t.J_T;
-      dVG_dq.setZero();
-      dVG_dv.setZero();
-      dVT_dq.setZero();
-      dVT_dv.setZero();
-      pinocchio::getFrameVelocityDerivatives(model_, data, lk.grasp, pinocchio::LOCAL, dVG_dq, dVG_dv);
-      pinocchio::getFrameVelocityDerivatives(model_, data, lk.tip, pinocchio::LOCAL, dVT_dq, dVT_dv);
-      const Vector6 V_T = Ad_inv * pinocchio::getFrameVelocity(model_, data, lk.tip, pinocchio::LOCAL).toVector();
-      t.xi = pinocchio::getFrameVelocity(model_, data, lk.grasp, pinocchio::LOCAL).toVector() - V_T;
-      t.dxi_dq = dVG_dq - Kernel::motion_cross(V_T) * t.Jr - Ad_inv * dVT_dq;
-    }
+    for (std::size_t i = 0; i < links.size(); ++i) Kernel::relative_twist(model_, data, links[i], out[i]);
   }
 
   // ∂G/∂p (nv, np) at the last matrix_derivatives (step_derivative.py: _matrix_parameters): a unit

@@ -65,49 +65,41 @@ public:
   // Its Python tangent (its own, or base.py's central differences) and its exact_tangent; what it
   // raises is kept for Python, as evaluate's.
   bool tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, Matrix6 & F_d, Matrix6 & F_x) const override {
-    namespace bp = boost::python;
-    const struct Gil {
-      PyGILState_STATE state = PyGILState_Ensure();
-      ~Gil() { PyGILState_Release(state); }
-    } gil;
-    try {
-      const bp::object out = evaluate_.attr("tangent")(T_M_G, Eigen::VectorXd(xi));
-      if (out.is_none()) throw std::runtime_error("the Python element " + describe() + "'s tangent raised (re-raised by Python)");
-      F_d = matrix6(out[0], "tangent returned a derivative with respect to the pose");
-      F_x = matrix6(out[1], "tangent returned a derivative with respect to the twist");
-      return bp::extract<bool>(element_.attr("exact_tangent"))();
-    } catch (const bp::error_already_set &) {
-      throw std::runtime_error("the Python element " + describe() + "'s tangent raised " + fetch_error());
-    } catch (const std::invalid_argument & e) {
-      throw std::runtime_error("the Python element " + describe() + "'s tangent: " + e.what());
-    }
+    return derivative_pair("tangent", "exact_tangent", F_d, F_x, T_M_G, Eigen::VectorXd(xi));
   }
 
   // Its Python matrix_tangent (its own, or base.py's central differences) and whether that is
   // exact; what it raises is kept for Python, as evaluate's.
   bool matrix_tangent(const pinocchio::SE3 & T_M_G, const Vector6 & xi, const Vector6 & w_K, const Vector6 & w_D,
                       Matrix6 & G_d, Matrix6 & G_x) const override {
+    return derivative_pair("matrix_tangent", "exact_matrix_tangent", G_d, G_x, T_M_G, Eigen::VectorXd(xi),
+                           Eigen::VectorXd(w_K), Eigen::VectorXd(w_D));
+  }
+
+private:
+  // The callback's `method` (what the element's own raises is kept: None comes back) with `args`:
+  // its two 6x6 derivatives (with respect to the pose, to the twist) and the element's `exact`.
+  template <class... Args>
+  bool derivative_pair(const char * method, const char * exact, Matrix6 & pose, Matrix6 & twist, const Args &... args) const {
     namespace bp = boost::python;
     const struct Gil {
       PyGILState_STATE state = PyGILState_Ensure();
       ~Gil() { PyGILState_Release(state); }
     } gil;
+    const std::string what = "the Python element " + describe() + "'s " + method;
     try {
-      const bp::object out =
-        evaluate_.attr("matrix_tangent")(T_M_G, Eigen::VectorXd(xi), Eigen::VectorXd(w_K), Eigen::VectorXd(w_D));
-      if (out.is_none())
-        throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent raised (re-raised by Python)");
-      G_d = matrix6(out[0], "matrix_tangent returned a derivative with respect to the pose");
-      G_x = matrix6(out[1], "matrix_tangent returned a derivative with respect to the twist");
-      return bp::extract<bool>(element_.attr("exact_matrix_tangent"))();
+      const bp::object out = evaluate_.attr(method)(args...);
+      if (out.is_none()) throw std::runtime_error(what + " raised (re-raised by Python)");
+      pose = matrix6(out[0], (std::string(method) + " returned a derivative with respect to the pose").c_str());
+      twist = matrix6(out[1], (std::string(method) + " returned a derivative with respect to the twist").c_str());
+      return bp::extract<bool>(element_.attr(exact))();
     } catch (const bp::error_already_set &) {
-      throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent raised " + fetch_error());
+      throw std::runtime_error(what + " raised " + fetch_error());
     } catch (const std::invalid_argument & e) {
-      throw std::runtime_error("the Python element " + describe() + "'s matrix_tangent: " + e.what());
+      throw std::runtime_error(what + ": " + e.what());
     }
   }
 
-private:
   static Matrix6 matrix6(const boost::python::object & value, const char * name) {
     const Eigen::MatrixXd m = boost::python::extract<Eigen::MatrixXd>(value);
     if (m.rows() != 6 || m.cols() != 6) throw std::invalid_argument(std::string(name) + " that is not 6x6");
