@@ -46,6 +46,7 @@ from .parameters import with_parameters
 from .result import Result
 from .rollout import Rollouts, rollout
 from .sensitivity import (
+    LossGradient,
     Sensitivity,
     StepSensitivity,
     TrajectorySensitivity,
@@ -77,6 +78,7 @@ __all__ = [
     "Interconnection",
     "JointElasticity",
     "Linearization",
+    "LossGradient",
     "Measurements",
     "ModelAdvice",
     "ModelLoadError",

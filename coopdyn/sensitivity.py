@@ -36,7 +36,15 @@ from .parameters import Parameter
 from .parameters import parameters as scene_parameters
 from .step_derivative import Carry, StepDerivative
 
-__all__ = ["Sensitivity", "StepSensitivity", "TrajectorySensitivity", "Transitions", "step_sensitivity", "trajectory_sensitivity"]
+__all__ = [
+    "LossGradient",
+    "Sensitivity",
+    "StepSensitivity",
+    "TrajectorySensitivity",
+    "Transitions",
+    "step_sensitivity",
+    "trajectory_sensitivity",
+]
 
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
 MAX_SPEED = 1e4
@@ -92,6 +100,21 @@ class TrajectorySensitivity:
 
 
 @dataclass(frozen=True)
+class LossGradient:
+    """A scalar loss's gradient along a trajectory (:meth:`Transitions.gradient`).
+
+    Attributes:
+        torques: (N, n_actuated) ∂L/∂u_k [per N·m or N of the torque held over period k].
+        parameters: (n_parameters,) ∂L/∂p [per the parameter's unit].
+        start: (2nv,) ∂L/∂x₀ (δq about q₀, then v).
+    """
+
+    torques: np.ndarray
+    parameters: np.ndarray
+    start: np.ndarray
+
+
+@dataclass(frozen=True)
 class Transitions:
     """A trajectory and its linearisation period by period (:meth:`Sensitivity.transitions`).
 
@@ -112,6 +135,30 @@ class Transitions:
     P: np.ndarray
     parameters: tuple[Parameter, ...]
     exact: bool
+
+    def gradient(self, dloss_dx: Any) -> LossGradient:
+        """The gradient of a scalar loss ``L(x₀, …, x_N)`` of the samples with respect to the
+        torques, the parameters and the start, by one backward (adjoint) pass over the periods'
+        exact linearisation — no more runs: ``λ_N = ∂L/∂x_N``, ``λ_k = ∂L/∂x_k + A_kᵀ λ_{k+1}``;
+        ``∂L/∂u_k = B_kᵀ λ_{k+1}``, ``∂L/∂p = Σ P_kᵀ λ_{k+1}``, ``∂L/∂x₀ = λ₀``.
+
+        Args:
+            dloss_dx: (N + 1, 2nv) ∂L/∂x_k at every sample, in the tangent coordinates about it
+                (δq about q_k, then v): for a loss of the configuration, ``∂L/∂q`` times Pinocchio's
+                ``dIntegrate`` with respect to δq (the identity on a revolute or prismatic joint).
+
+        Raises:
+            SimulationError: dloss_dx of another shape, or not finite.
+        """
+        N, n = self.A.shape[0], self.A.shape[1]
+        g = _validate.finite_array(dloss_dx, "dloss_dx", (N + 1, n), SimulationError)
+        lam = g[N].copy()
+        du, dp = np.empty((N, self.B.shape[2])), np.zeros(self.P.shape[2])
+        for k in reversed(range(N)):
+            du[k] = self.B[k].T @ lam
+            dp += self.P[k].T @ lam
+            lam = g[k] + self.A[k].T @ lam
+        return LossGradient(du, dp, lam)
 
 
 class Sensitivity:

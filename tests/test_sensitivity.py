@@ -626,6 +626,52 @@ def test_transitions_are_the_periods_linearisation(book: cd.Scene, pandas: cd.Sc
         cd.Sensitivity(pandas, controller=_impedance(pandas)).transitions(U, 2e-3)
 
 
+@pytest.mark.parametrize("method", ["rk4", "trapezoid"])
+def test_a_losss_gradient_by_the_backward_pass_is_the_derivative_of_rollouts(pandas: cd.Scene, method: str) -> None:
+    """L = Σ_k w_k·δx_k over the samples (δx about the nominal trajectory): its gradient from
+    Transitions.gradient (one backward pass) against central differences of compiled rollouts in
+    the torques and the start, and of rollouts of with_parameters in the parameters."""
+    model, nv, na = pandas.model, pandas.nv, pandas.n_actuated
+    rng = np.random.default_rng(8)
+    g = pin.computeGeneralizedGravity(model, model.createData(), pandas.q0)[pandas.actuated]
+    N, period, dt = 5, 2e-3, 1e-3
+    U = g + 2.0 * rng.normal(size=(N, na))
+    names = ["left.k_linear", "right.grasp_z"]
+    tr = cd.Sensitivity(pandas, method, parameters=names).transitions(U, period, dt=dt)
+    w = rng.normal(size=(N + 1, 2 * nv))
+    grad = tr.gradient(w)
+
+    def loss(batch: np.ndarray, scene: cd.Scene = pandas, x0: np.ndarray | None = None) -> np.ndarray:
+        x0 = np.zeros((len(batch), 2 * nv)) if x0 is None else x0
+        q0 = np.array([pin.integrate(model, pandas.q0, x[:nv]) for x in x0])
+        run = cd.rollout(scene, batch, period=period, dt=dt, q0=q0, v0=pandas.v0 + x0[:, nv:], integrator=method, threads=1)
+        out = np.zeros(len(batch))
+        for b in range(len(batch)):
+            dx = [np.concatenate([pin.difference(model, tr.q[k], run.q[b, k]), run.v[b, k] - tr.v[k]]) for k in range(N + 1)]
+            out[b] = float(np.sum(w * np.array(dx)))
+        return out
+
+    eps = 1e-3
+    plus, minus = np.repeat(U[None], N * na, axis=0), np.repeat(U[None], N * na, axis=0)
+    for j in range(N * na):
+        plus[j].flat[j] += eps
+        minus[j].flat[j] -= eps
+    du = ((loss(plus) - loss(minus)) / (2 * eps)).reshape(N, na)
+    assert _rel(grad.torques, du) < 1e-6
+    e = 1e-5 * np.eye(2 * nv)
+    dx0 = (loss(np.repeat(U[None], 2 * nv, axis=0), x0=e) - loss(np.repeat(U[None], 2 * nv, axis=0), x0=-e)) / 2e-5
+    assert _rel(grad.start, dx0) < 1e-6
+    for k, p in enumerate(tr.parameters):
+        step = _step(p, 1e-2)
+        dp = (
+            loss(U[None], with_parameters(pandas, {p.name: p.value + step}))
+            - loss(U[None], with_parameters(pandas, {p.name: p.value - step}))
+        ) / (2 * step)
+        assert abs(grad.parameters[k] - dp[0]) < 1e-5 * max(abs(dp[0]), 1e-300), p.name
+    with pytest.raises(SimulationError, match=r"dloss_dx.*shape"):
+        tr.gradient(w[:-1])
+
+
 def test_a_diverging_run_is_stopped_at_its_first_fast_step_with_its_time() -> None:
     """rk4 at 20 ms on a 28 Hz box (|R| ≈ 3.8 a step): the speed passes 1e4 at a step of a later
     period; trajectory and transitions (which runs period by period) both stop there and name the
