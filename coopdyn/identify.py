@@ -21,6 +21,7 @@ residual's variance per degree of freedom (≈ 1 when the noise levels given are
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -129,7 +130,8 @@ class Identification:
     """The estimate of :func:`identify` (see the module docstring).
 
     Attributes:
-        parameters: the fitted :class:`~coopdyn.parameters.Parameter` (their values at the start).
+        parameters: the fitted :class:`~coopdyn.parameters.Parameter` (their values in the scene);
+            start: the values the fit started from (``initial``, else the scene's).
         estimate, std: each parameter's estimate and 1-σ uncertainty, by name [its unit].
         covariance: (n_p, n_p) ``s²·(JᵀJ)⁻¹``; residual_rms: s = √(Σr²/(m − n)), the weighted
             residual's RMS per degree of freedom (≈ 1 when the noise levels given are the true
@@ -152,6 +154,7 @@ class Identification:
     jacobians: int  #: Jacobian evaluations
     cpu_time: float  #: CPU time of the fit [s]
     message: str  #: the optimiser's
+    start: dict[str, float] = dataclasses.field(default_factory=dict)  #: the values the fit started from, by name
 
     def interval(self, name: str, sigmas: float = 2.0) -> tuple[float, float]:
         """(low, high): the estimate ± ``sigmas``·σ of the parameter ``name``."""
@@ -161,7 +164,8 @@ class Identification:
         """A table: each parameter's start, estimate and σ, with units."""
         lines = [f"{'parameter':<22} {'start':>12} {'estimate':>12} {'σ':>10}  unit"]
         for p in self.parameters:
-            lines.append(f"{p.name:<22} {p.value:>12.6g} {self.estimate[p.name]:>12.6g} {self.std[p.name]:>10.3g}  {p.unit}")
+            start = self.start.get(p.name, p.value)
+            lines.append(f"{p.name:<22} {start:>12.6g} {self.estimate[p.name]:>12.6g} {self.std[p.name]:>10.3g}  {p.unit}")
         fit = f"weighted residual RMS {self.residual_rms:.3f}; joints {self.joint_rms:.3g} rad"
         if self.wrench_rms is not None:
             fit += f", forces {self.wrench_rms[0]:.3g} N, moments {self.wrench_rms[1]:.3g} N·m"
@@ -371,6 +375,8 @@ def identify(
             method="trf",
         )
     except SimulationError as exc:
+        if "diverged" not in str(exc):  # (an argument the model refuses, not a divergence: as it is)
+            raise
         raise SimulationError(
             f"identify: the model diverged during the fit ({exc}); start nearer, or shorten the record"
         ) from exc
@@ -385,6 +391,13 @@ def identify(
         cov = np.full((len(x0), len(x0)), np.inf)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     _warn_if_untrustworthy(names, fit.x, std, math.sqrt(s2), [p.unit for p in params], fit.active_mask, positions)
+    if fit.status == 0:  # (the budget of runs spent before a convergence test passed)
+        warnings.warn(
+            f"identify: stopped after max_iterations = {max_iterations} runs of the model before converging; the estimate "
+            "may not be the best fit: raise max_iterations",
+            FitWarning,
+            stacklevel=2,
+        )
     best = model_scene(fit.x)
     n_joint = (U.shape[0]) * len(q_idx)
     joint_rms = math.sqrt(float(np.mean((r[:n_joint] / w_joint) ** 2)))
@@ -407,6 +420,7 @@ def identify(
         counts["jacobians"],
         time.process_time() - cpu0,
         str(fit.message),
+        dict(zip(names, map(float, x0), strict=True)),
     )
 
 

@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import _validate
+from .accuracy import HoldInstability, sampled_instability, start_loop
 from .closed_loop import Controller, System
 from .compiled import controller_settings
 from .dynamics.backend import kernel_module
@@ -144,13 +145,21 @@ class Transitions:
 
         Args:
             dloss_dx: (N + 1, 2nv) ∂L/∂x_k at every sample, in the tangent coordinates about it
-                (δq about q_k, then v): for a loss of the configuration, ``∂L/∂q`` times Pinocchio's
-                ``dIntegrate`` with respect to δq (the identity on a revolute or prismatic joint).
+                (δq about q_k, then v; not ∂L/∂q, which has nq entries). For a loss of a frame's
+                world position p (the box's, say), ``∂L/∂δq = Jᵀ ∂L/∂p`` with J the first three rows
+                of Pinocchio's frame Jacobian in ``LOCAL_WORLD_ALIGNED`` at q_k (after
+                ``computeJointJacobians``; its columns are the same δq) — a free-flyer's δq is in
+                body axes, so ∂L/∂p cannot be put at its index as it is.
 
         Raises:
             SimulationError: dloss_dx of another shape, or not finite.
         """
         N, n = self.A.shape[0], self.A.shape[1]
+        if np.shape(dloss_dx) != (N + 1, n):
+            raise SimulationError(
+                f"dloss_dx must be (N + 1, 2nv) = ({N + 1}, {n}): one row per sample, δq (nv) then v (nv) in tangent "
+                f"coordinates, got shape {np.shape(dloss_dx)}"
+            )
         g = _validate.finite_array(dloss_dx, "dloss_dx", (N + 1, n), SimulationError)
         lam = g[N].copy()
         du, dp = np.empty((N, self.B.shape[2])), np.zeros(self.P.shape[2])
@@ -309,11 +318,24 @@ class Sensitivity:
         if initial_state:
             dq[:, n_p : n_p + nv] = np.eye(nv)
             dv[:, n_p + nv :] = np.eye(nv)
-        Q, V, W, dX, dW, applied = self._run(q, v, U, per, h, (dq, dv, du, dp))
+        try:
+            Q, V, W, dX, dW, applied = self._run(q, v, U, per, h, (dq, dv, du, dp))
+        except SimulationError as exc:  # a closed loop's divergence: is its hold too slow for its gains?
+            hold = self._hold(q, v, period) if self.system is not None and "diverged" in str(exc) else None
+            if hold is None:
+                raise
+            raise SimulationError(f"{exc}. The {hold.sentence.removeprefix('the ')}") from exc
         dx0 = dX[:, :, n_p:] if initial_state else None
         return TrajectorySensitivity(
             np.arange(N + 1) * period, Q, V, W, applied, dX[:, :, :n_p], dW[..., :n_p], dx0, self.params, self.exact
         )
+
+    def _hold(self, q: np.ndarray, v: np.ndarray, period: float) -> HoldInstability | None:
+        """The closed loop's controller, sampled every period and held, when that alone makes the
+        loop linearised at (q, v) unstable (:func:`coopdyn.accuracy.sampled_instability`)."""
+        assert self.system is not None
+        loop = start_loop(self.system, q, v)
+        return None if loop is None else sampled_instability(loop, period)
 
     def transitions(self, torques: Any, period: float, *, dt: float | None = None, q0: Any = None, v0: Any = None) -> Transitions:
         """An open-loop trajectory (``torques[k]`` held over period k, as :meth:`trajectory`) and its

@@ -821,10 +821,10 @@ class _Run:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
         period = self.system.control_dt
         hold = screening.sampled_instability(loop, period) if loop is not None and period else None
-        if hold is not None and hold.explains(t):
+        if hold is not None and hold.explains(t):  # (the methods' stability is the continuous loop's: in .advice)
             cause = (
-                f"The {hold.sentence.removeprefix('the ')}. As for the method, for the loop with the controller applied "
-                f"continuously, at the last saved state, {diagnosis}"
+                f"The {hold.sentence.removeprefix('the ')} (this error's .advice has the methods' stability with the "
+                "controller applied continuously)"
             )
         else:
             cause = f"At the last saved state, {diagnosis}"

@@ -124,6 +124,8 @@ def test_grasp_positions_are_identified_with_the_stiffness() -> None:
         assert lo < value < hi, (name, exact.estimate[name], exact.std[name])
         assert abs(fd.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name]
     assert exact.std["left.grasp_y"] < 1e-4 and "grasp_y" in exact.summary() and " m" in exact.summary()
+    guess = identify(scene, m, list(truth), initial={"left.grasp_y": -0.093}, dt=1e-3)
+    assert guess.start["left.grasp_y"] == -0.093 and "-0.093" in guess.summary()  # (the start the fit used)
 
 
 @pytest.mark.slow
@@ -162,8 +164,9 @@ def test_bad_measurements_are_refused(damped: cd.Scene) -> None:
         identify(damped, (m.torques, m.joints), ["left.k_x"])  # type: ignore[arg-type]
     with pytest.raises(SimulationError, match="adapts its step in a run"):
         identify(damped, m, ["left.k_x"], integrator="dopri5")
-    with pytest.raises(SimulationError, match="the exponential integrator needs a linear scene"):
+    with pytest.raises(SimulationError, match="the exponential integrator needs a linear scene") as caught:
         identify(damped, m, ["left.k_x"], integrator="exponential")
+    assert "diverged during the fit" not in str(caught.value)  # (a refusal, passed on as it is)
     with pytest.raises(SimulationError, match=r"LinearlyImplicitEuler\(jacobian_every=3\) is not differentiated"):
         identify(damped, m, ["left.k_x"], integrator=cd.integrators.LinearlyImplicitEuler(jacobian_every=3))
     with pytest.raises(SimulationError, match="must divide the period"):
