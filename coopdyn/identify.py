@@ -164,8 +164,13 @@ class Identification:
         """A table: each parameter's start, estimate and σ, with units."""
         lines = [f"{'parameter':<22} {'start':>12} {'estimate':>12} {'σ':>10}  unit"]
         for p in self.parameters:
-            start = self.start.get(p.name, p.value)
-            lines.append(f"{p.name:<22} {start:>12.6g} {self.estimate[p.name]:>12.6g} {self.std[p.name]:>10.3g}  {p.unit}")
+            scale, unit = (1e3, "mm") if p.unit == "m" else (1.0, p.unit)  # (a grasp position in mm: readable)
+            start, estimate, std = (
+                self.start.get(p.name, p.value) * scale,
+                self.estimate[p.name] * scale,
+                self.std[p.name] * scale,
+            )
+            lines.append(f"{p.name:<22} {start:>12.6g} {estimate:>12.6g} {std:>10.3g}  {unit}")
         fit = f"weighted residual RMS {self.residual_rms:.3f}; joints {self.joint_rms:.3g} rad"
         if self.wrench_rms is not None:
             fit += f", forces {self.wrench_rms[0]:.3g} N, moments {self.wrench_rms[1]:.3g} N·m"

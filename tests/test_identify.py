@@ -123,9 +123,9 @@ def test_grasp_positions_are_identified_with_the_stiffness() -> None:
         lo, hi = exact.interval(name, 3.0)
         assert lo < value < hi, (name, exact.estimate[name], exact.std[name])
         assert abs(fd.estimate[name] - exact.estimate[name]) < 0.05 * exact.std[name]
-    assert exact.std["left.grasp_y"] < 1e-4 and "grasp_y" in exact.summary() and " m" in exact.summary()
+    assert exact.std["left.grasp_y"] < 1e-4 and "grasp_y" in exact.summary() and " mm" in exact.summary()
     guess = identify(scene, m, list(truth), initial={"left.grasp_y": -0.093}, dt=1e-3)
-    assert guess.start["left.grasp_y"] == -0.093 and "-0.093" in guess.summary()  # (the start the fit used)
+    assert guess.start["left.grasp_y"] == -0.093 and "-93  " in guess.summary()  # (the start the fit used, in mm)
 
 
 @pytest.mark.slow

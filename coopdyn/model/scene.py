@@ -396,9 +396,9 @@ class Scene:
             if i and j.shortname() not in _PRISMATIC and not self.model.names[i].endswith(MOTOR_SUFFIX)
         ]
         if bad:
-            return "joints that are not prismatic make the mass matrix or the kinematics configuration-dependent: " + ", ".join(
-                bad
-            )
+            listed = ", ".join(bad[:3]) + (f" and {len(bad) - 3} more" if len(bad) > 3 else "")
+            what = "the mass matrix or the kinematics configuration-dependent"
+            return f"{len(bad)} joints that are not prismatic make {what}: {listed}"
         if any(not lk.element.linear for lk in self.links):
             return "an interconnection element is not linear in the relative translation"
         return None
