@@ -380,8 +380,8 @@ def sampled_instability(loop: StartLoop, period: float) -> HoldInstability | Non
         E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
         return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
 
-    def stable(T: float, r: float | None = None) -> bool:  # (a neutral mode, a free spin say, grows as the continuous one)
-        return (radius(T) if r is None else r) <= max(1.0, math.exp(sigma * T)) * (1.0 + 1e-6)
+    def stable(T: float) -> bool:  # (a neutral mode, a free spin say, grows as the continuous one)
+        return radius(T) <= max(1.0, math.exp(sigma * T)) * (1.0 + 1e-6)
 
     sampled = radius(period)
     growth = math.exp(sigma * period)

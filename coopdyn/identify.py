@@ -164,7 +164,7 @@ class Identification:
         """A table: each parameter's start, estimate and σ, with units."""
         lines = [f"{'parameter':<22} {'start':>12} {'estimate':>12} {'σ':>10}  unit"]
         for p in self.parameters:
-            scale, unit = (1e3, "mm") if p.unit == "m" else (1.0, p.unit)  # (a grasp position in mm: readable)
+            scale, unit = (1e3, "mm") if p.position else (1.0, p.unit)  # (a grasp position in mm: readable)
             start, estimate, std = (
                 self.start.get(p.name, p.value) * scale,
                 self.estimate[p.name] * scale,
@@ -284,7 +284,7 @@ def identify(
     unknown = set(start) - set(names)
     if unknown:
         raise SimulationError(f"identify: initial names {sorted(unknown)}, which are not among the parameters {names}")
-    positions = np.array([p.unit == "m" for p in params])  # grasp positions: any sign, no bound
+    positions = np.array([p.position for p in params])  # grasp positions: any sign, no bound
     for p, position in zip(params, positions, strict=True):
         if p.name not in start and p.value == 0.0 and not position:
             raise SimulationError(

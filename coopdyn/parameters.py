@@ -59,6 +59,11 @@ class Parameter:
     link: int | None  #: the interconnection's index in ``scene.links``; None for the object's mass
     kind: str  #: a key of :data:`KINDS` (``k_linear``, ``d_x``, ``grasp_z``, …) or ``mass``
 
+    @property
+    def position(self) -> bool:
+        """Whether it is a grasp position [m] (any sign; the others are ≥ 0)."""
+        return KINDS.get(self.kind, ("",))[0] == "grasp"
+
 
 def _names_help(scene: Scene) -> str:
     links = ", ".join(f"'{lk.name}.<kind>'" for lk in scene.links)
@@ -117,7 +122,7 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
                     f"parameter {name!r}: the object is a {type(scene.object).__name__}; a grasp position is a parameter "
                     "on a rigid object only (on an elastic one the grasp rides on its nearest node)"
                 )
-            out.append(Parameter(name, float(_grasp_pose(scene, i).translation[KINDS[kind][1][0]]), "m", i, kind))
+            out.append(Parameter(name, float(grasp_pose(scene, i).translation[KINDS[kind][1][0]]), "m", i, kind))
             continue
         if type(element) not in _LINEAR_IN_KD:  # (a subclass may change the law: not known to be linear)
             raise SceneError(
@@ -170,7 +175,7 @@ def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
         element: Any = scene.links[p.link].element
         matrix, idx, _, _ = KINDS[p.kind]
         if matrix == "grasp":
-            moved = grasps.setdefault(p.link, _grasp_pose(scene, p.link).copy())
+            moved = grasps.setdefault(p.link, grasp_pose(scene, p.link).copy())
             position = moved.translation.copy()
             position[idx[0]] = _validate.number(values[p.name], f"parameter {p.name!r}", p.unit, SceneError)
             moved.translation = position
@@ -180,7 +185,7 @@ def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
         current[matrix][np.ix_(idx, idx)] = value * np.eye(len(idx))
     for i in sorted(set(matrices) | set(grasps)):
         spec = specs[i]
-        grasp = grasps.get(i, spec.grasp if spec.grasp is not None else _grasp_pose(scene, i))
+        grasp = grasps.get(i, spec.grasp if spec.grasp is not None else grasp_pose(scene, i))
         new = matrices.get(i, {"stiffness": spec.stiffness, "damping": spec.damping})
         fixture = spec.fixture
         if spec.arm is None and fixture is None:  # (a fixture placed at G's start: kept there when G moves)
@@ -189,16 +194,20 @@ def with_parameters(scene: Scene, values: Mapping[str, float]) -> Scene:
     return Scene(list(scene.arm_specs), obj, specs, scene.gravity)
 
 
+def _start(scene: Scene) -> pin.Data:
+    """The scene's kinematics at its start (the frames' world poses in ``oMf``)."""
+    data = scene.model.createData()
+    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    return data
+
+
 def _world_pose(scene: Scene, frame: int) -> pin.SE3:
     """A frame's world pose at the scene's start."""
-    data = scene.model.createData()
-    pin.framesForwardKinematics(scene.model, data, scene.q0)
-    return data.oMf[frame].copy()
+    return _start(scene).oMf[frame].copy()
 
 
-def _grasp_pose(scene: Scene, link: int) -> pin.SE3:
+def grasp_pose(scene: Scene, link: int) -> pin.SE3:
     """The pose of link's grasp frame in the object frame, at the scene's start (as the scene
     placed it; on an elastic object the grasp rides on a node, the pose is the same at rest)."""
-    data = scene.model.createData()
-    pin.framesForwardKinematics(scene.model, data, scene.q0)
+    data = _start(scene)
     return data.oMf[scene.object_frame].actInv(data.oMf[scene.links[link].grasp_frame])

@@ -227,14 +227,7 @@ class Sensitivity:
             A, b = self.method.tableau if self.method.tableau is not None else ((), ())
             method = self.method
             implicit = (method.gamma, float(method.stages)) if method.gamma is not None else (method.alpha or ())
-            specs = [
-                ("offset", p.link, list(map(float, self.stepper.offsets[k])))
-                if k in self.stepper.offsets
-                else ("mass", scene.object_joint, float(scene.object.mass_and_com()[0]))
-                if law is None
-                else ("element", p.link, lookup(type(law)).native, law.native_parameters())
-                for k, (p, law) in enumerate(zip(params, self.stepper.units, strict=True))
-            ]
+            specs = [self._native_parameter(k, p, law) for k, (p, law) in enumerate(zip(params, self.stepper.units, strict=True))]
             rows = [list(map(float, row)) for row in A]
             symplectic = method.explicit and method.tableau is None
             self.native = kernel_module().Sensitivity(
@@ -329,6 +322,14 @@ class Sensitivity:
         return TrajectorySensitivity(
             np.arange(N + 1) * period, Q, V, W, applied, dX[:, :, :n_p], dW[..., :n_p], dx0, self.params, self.exact
         )
+
+    def _native_parameter(self, k: int, p: Parameter, law: Any) -> tuple[Any, ...]:
+        """Parameter k as the kernel's twin takes it (src/native/sensitivity.hpp: its constructor)."""
+        if p.position:
+            return ("offset", p.link, list(map(float, self.stepper.offsets[k])))
+        if law is None:  # the object's mass
+            return ("mass", self.scene.object_joint, float(self.scene.object.mass_and_com()[0]))
+        return ("element", p.link, lookup(type(law)).native, law.native_parameters())
 
     def _hold(self, q: np.ndarray, v: np.ndarray, period: float) -> HoldInstability | None:
         """The closed loop's controller, sampled every period and held, when that alone makes the

@@ -67,7 +67,7 @@ from .model.elements.ball_spring import BallSpring
 from .model.elements.lie import dexp_inv_rate
 from .model.elements.se3_spring import SE3Spring
 from .model.scene import Scene
-from .parameters import KINDS, Parameter
+from .parameters import KINDS, Parameter, grasp_pose
 
 __all__ = ["Carry", "StepDerivative", "StepMethod", "step_method"]
 
@@ -116,7 +116,7 @@ class StepDerivative:
         self.nv = nv
         self.units = [self._unit_law(p) for p in params]
         #: a grasp position's direction: the right perturbation of G per metre, (R_OGᵀ e_axis, 0)
-        self.offsets = {k: self._offset(p) for k, p in enumerate(params) if KINDS.get(p.kind, ("",))[0] == "grasp"}
+        self.offsets = {k: self._offset(p) for k, p in enumerate(params) if p.position}
         self.exact = True
         if any(p.kind == "mass" for p in params):
             j = scene.object_joint
@@ -133,15 +133,13 @@ class StepDerivative:
         """A grasp position's direction in G's body twist: moving G by e along the object frame's
         axis is ``G·exp6((R_OGᵀ e, 0))`` (R_OG: G's orientation in the object frame)."""
         assert p.link is not None
-        data = self.model.createData()
-        pin.framesForwardKinematics(self.model, data, self.scene.q0)
-        R = data.oMf[self.scene.object_frame].actInv(data.oMf[self.scene.links[p.link].grasp_frame]).rotation
+        R = grasp_pose(self.scene, p.link).rotation
         return np.concatenate([R.T @ np.eye(3)[KINDS[p.kind][1][0]], np.zeros(3)])
 
     def _unit_law(self, p: Parameter) -> Any:
         """The law with only p's entries at 1 (its wrench is ∂G_f_G/∂p), or None for the mass and a
         grasp position."""
-        if p.link is None or KINDS[p.kind][0] == "grasp":
+        if p.link is None or p.position:
             return None
         element = self.scene.links[p.link].element
         matrix, idx, _, _ = KINDS[p.kind]

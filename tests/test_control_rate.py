@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 import pytest
 from scipy.linalg import expm
+from test_linearize import ball_pandas
 
 import coopdyn as cd
 from coopdyn.closed_loop import System
@@ -235,14 +236,7 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
     assert message.index("rk4 is stable while") < message.index("Besides, the controller, sampled every control_dt = 1 ms")
     assert "grows ×1.022 a period" in message and "slowly: alone it takes 0.323 s to grow ×1000" in message
     # ball grasps leave the object a free spin (a neutral mode): the bound is still the hold's
-    ball = cd.Scene(
-        scene.arm_specs,
-        scene.object,
-        [
-            cd.Interconnection(ic.arm, stiffness=np.eye(3) * 1e4, damping=np.eye(3) * 20.0, element="ball")
-            for ic in scene.interconnection_specs
-        ],
-    )
+    ball = ball_pandas((1e4, 1e4, 1e4))
     with warnings.catch_warnings(), pytest.raises(cd.errors.DivergenceError) as info:
         warnings.simplefilter("ignore")
         cd.simulate(ball, 0.5, GravityCompensationPD(ball, kp=100.0, kd=20.0), "trapezoid", dt=1e-3, control_dt=1e-3)

@@ -166,11 +166,12 @@ def test_an_element_without_a_tangent_gets_central_differences_and_says_so() -> 
     assert not cd.linearize(scene, backend="python").exact
 
 
-def _ball_pandas() -> cd.Scene:
+def ball_pandas(stiffness: tuple[float, float, float] = (1e4, 2e4, 3e4)) -> cd.Scene:
+    """The two Pandas on ball grasps of diagonal ``stiffness`` [N/m] (tip axes), damping 20 N·s/m."""
     base = cd.scenes.facing_arms("panda", stiffness=1e4)
+    K = np.diag(stiffness)
     links = [
-        cd.Interconnection(ic.arm, stiffness=np.diag([1e4, 2e4, 3e4]), damping=np.eye(3) * 20.0, element="ball")
-        for ic in base.interconnection_specs
+        cd.Interconnection(ic.arm, stiffness=K, damping=np.eye(3) * 20.0, element="ball") for ic in base.interconnection_specs
     ]
     return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
 
@@ -195,7 +196,7 @@ SCENES: dict[str, Callable[[], cd.Scene]] = {
     "pandas, damped SE(3) grasps and joints": lambda: cd.scenes.facing_arms(
         "panda", stiffness=1e5, damping=30.0, joint_damping=0.5
     ),
-    "pandas, ball grasps": _ball_pandas,
+    "pandas, ball grasps": ball_pandas,
     "pandas, hardening grasps": _hardening_pandas,
     "box hung from a fixture": _hung_box,
     "beam held by two pandas": lambda: cd.scenes.held_beam(n_elements=2, damping=5.0),

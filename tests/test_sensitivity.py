@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg
-from test_linearize import _rel, richardson
+from test_linearize import _rel, ball_pandas, richardson
 
 import coopdyn as cd
 from coopdyn.closed_loop import System
@@ -34,12 +34,7 @@ def _damped_pandas() -> cd.Scene:
 
 
 def _ball_pandas() -> cd.Scene:
-    base = cd.scenes.facing_arms("panda", stiffness=1e4)
-    links = [
-        cd.Interconnection(ic.arm, stiffness=np.diag([1e4, 1e4, 1e4]), damping=np.eye(3) * 20.0, element="ball")
-        for ic in base.interconnection_specs
-    ]
-    return cd.Scene(base.arm_specs, base.object, links, gravity=base.gravity)
+    return ball_pandas((1e4, 1e4, 1e4))  # (isotropic: a k_linear parameter)
 
 
 def _hardening_box() -> cd.Scene:
@@ -96,7 +91,7 @@ def _start(scene: cd.Scene, seed: int = 11, spread: float = 1.0) -> tuple[np.nda
 def _step(p: Any, relative: float) -> float:
     """A difference step for parameter p: ``relative`` of its value, or of 0.1 m for a grasp
     position (near 0 on these scenes)."""
-    return relative * (0.1 if p.unit == "m" else p.value)
+    return relative * (0.1 if p.position else p.value)
 
 
 def _stepper(
