@@ -8,6 +8,7 @@ from .dynamics import Dynamics, Energy, backend
 from .errors import (
     AccuracyWarning,
     ControllerError,
+    ControlRateWarning,
     CoopdynError,
     DivergenceError,
     EnergyBalanceError,
@@ -66,6 +67,7 @@ __all__ = [
     "Beam",
     "BeamSegment",
     "Case",
+    "ControlRateWarning",
     "ControllerError",
     "CoopdynError",
     "DivergenceError",

@@ -129,6 +129,12 @@ class AccuracyWarning(UserWarning):
     forces that mode carries are damped away or out of phase (see :func:`coopdyn.advise`)."""
 
 
+class ControlRateWarning(UserWarning):
+    """A built-in controller sampled too slowly for its gains (``simulate(control_dt=…)``): the
+    sampled closed loop, linearised exactly at the start, is unstable where the same gains applied
+    continuously are not. The run completes, and its motion shows that instability."""
+
+
 class SceneWarning(UserWarning):
     """A scene or task that runs but looks wrong: a task that starts away from the object, a
     grasp far from it. The message gives the figure and the fix."""

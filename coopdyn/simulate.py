@@ -26,6 +26,7 @@ from .dynamics.constrained import check_integrator, has_constraints
 from .errors import (
     AccuracyWarning,
     ControllerError,
+    ControlRateWarning,
     CoopdynError,
     DivergenceError,
     EnergyBalanceError,
@@ -128,7 +129,10 @@ def simulate(
             and its output is held in between (zero-order hold) — one call per sample instead
             of one per stage, whatever the method. Fixed-step methods need ``control_dt`` a
             whole multiple of ``dt``; adaptive ones land a step on every sample instant. A
-            hold is part of the physics: the accuracy check's reference run holds too.
+            hold is part of the physics: the accuracy check's reference run holds too. A
+            built-in controller whose hold makes the loop unstable (linearised exactly at the
+            start, discretised exactly over a period) gets a ``ControlRateWarning`` when the run
+            completes (a slow growth need not diverge), unless ``accuracy_check="off"``.
         accuracy: the interconnection-force error [N] the run may have, or ``None``. Given, the
             step is chosen for it: the method runs at ``dt``, dt/2, dt/4, … (at most
             :data:`ACCURACY_HALVINGS` halvings, the saved grid kept) until its forces agree with
@@ -263,12 +267,37 @@ def simulate(
     finally:
         if bar is not None:
             bar.close()
+    if control_dt is not None and accuracy_check != "off" and t_final > 0 and hasattr(controller, "compiled_spec"):
+        _warn_if_hold_unstable(system, q, v, t_final)
     if not judged:
         return result
     rerun = dict(
         controller=controller, q0=q, v0=v, object_wrench=object_wrench, backend=backend, progress=progress, control_dt=control_dt
     )
     return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
+
+
+def _warn_if_hold_unstable(system: System, q: np.ndarray, v: np.ndarray, t_final: float, stacklevel: int = 3) -> None:
+    """Warn (ControlRateWarning) when the run's built-in controller, sampled every control_dt,
+    makes its loop unstable — linearised exactly at the start (q, v) and discretised exactly over
+    a period (:func:`coopdyn.accuracy.sampled_instability`) — where the same gains applied
+    continuously do not: a run that completes then shows that instability, and nothing else says
+    so (the accuracy check's reference holds too). A built-in controller keeps no state, so the
+    4·nv + 1 calls that give its gain change nothing; a user's own is not probed."""
+    period = system.control_dt
+    assert period is not None
+    loop = screening.start_loop(system, q, v)
+    hold = screening.sampled_instability(loop, period) if loop is not None else None
+    if hold is None:
+        return
+    decades = t_final / period * math.log10(hold.growth)
+    total = f"×{10.0**decades:.3g}" if decades < 300 else f"×1e{decades:.0f}"
+    _progress.warn(
+        f"{hold.sentence[0].upper()}{hold.sentence[1:]}. This {t_final:g} s run completed, and its motion shows that "
+        f"instability: over the run the linearised loop grows {total} (accuracy_check='off' skips this check)",
+        ControlRateWarning,
+        stacklevel=stacklevel,
+    )
 
 
 def _judge_forces(result: Result, system: System, method: Integrator, mode: str, streamed: bool, rerun: dict[str, Any]) -> Result:
@@ -412,7 +441,9 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         raise SimulationError("accuracy= runs the scene several times: it cannot stream to files; drop stream_to")
     t_final = _checked_duration(t_final)
     dt, every, _ = _checked_steps(settings.pop("dt"), settings.pop("save_every"), settings["max_speed"])
-    q, _ = scene.check_state(scene.q0 if settings["q0"] is None else settings["q0"], scene.v0)
+    q, v = scene.check_state(
+        scene.q0 if settings["q0"] is None else settings["q0"], scene.v0 if settings["v0"] is None else settings["v0"]
+    )
     if not has_constraints(scene):
         _warn_if_soft(Dynamics(scene, settings["backend"]), q)  # (the tries run without the checks)
     cpu0 = time.process_time()
@@ -449,6 +480,10 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         print(f"accuracy {tolerance:g} N: chose {_setting(run)}, the cheapest run that meets it ({costs})", file=sys.stderr)
     for w in said:
         warnings.warn(w.message, w.category, stacklevel=3)
+    controller, period = settings["controller"], settings["control_dt"]
+    if period is not None and hasattr(controller, "compiled_spec"):  # (the tries run without the checks)
+        system = System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], float(period))
+        _warn_if_hold_unstable(system, q, v, t_final, stacklevel=4)
     return _estimated(run, error, cpu_time=time.process_time() - cpu0)
 
 

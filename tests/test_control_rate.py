@@ -185,11 +185,16 @@ def test_the_energy_balance_holds_across_the_torques_jumps(pandas: cd.Scene, sta
 
 def test_the_accuracy_check_compares_with_a_reference_that_holds_too(pandas: cd.Scene, start: np.ndarray) -> None:
     """implicit_euler at 1 ms under a 2 ms hold is 24 % off in the forces: the check warns, and
-    its estimate is the error against a tight dopri5 of the same sampled loop."""
+    its estimate is the error against a tight dopri5 of the same sampled loop. (That hold makes
+    the loop on undamped grasps unstable, ×1.044 a period: a ControlRateWarning says so too.)"""
     kw = dict(controller=GravityCompensationPD(pandas), v0=start, control_dt=2e-3)
     tight = cd.simulate(pandas, 0.2, integrator=DormandPrince(rtol=1e-11, atol=1e-13), accuracy_check="off", **kw)  # type: ignore[arg-type]
-    with pytest.warns(cd.AccuracyWarning, match="wrong by up to"):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         res = cd.simulate(pandas, 0.2, integrator="implicit_euler", dt=1e-3, **kw)  # type: ignore[arg-type]
+    said = {w.category: str(w.message) for w in caught}
+    assert set(said) == {cd.AccuracyWarning, cd.ControlRateWarning}
+    assert "wrong by up to" in said[cd.AccuracyWarning] and "grows ×1.044 a period" in said[cd.ControlRateWarning]
     error = np.max(np.linalg.norm(res.wrenches()[..., :3] - tight.wrenches()[..., :3], axis=-1))
     peak = np.max(np.linalg.norm(tight.wrenches()[..., :3], axis=-1))
     assert error > 0.1 * peak
@@ -241,6 +246,43 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
         warnings.simplefilter("ignore")
         cd.simulate(ball, 0.5, GravityCompensationPD(ball, kp=100.0, kd=20.0), "trapezoid", dt=1e-3, control_dt=1e-3)
     assert "sample every 0.491 ms or faster" in str(info.value)
+
+
+def test_a_run_that_completes_under_too_slow_a_built_in_controller_warns() -> None:
+    """The same PD sampled every 0.5 ms (beyond its 0.491 ms bound) does not diverge within 0.3 s,
+    yet its joints end at hundreds of rad/s: a ControlRateWarning says why, with the growth per
+    period and over the run and the bound. At 0.45 ms, with accuracy_check='off', or under a
+    user's own controller (not probed: called once per sample only) nothing is said."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    pd = GravityCompensationPD(scene, kp=100.0, kd=20.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = cd.simulate(scene, 0.3, pd, "trapezoid", dt=1.25e-4, control_dt=5e-4)
+    assert np.max(np.abs(res.v[-20:])) > 100.0  # (what the warning explains)
+    (message,) = [str(w.message) for w in caught if w.category is cd.ControlRateWarning]
+    assert message.startswith("The controller, sampled every control_dt = 0.5 ms and held, makes the loop unstable")
+    assert "grows ×1.036 a period (applied continuously it decays)" in message
+    assert "sample every 0.491 ms or faster" in message
+    assert "This 0.3 s run completed" in message and "the linearised loop grows ×1.65e+09" in message
+    assert caught[0].filename == __file__  # (attributed to the caller of simulate)
+    with warnings.catch_warnings(record=True) as caught:  # the step chosen for an accuracy: the same warning
+        warnings.simplefilter("always")
+        cd.simulate(scene, 0.1, pd, "trapezoid", dt=1.25e-4, control_dt=5e-4, accuracy=1.0)
+    assert [w.filename for w in caught if w.category is cd.ControlRateWarning] == [__file__]
+
+    def rate_warnings(controller: object, control_dt: float, **options: object) -> list[warnings.WarningMessage]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            dt = control_dt / 4
+            cd.simulate(scene, 0.3, controller, "trapezoid", dt=dt, control_dt=control_dt, **options)  # type: ignore[arg-type]
+        return [w for w in caught if w.category is cd.ControlRateWarning]
+
+    assert not rate_warnings(pd, 4.5e-4)
+    assert not rate_warnings(pd, 5e-4, accuracy_check="off")
+    user = Counting(scene)
+    user.inner = pd
+    assert not rate_warnings(user, 5e-4)
+    assert len(user.times) == 600  # one call per sample: not probed
 
 
 @pytest.mark.parametrize(
