@@ -354,38 +354,42 @@ class HoldInstability:
     """A sampled controller too slow for its gains (:func:`sampled_instability`)."""
 
     sentence: str  #: what it is and what to do, lower case, no full stop
-    growth: float  #: the sampled loop's growth per period
+    growth: float  #: the sampled loop's growth per period (> 1; inf when it overflows)
     period: float  #: [s]
 
     def explains(self, duration: float) -> bool:
         """Whether its growth over ``duration`` [s] explains a divergence by itself."""
-        return self.growth ** (duration / self.period) >= HOLD_EXPLAINS
+        return math.log(self.growth) * duration / self.period >= math.log(HOLD_EXPLAINS)
 
     def seconds(self) -> float:
         """[s] the time its growth alone takes to reach ×:data:`HOLD_EXPLAINS`."""
         return self.period * math.log(HOLD_EXPLAINS) / math.log(self.growth)
 
 
-def sampled_instability(loop: StartLoop, period: float) -> HoldInstability | None:
+def sampled_instability(loop: StartLoop, period: float, knob: str = "control_dt") -> HoldInstability | None:
     """A controller sampled every ``period`` [s] and held whose loop, discretised exactly over the
     period (``[Φ Γ] = expm([[AT, BT], [0, 0]])``), ``Φ + Γ G``, has a spectral radius above 1 where
     the same gains applied continuously (``A + B G``) keep it smaller — a digital controller too
     slow for its gains —, with its growth per period and the longest stable period; None when the
-    sampled loop is stable, or no stable period is found."""
+    sampled loop is stable, or no stable period is found. ``knob``: what the sentence calls the
+    period (``control_dt``, a sensitivity's ``period``). Compared in logarithms: a loop that grows
+    past the floats' range over a period (a wrong sign in a gain) is still told."""
     A, B, G = loop.A, loop.B, loop.G
     n, m = B.shape
     sigma = float(np.max(np.linalg.eigvals(A + B @ G).real))  # the continuous loop's growth rate [1/s]
 
-    def radius(T: float) -> float:
+    def log_radius(T: float) -> float:
         E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
-        return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
+        if not np.all(np.isfinite(E)):
+            return math.inf
+        radius = float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
+        return math.log(radius) if radius > 0 else -math.inf
 
     def stable(T: float) -> bool:  # (a neutral mode, a free spin say, grows as the continuous one)
-        return radius(T) <= max(1.0, math.exp(sigma * T)) * (1.0 + 1e-6)
+        return log_radius(T) <= max(0.0, sigma * T) + math.log1p(1e-6)
 
-    sampled = radius(period)
-    growth = math.exp(sigma * period)
-    if not (sampled > 1.0 + 1e-3 and sampled > growth * (1.0 + 1e-3)):
+    sampled = log_radius(period)
+    if not (sampled > math.log1p(1e-3) and sampled > sigma * period + math.log1p(1e-3)):
         return None
     lo = period / 2.0
     while not stable(lo):
@@ -396,14 +400,23 @@ def sampled_instability(loop: StartLoop, period: float) -> HoldInstability | Non
     for _ in range(14):  # log-scale bisection: 0.2 % in the period
         mid = math.sqrt(lo * hi)
         lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    applied = "decays" if growth < 1.0 - 1e-9 else "holds it" if growth <= 1.0 + 1e-6 else f"grows ×{growth:.4g} a period"
+    drift = sigma * period
+    applied = "decays" if drift < -1e-9 else "holds it" if drift <= 1e-6 else f"grows {growth_factor(drift)} a period"
     sentence = (
-        f"the controller, sampled every control_dt = {period * 1e3:.4g} ms and held, makes the loop unstable: linearised "
-        f"exactly at the start and discretised exactly over a period it grows ×{sampled:.4g} a period (applied "
+        f"the controller, sampled every {knob} = {period * 1e3:.4g} ms and held, makes the loop unstable: linearised "
+        f"exactly at the start and discretised exactly over a period it grows {growth_factor(sampled)} a period (applied "
         f"continuously it {applied}). No integrator makes that stable: sample every {lo * 1e3:.3g} ms or faster, or "
         "lower the gains"
     )
-    return HoldInstability(sentence, sampled, period)
+    return HoldInstability(sentence, math.exp(sampled) if sampled < 709.0 else math.inf, period)
+
+
+def growth_factor(log_growth: float) -> str:
+    """A growth factor given by its natural logarithm: "×1.036", "×1.65e+09", "×1e+400" past floats."""
+    if log_growth == math.inf:
+        return "×inf"
+    decades = log_growth / math.log(10.0)
+    return f"×{math.exp(log_growth):.4g}" if decades < 300 else f"×1e+{decades:.0f}"
 
 
 def growth_text(system: System, q: np.ndarray, v: np.ndarray, duration: float) -> str:

@@ -17,6 +17,7 @@ the step and of the compiled loop's rollout.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -317,7 +318,11 @@ class Sensitivity:
             hold = self._hold(q, v, period) if self.system is not None and "diverged" in str(exc) else None
             if hold is None:
                 raise
-            raise SimulationError(f"{exc}. The {hold.sentence.removeprefix('the ')}") from exc
+            when = _diverged_at(str(exc))
+            if when is None or hold.explains(when):
+                raise SimulationError(f"{exc}. The {hold.sentence.removeprefix('the ')}") from exc
+            slowly = f" — slowly: alone it takes {hold.seconds():.3g} s to grow ×1000"
+            raise SimulationError(f"{exc}. Besides, {hold.sentence}{slowly}") from exc
         dx0 = dX[:, :, n_p:] if initial_state else None
         return TrajectorySensitivity(
             np.arange(N + 1) * period, Q, V, W, applied, dX[:, :, :n_p], dW[..., :n_p], dx0, self.params, self.exact
@@ -336,7 +341,10 @@ class Sensitivity:
         loop linearised at (q, v) unstable (:func:`coopdyn.accuracy.sampled_instability`)."""
         assert self.system is not None
         loop = start_loop(self.system, q, v)
-        return None if loop is None else sampled_instability(loop, period)
+        try:
+            return None if loop is None else sampled_instability(loop, period, knob="period")
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (never hiding the divergence itself)
+            return None
 
     def transitions(self, torques: Any, period: float, *, dt: float | None = None, q0: Any = None, v0: Any = None) -> Transitions:
         """An open-loop trajectory (``torques[k]`` held over period k, as :meth:`trajectory`) and its
@@ -453,6 +461,13 @@ class Sensitivity:
         else:  # (the end's wrench would cost one more evaluation of the derivatives)
             Q[N], V[N], dX[N, :nv], dX[N, nv:], W[N], dW[N] = q, v, dq, dv, np.nan, np.nan
         return Q, V, W, dX, dW, applied
+
+
+def _diverged_at(message: str) -> float | None:
+    """The time [s] a divergence message of :meth:`Sensitivity._run` names (both backends write
+    "t = … s"), or None."""
+    found = re.search(r"\bt = ([-+0-9.eE]+) s", message)
+    return float(found.group(1)) if found else None
 
 
 def _identity_seeds(nv: int, na: int, n_p: int) -> tuple[np.ndarray, ...]:

@@ -286,12 +286,14 @@ def _warn_if_hold_unstable(system: System, q: np.ndarray, v: np.ndarray, t_final
     4·nv + 1 calls that give its gain change nothing; a user's own is not probed."""
     period = system.control_dt
     assert period is not None
-    loop = screening.start_loop(system, q, v)
-    hold = screening.sampled_instability(loop, period) if loop is not None else None
+    try:
+        loop = screening.start_loop(system, q, v)
+        hold = screening.sampled_instability(loop, period) if loop is not None else None
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (a diagnosis never turns a run into an error)
+        return
     if hold is None:
         return
-    decades = t_final / period * math.log10(hold.growth)
-    total = f"×{10.0**decades:.3g}" if decades < 300 else f"×1e{decades:.0f}"
+    total = screening.growth_factor(t_final / period * math.log(hold.growth))
     _progress.warn(
         f"{hold.sentence[0].upper()}{hold.sentence[1:]}. This {t_final:g} s run completed, and its motion shows that "
         f"instability: over the run the linearised loop grows {total} (accuracy_check='off' skips this check)",
@@ -851,11 +853,14 @@ class _Run:
         # the loop at the start (by the blow-up the state is far from any linearisation): one
         # linearisation, its controller probed 4·nv times, for both diagnoses
         loop = screening.start_loop(self.system, self.start[0], self.start[1])
-        mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t, loop) if loop is not None else ""
+        period = self.system.control_dt
+        try:
+            mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t, loop) if loop is not None else ""
+            hold = screening.sampled_instability(loop, period) if loop is not None and period else None
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (never hiding the divergence itself)
+            mode, hold = "", None
         if mode:
             diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
-        period = self.system.control_dt
-        hold = screening.sampled_instability(loop, period) if loop is not None and period else None
         if hold is not None and hold.explains(t):  # (the methods' stability is the continuous loop's: in .advice)
             cause = (
                 f"The {hold.sentence.removeprefix('the ')} (this error's .advice has the methods' stability with the "

@@ -224,7 +224,7 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
     assert np.max(np.abs(calm.v[-100:])) < 1e-2 < 10.0 < np.max(np.abs(growing.v[-100:]))
     # the same controller closing the loop of a sensitivity run, sampled every 1 ms: the hold is named there too
     with pytest.raises(
-        cd.errors.SimulationError, match=r"sensitivities: diverged.*The controller, sampled every control_dt = 1 ms"
+        cd.errors.SimulationError, match=r"sensitivities: diverged.*The controller, sampled every period = 1 ms"
     ):
         cd.Sensitivity(scene, "trapezoid", controller=pd).trajectory(200, 1e-3)
     # rk4 beyond its limit on stiff grasps under a hold that is stable: the method is blamed, not the hold
@@ -240,6 +240,12 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
     message = str(info.value)
     assert message.index("rk4 is stable while") < message.index("Besides, the controller, sampled every control_dt = 1 ms")
     assert "grows ×1.022 a period" in message and "slowly: alone it takes 0.323 s to grow ×1000" in message
+    # the same loop closing a sensitivity run: the method first there too, and the knob is its period
+    with pytest.raises(cd.errors.SimulationError) as info:
+        cd.Sensitivity(stiff, "rk4", controller=GravityCompensationPD(stiff, kp=100.0, kd=13.25)).trajectory(500, 1e-3)
+    message = str(info.value)
+    assert "Besides, the controller, sampled every period = 1 ms and held" in message
+    assert "slowly: alone it takes 0.323 s to grow ×1000" in message and "control_dt" not in message
     # ball grasps leave the object a free spin (a neutral mode): the bound is still the hold's
     ball = ball_pandas((1e4, 1e4, 1e4))
     with warnings.catch_warnings(), pytest.raises(cd.errors.DivergenceError) as info:
@@ -263,7 +269,7 @@ def test_a_run_that_completes_under_too_slow_a_built_in_controller_warns() -> No
     assert message.startswith("The controller, sampled every control_dt = 0.5 ms and held, makes the loop unstable")
     assert "grows ×1.036 a period (applied continuously it decays)" in message
     assert "sample every 0.491 ms or faster" in message
-    assert "This 0.3 s run completed" in message and "the linearised loop grows ×1.65e+09" in message
+    assert "This 0.3 s run completed" in message and "the linearised loop grows ×1.646e+09" in message
     assert caught[0].filename == __file__  # (attributed to the caller of simulate)
     with warnings.catch_warnings(record=True) as caught:  # the step chosen for an accuracy: the same warning
         warnings.simplefilter("always")
@@ -283,6 +289,22 @@ def test_a_run_that_completes_under_too_slow_a_built_in_controller_warns() -> No
     user.inner = pd
     assert not rate_warnings(user, 5e-4)
     assert len(user.times) == 600  # one call per sample: not probed
+
+
+def test_a_loop_that_grows_past_the_floats_over_a_period_is_still_reported_as_diverged() -> None:
+    """A gain of the wrong sign (+50·v) sampled every second: the loop grows past the floats' range
+    over a period, and the divergence is still the error (the hold's diagnosis overflowed once)."""
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    arm, inner = np.array(scene.arm_joints), GravityCompensationPD(scene, kp=0.0, kd=0.0)
+
+    def wrong_sign(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return inner(t, q, v) + 50.0 * v[arm]
+
+    with warnings.catch_warnings(), pytest.raises(cd.errors.DivergenceError, match=r"the simulation diverged at t = 2\.0"):
+        warnings.simplefilter("ignore")
+        cd.simulate(scene, 3.0, wrong_sign, "rk4", dt=1e-3, control_dt=1.0)
+    with pytest.raises(cd.errors.SimulationError, match="sensitivities: diverged"):
+        cd.Sensitivity(scene, "rk4", controller=wrong_sign).trajectory(3, 1.0, dt=1e-3)
 
 
 @pytest.mark.parametrize(
