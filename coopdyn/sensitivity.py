@@ -51,6 +51,13 @@ __all__ = [
 #: a speed [rad/s or m/s] above which a differentiated run counts as diverged (coopdyn.rollout's default)
 MAX_SPEED = 1e4
 _DIVERGED_HINT = "; a smaller step or a method that resolves the scene's modes"
+#: why a closed loop's derivative refuses a controller that answered the same call differently
+_STATEFUL = (
+    "it keeps state between calls (an integral term, a filter, a counter). A closed loop's derivative calls it "
+    "more times per sample (central differences), which would change that state and with it the trajectory: "
+    'give a controller that is a function of (t, q, v) alone, or fit with identify(..., jacobian="finite-differences"), '
+    "whose runs call it once per sample"
+)
 
 
 @dataclass(frozen=True)
@@ -196,7 +203,9 @@ class Sensitivity:
             runs compiled and keeps its own model of the object, as on a real robot. Its
             derivative along the sensitivities' columns comes from central differences (2 calls
             per column and period; 4·nv when there are 2·nv columns or more), so the result's
-            ``exact`` is then False.
+            ``exact`` is then False. It must be a function of (t, q, v): one that keeps state
+            between calls (an integral term) would be changed by those calls, and is refused
+            (SimulationError) when it answers the same call twice differently.
     """
 
     def __init__(
@@ -405,6 +414,9 @@ class Sensitivity:
                 self.dynamics.reraise_python_error()  # a Python element's own failure (or Ctrl-C in it)
                 if str(exc).startswith("diverged"):  # (the twin's divergences: the Python loop's messages)
                     raise SimulationError(f"sensitivities: {exc}{_DIVERGED_HINT}") from exc
+                if str(exc).startswith("stateful controller"):
+                    when = str(exc).removeprefix("stateful controller ").split(":")[0]
+                    raise _stateful(when) from None
                 raise SimulationError(f"sensitivities: the kernel stopped the run: {exc}") from exc
             Q, V, W, dX, dW, exact, applied = raw
             N, L, m = len(U), len(self.scene.elements), seeds[0].shape[1]
@@ -433,8 +445,12 @@ class Sensitivity:
             du_k = du
             if self.system is not None:  # the controller's sample, held over the period
                 t_k = k * per * h
-                applied[k] = U[k] + self.system.torque(t_k, q, v)
+                tau_k = self.system.torque(t_k, q, v)
+                applied[k] = U[k] + tau_k
                 du_k = du + _controller_derivative(self.system, t_k, q, v, dq, dv)
+                again = self.system.torque(t_k, q, v)  # (a controller with a state has been changed by the probes)
+                if not np.max(np.abs(again - tau_k), initial=0.0) <= 1e-9 * max(1.0, float(np.max(np.abs(tau_k), initial=0.0))):
+                    raise _stateful(f"at t = {t_k:.6g} s")
                 self.exact = False
             carry: Carry = None  # (a new held torque: generalized-α starts afresh, as the integrators do)
             for s in range(per):
@@ -461,6 +477,11 @@ class Sensitivity:
         else:  # (the end's wrench would cost one more evaluation of the derivatives)
             Q[N], V[N], dX[N, :nv], dX[N, nv:], W[N], dW[N] = q, v, dq, dv, np.nan, np.nan
         return Q, V, W, dX, dW, applied
+
+
+def _stateful(when: str) -> SimulationError:
+    """The refusal of a controller that answered the same call ``when`` ("at t = … s") differently."""
+    return SimulationError(f"sensitivities: the controller answered the same call {when} differently: {_STATEFUL}")
 
 
 def _diverged_at(message: str) -> float | None:

@@ -452,6 +452,34 @@ def test_a_closed_loops_sensitivities_are_the_derivatives_of_its_simulation(meth
         cd.sensitivity.Sensitivity(scene, controller=controller).step()
 
 
+def test_a_controller_that_keeps_state_is_refused_by_a_closed_loops_derivative(book: cd.Scene) -> None:
+    """A PI whose integral grows at every call: the probes of its derivative would change it (the
+    trajectory was 0.16 m off the simulation's, and identify never moved); both backends refuse
+    it and say why, and the fit by finite differences, which calls it once per sample, finds the
+    true stiffness."""
+
+    class PI:
+        def __init__(self) -> None:
+            self.integral = np.zeros(2)
+
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            if t == 0.0:
+                self.integral = np.zeros(2)
+            error = 0.01 - q[:2]
+            self.integral += 0.01 * error
+            return 2000.0 * error + 20000.0 * self.integral - 50.0 * v[:2]
+
+    run = cd.simulate(book, 0.2, PI(), "rk4", dt=1e-3, control_dt=1e-2, save_every=10, accuracy_check="off")
+    for backend in ("native", "python"):
+        with pytest.raises(SimulationError, match=r"answered the same call at t = 0\.01 s differently: it keeps state"):
+            trajectory_sensitivity(book, 20, 1e-2, dt=1e-3, parameters=["tip1.k_z"], controller=PI(), backend=backend)
+    measured, start = cd.Measurements.from_result(run), {"tip1.k_z": 1.5e4}
+    with pytest.raises(SimulationError, match="keeps state between calls"):
+        cd.identify(book, measured, ["tip1.k_z"], initial=start, controller=PI(), dt=1e-3)
+    fit = cd.identify(book, measured, ["tip1.k_z"], initial=start, controller=PI(), dt=1e-3, jacobian="finite-differences")
+    assert fit.estimate["tip1.k_z"] == pytest.approx(parameters(book, ["tip1.k_z"])[0].value, rel=1e-9)
+
+
 def test_one_period_and_one_parameter_with_the_start_give_the_references_derivatives(pandas: cd.Scene) -> None:
     """(1, n) inputs to the kernel's twin: one period of torques, one parameter with the start's
     columns — eigenpy once mapped such arrays wrongly through an Eigen::Ref."""

@@ -178,8 +178,22 @@ private:
   // τ at (t, q, v) and its derivative along the seed columns, du = ∂τ/∂(δq, v)·[dq; dv] (na, m),
   // by central differences: along each column (2m calls; a step of 1e-6 on its largest entry)
   // when m < 2nv, else through the whole gain (4nv calls: steps 1e-6 in δq, 1e-6·max(1, |v|∞) in v,
-  // as linearize.py's controller_gain).
+  // as linearize.py's controller_gain). Then τ once more at (t, q, v): a controller that keeps
+  // state between calls answers differently, and the probes have changed its trajectory — an
+  // error that starts with "stateful controller" (coopdyn/sensitivity.py words it).
   void controller_sample(double t, const VectorXd & q, const VectorXd & v, const MatrixXd & dq, const MatrixXd & dv,
+                         VectorXd & tau, MatrixXd & du) {
+    controller_probe(t, q, v, dq, dv, tau, du);
+    VectorXd again(tau.size());
+    if (ctrl_->reads_kernel()) kernel_.kinematics(q, v, false);
+    ctrl_->torque(t, q, v, again);
+    const double scale = std::max(1.0, tau.size() ? tau.cwiseAbs().maxCoeff() : 0.0);
+    if (!again.allFinite() || (again - tau).cwiseAbs().maxCoeff() > 1e-9 * scale)
+      throw std::runtime_error("stateful controller at t = " + number(t, 6) + " s: " + number(tau.norm(), 6) + " then " +
+                               number(again.norm(), 6));
+  }
+
+  void controller_probe(double t, const VectorXd & q, const VectorXd & v, const MatrixXd & dq, const MatrixXd & dv,
                          VectorXd & tau, MatrixXd & du) {
     const Eigen::Index nv = model_.nv, na = kernel_.actuated().size(), m = dq.cols();
     auto torque = [&](const VectorXd & qq, const VectorXd & vv, VectorXd & out) {
