@@ -523,7 +523,8 @@ def step_method(integrator: Any) -> StepMethod:
         SimulationError: any other method, with the reason.
     """
     method = get_integrator(integrator)
-    if isinstance(method, ExplicitRungeKutta | DormandPrince):
+    tableau_family = next((base for base in (ExplicitRungeKutta, DormandPrince) if isinstance(method, base)), None)
+    if tableau_family is not None and _keeps_step(method, tableau_family):
         return StepMethod((method.tableau.A, method.tableau.b))
     if type(method) is SymplecticEuler:
         return StepMethod(None)
@@ -546,7 +547,17 @@ def step_method(integrator: Any) -> StepMethod:
         name = repr(method)
     elif type(method) is AdaptiveROS2:
         why = "it adapts its step in a run; 'ros2' is the same step at a fixed h"
-    elif isinstance(method, LinearlyImplicitEuler | ROS2 | Trapezoid | GeneralizedAlpha | SymplecticEuler | Exponential):
+    elif isinstance(
+        method,
+        ExplicitRungeKutta
+        | DormandPrince
+        | LinearlyImplicitEuler
+        | ROS2
+        | Trapezoid
+        | GeneralizedAlpha
+        | SymplecticEuler
+        | Exponential,
+    ):
         why = f"it is a subclass of a built-in method ({type(method).__name__}) whose step may differ from the one differentiated"
     else:
         why = "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods are"
@@ -555,6 +566,12 @@ def step_method(integrator: Any) -> StepMethod:
         "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha', 'exponential' (linear scenes) or an explicit "
         "tableau (ExplicitRungeKutta)"
     )
+
+
+def _keeps_step(method: Any, base: type) -> bool:
+    """Whether ``method``'s class steps as ``base`` does (a subclass that only sets a tableau) —
+    not one that overrides the step or an adaptive attempt, which its tableau would not describe."""
+    return all(getattr(type(method), name, None) is getattr(base, name, None) for name in ("step", "attempt"))
 
 
 def acceleration_derivative(

@@ -366,6 +366,17 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
     class MyTrapezoid(cd.integrators.Trapezoid):
         pass
 
+    class HalvedRK4(cd.integrators.INTEGRATORS["rk4"]):  # type: ignore[misc,valid-type]
+        """An rk4 whose own step differs from its tableau's (it was differentiated as the tableau)."""
+
+        def step(self, system: Any, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Any:
+            q1, v1 = super().step(system, t, q, v, h, ws)
+            return q1, 0.5 * v1
+
+    class NamedRK4(cd.integrators.INTEGRATORS["rk4"]):  # type: ignore[misc,valid-type]
+        name = "my_rk4"  # (only a name: its step is the tableau's, differentiated)
+
+    assert step_sensitivity(pandas, integrator=NamedRK4()).dx_dx.shape == (2 * pandas.nv, 2 * pandas.nv)
     with pytest.raises(SimulationError, match="the exponential integrator needs a linear scene; this one is not"):
         step_sensitivity(pandas, integrator="exponential")
     refused = {
@@ -373,6 +384,7 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
         "reuses an earlier step's matrices.*use jacobian_every=1",
         "ros2_adaptive": "adapts its step in a run; 'ros2' is the same step at a fixed h",
         MyTrapezoid(): r"a subclass of a built-in method \(MyTrapezoid\)",
+        HalvedRK4(): r"a subclass of a built-in method \(HalvedRK4\)",
         "scipy": "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods",
     }
     for method, why in refused.items():
