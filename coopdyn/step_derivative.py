@@ -525,7 +525,7 @@ def step_method(integrator: Any) -> StepMethod:
     method = get_integrator(integrator)
     tableau_family = next((base for base in (ExplicitRungeKutta, DormandPrince) if isinstance(method, base)), None)
     if tableau_family is not None and _keeps_step(method, tableau_family):
-        return StepMethod((method.tableau.A, method.tableau.b))
+        return StepMethod((method.tableau.A, method.tableau.b))  # type: ignore[attr-defined]
     if type(method) is SymplecticEuler:
         return StepMethod(None)
     if type(method) is LinearlyImplicitEuler and method.jacobian_every == 1:
