@@ -135,6 +135,12 @@ class ControlRateWarning(UserWarning):
     continuously are not. The run completes, and its motion shows that instability."""
 
 
+class UnstableLoopWarning(UserWarning):
+    """The closed loop under a built-in controller, linearised exactly at the start, has an
+    oscillating mode that grows by more than e over the run: the run's motion grows from that
+    instability, and its figures depend on the step and the start (no method makes it stable)."""
+
+
 class SceneWarning(UserWarning):
     """A scene or task that runs but looks wrong: a task that starts away from the object, a
     grasp far from it. The message gives the figure and the fix."""

@@ -39,6 +39,7 @@ from .errors import (
     SimulationInterrupted,
     StepBudgetError,
     StepMatrixError,
+    UnstableLoopWarning,
 )
 from .integrators import AdaptiveIntegrator, DormandPrince, Integrator, get_integrator
 from .model.scene import Scene
@@ -123,6 +124,11 @@ def simulate(
             dwarf the run's forces is reported as an unstable loop the run's step hides).
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
+            Whatever the method, a built-in controller's loop is also linearised exactly at the
+            start (its gain by central differences: 1–15 ms): an oscillating mode that grows by
+            more than e over the run gives an ``UnstableLoopWarning`` — the run's figures are an
+            instability's, and depend on the step — and a ``control_dt`` too long for its gains
+            a ``ControlRateWarning``. ``"off"`` skips that too.
         control_dt: the controller's sample period [s], or ``None`` (default) to call it at every
             evaluation (a continuous-time controller: every stage of every step). With a period
             the controller runs as a digital one does: it is called at t = 0, k·control_dt, …
@@ -267,8 +273,8 @@ def simulate(
     finally:
         if bar is not None:
             bar.close()
-    if control_dt is not None and accuracy_check != "off" and t_final > 0 and hasattr(controller, "compiled_spec"):
-        _warn_if_hold_unstable(system, q, v, t_final)
+    if accuracy_check != "off" and t_final > 0 and hasattr(controller, "compiled_spec"):
+        _check_the_loop(system, q, v, t_final)
     if not judged:
         return result
     rerun = dict(
@@ -277,29 +283,41 @@ def simulate(
     return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
 
 
-def _warn_if_hold_unstable(system: System, q: np.ndarray, v: np.ndarray, t_final: float, stacklevel: int = 3) -> None:
-    """Warn (ControlRateWarning) when the run's built-in controller, sampled every control_dt,
-    makes its loop unstable — linearised exactly at the start (q, v) and discretised exactly over
-    a period (:func:`coopdyn.accuracy.sampled_instability`) — where the same gains applied
-    continuously do not: a run that completes then shows that instability, and nothing else says
-    so (the accuracy check's reference holds too). A built-in controller keeps no state, so the
-    4·nv + 1 calls that give its gain change nothing; a user's own is not probed."""
+def _check_the_loop(system: System, q: np.ndarray, v: np.ndarray, t_final: float, stacklevel: int = 3) -> None:
+    """Warn when the run's built-in controller makes its loop — linearised exactly at the start
+    (q, v) — unstable: an oscillating mode that grows by more than e over the run
+    (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`), or a control_dt too long for its
+    gains (ControlRateWarning, :func:`coopdyn.accuracy.sampled_instability`). A run that completes
+    then shows that instability, and nothing else says so (the accuracy check's reference is just
+    as unstable). A built-in controller keeps no state, so the 4·nv + 1 calls that give its gain
+    change nothing; a user's own is not probed."""
     period = system.control_dt
-    assert period is not None
     try:
         loop = screening.start_loop(system, q, v)
-        hold = screening.sampled_instability(loop, period) if loop is not None else None
+        if loop is None:
+            return
+        mode = screening.unstable_mode(system, q, v, t_final, loop)
+        hold = screening.sampled_instability(loop, period) if period is not None else None
     except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (a diagnosis never turns a run into an error)
         return
-    if hold is None:
-        return
-    total = screening.growth_factor(t_final / period * math.log(hold.growth))
-    _progress.warn(
-        f"{hold.sentence[0].upper()}{hold.sentence[1:]}. This {t_final:g} s run completed, and its motion shows that "
-        f"instability: over the run the linearised loop grows {total} (accuracy_check='off' skips this check)",
-        ControlRateWarning,
-        stacklevel=stacklevel,
-    )
+    skip = "(accuracy_check='off' skips this check)"
+    if mode:
+        _progress.warn(
+            f"The closed loop under this controller is unstable: linearised exactly at the start (coopdyn.linearize with "
+            f"the controller), it has {mode}. This {t_final:g} s run's motion grows from that instability, so its figures "
+            f"(forces, tracking) depend on the step and the start, and no method makes it stable: change the controller "
+            f"or its gains {skip}",
+            UnstableLoopWarning,
+            stacklevel=stacklevel,
+        )
+    if hold is not None:
+        total = screening.growth_factor(t_final / hold.period * math.log(hold.growth))
+        _progress.warn(
+            f"{hold.sentence[0].upper()}{hold.sentence[1:]}. This {t_final:g} s run completed, and its motion shows that "
+            f"instability: over the run the linearised loop grows {total} {skip}",
+            ControlRateWarning,
+            stacklevel=stacklevel,
+        )
 
 
 def _judge_forces(result: Result, system: System, method: Integrator, mode: str, streamed: bool, rerun: dict[str, Any]) -> Result:
@@ -483,9 +501,11 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     for w in said:
         warnings.warn(w.message, w.category, stacklevel=3)
     controller, period = settings["controller"], settings["control_dt"]
-    if period is not None and hasattr(controller, "compiled_spec"):  # (the tries run without the checks)
-        system = System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], float(period))
-        _warn_if_hold_unstable(system, q, v, t_final, stacklevel=4)
+    if hasattr(controller, "compiled_spec"):  # (the tries run without the checks)
+        held = None if period is None else float(period)
+        _check_the_loop(
+            System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], held), q, v, t_final, 4
+        )
     return _estimated(run, error, cpu_time=time.process_time() - cpu0)
 
 

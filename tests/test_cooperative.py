@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import re
 import warnings
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -255,14 +257,43 @@ def test_an_unstable_closed_loop_is_said_so_in_the_warning_and_the_divergence() 
     scene = cd.scenes.held_beam(n_elements=4)
     controller = ObjectImpedance(scene, measure="object")
     growing = r"has a 3\d\d(\.\d)? Hz mode growing at \d+(\.\d+)? /s"
-    with pytest.warns(cd.AccuracyWarning, match=r"the closed loop " + growing + r" .*: it is unstable"):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         cd.simulate(scene, 0.3, controller=controller, integrator="implicit_euler", dt=1e-3)
+    said = {w.category: str(w.message) for w in caught}
+    assert re.search(r"the closed loop " + growing + r" .*: it is unstable", said[cd.AccuracyWarning])
+    # the loop's own warning, whatever the method: the run's figures are an instability's
+    assert re.search(r"^The closed loop under this controller is unstable: .* it " + growing, said[cd.UnstableLoopWarning])
     said = r"From the start the closed loop is unstable: linearised exactly there, it "
     with pytest.raises(cd.DivergenceError, match=said + growing):
         cd.simulate(scene, 1.0, controller=controller, integrator="implicit_euler", dt=1e-3, accuracy_check="off")
     with warnings.catch_warnings():
         warnings.simplefilter("error", cd.AccuracyWarning)  # read at the tips: stable, and the trapezoid resolves what matters
         cd.simulate(scene, 0.3, controller=ObjectImpedance(scene), integrator="trapezoid", dt=1e-3)
+
+
+def test_an_unstable_loop_is_said_so_whatever_the_method_and_only_then() -> None:
+    """ObjectImpedance on undamped Panda grasps (k = 1e4 N/m): its loop, linearised exactly at the
+    start, has a 28.1 Hz mode growing at 22.8 /s — the trapezoid's run is accurate (the reference
+    is just as unstable) yet its figures are an instability's: an UnstableLoopWarning says so.
+    With the demo's damped grasps, with accuracy_check="off", or under a user's own controller
+    (not probed) nothing is said."""
+    undamped = cd.scenes.facing_arms("panda", stiffness=1e4)
+
+    def loop_warnings(scene: cd.Scene, controller: Any, **options: Any) -> list[str]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cd.simulate(scene, 0.3, controller, "trapezoid", dt=1e-3, **options)
+        return [str(w.message) for w in caught if w.category is cd.UnstableLoopWarning]
+
+    (message,) = loop_warnings(undamped, ObjectImpedance(undamped))
+    assert message.startswith("The closed loop under this controller is unstable: linearised exactly at the start")
+    assert "a 28.1 Hz mode growing at 22.8 /s (×e every 43.9 ms)" in message and "This 0.3 s run's motion" in message
+    damped = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    assert not loop_warnings(damped, ObjectImpedance(damped))
+    assert not loop_warnings(undamped, ObjectImpedance(undamped), accuracy_check="off")
+    inner = ObjectImpedance(undamped)
+    assert not loop_warnings(undamped, lambda t, q, v: inner(t, q, v))
 
 
 def test_internal_moments_turn_a_tool_back_towards_the_other_and_damp_it() -> None:

@@ -286,6 +286,7 @@ SPEC = """
 builder = "facing_arms"
 robot = "panda"
 stiffness = 1e4
+damping = 0.002
 
 [controller]
 type = "object_impedance"
@@ -342,7 +343,7 @@ def test_a_spec_runs_from_the_command_line(tmp_path: Path, capsys: pytest.Captur
 
 
 def _spec_case(k: float, gains: list[float]) -> cd.Case:
-    scene = cd.scenes.facing_arms("panda", stiffness=k)
+    scene = cd.scenes.facing_arms("panda", stiffness=k, damping=0.002)
     task = GripLiftOscillate(start=object_start(scene), t_grip=0.1)
     return cd.Case(scene, ObjectImpedance(scene, task, stiffness=tuple(gains)), task)
 
