@@ -126,9 +126,10 @@ def simulate(
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
             start (its gain by central differences: 1–15 ms): an oscillating mode that grows by
-            more than e over the run gives an ``UnstableLoopWarning`` — the run's figures are an
-            instability's, and depend on the step — and a ``control_dt`` too long for its gains
-            a ``ControlRateWarning``. ``"off"`` skips that too.
+            more than e over the run, in a run whose grasp forces grow ×2 from its first third to
+            its last, gives an ``UnstableLoopWarning`` — the run's figures are an instability's,
+            and depend on the step — and a ``control_dt`` too long for its gains a
+            ``ControlRateWarning``. ``"off"`` skips that too.
         control_dt: the controller's sample period [s], or ``None`` (default) to call it at every
             evaluation (a continuous-time controller: every stage of every step). With a period
             the controller runs as a digital one does: it is called at t = 0, k·control_dt, …
@@ -274,7 +275,7 @@ def simulate(
         if bar is not None:
             bar.close()
     if accuracy_check != "off" and t_final > 0 and hasattr(controller, "compiled_spec"):
-        _check_the_loop(system, q, v, t_final)
+        _check_the_loop(result, system, q, v)
     if not judged:
         return result
     rerun = dict(
@@ -283,14 +284,18 @@ def simulate(
     return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
 
 
-def _check_the_loop(system: System, q: np.ndarray, v: np.ndarray, t_final: float, stacklevel: int = 3) -> None:
+def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray, stacklevel: int = 3) -> None:
     """Warn when the run's built-in controller makes its loop — linearised exactly at the start
-    (q, v) — unstable: an oscillating mode that grows by more than e over the run
-    (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`), or a control_dt too long for its
-    gains (ControlRateWarning, :func:`coopdyn.accuracy.sampled_instability`). A run that completes
-    then shows that instability, and nothing else says so (the accuracy check's reference is just
-    as unstable). A built-in controller keeps no state, so the 4·nv + 1 calls that give its gain
-    change nothing; a user's own is not probed."""
+    (q, v) — unstable: an oscillating mode that grows by more than e over the run while the run's
+    own grasp forces (joint speeds without interconnections) grow ×:data:`~coopdyn.accuracy.UNSTABLE_GROWTH`
+    from its first third to its last (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`;
+    a start's instability the task's own forces cure, a squeeze that stiffens the grasps say, is
+    not one), or a control_dt too long for its gains (ControlRateWarning,
+    :func:`coopdyn.accuracy.sampled_instability`). A run that completes then shows that
+    instability, and nothing else says so (the accuracy check's reference is just as unstable).
+    A built-in controller keeps no state, so the 4·nv + 1 calls that give its gain change
+    nothing; a user's own is not probed."""
+    t_final = float(result.t[-1])
     period = system.control_dt
     try:
         loop = screening.start_loop(system, q, v)
@@ -301,12 +306,16 @@ def _check_the_loop(system: System, q: np.ndarray, v: np.ndarray, t_final: float
     except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (a diagnosis never turns a run into an error)
         return
     skip = "(accuracy_check='off' skips this check)"
+    if mode and len(result.t) >= 3:
+        what = "grasp forces" if result.scene.links else "joint speeds"
+        grown = _growth(result.wrenches()[..., :3] if result.scene.links else result.v[:, None, :])
+        mode = mode if grown > screening.UNSTABLE_GROWTH else ""
     if mode:
         _progress.warn(
             f"The closed loop under this controller is unstable: linearised exactly at the start (coopdyn.linearize with "
-            f"the controller), it has {mode}. This {t_final:g} s run's motion grows from that instability, so its figures "
-            f"(forces, tracking) depend on the step and the start, and no method makes it stable: change the controller "
-            f"or its gains {skip}",
+            f"the controller), it has {mode}, and this {t_final:g} s run's {what} grow ×{grown:.3g} from its first third "
+            f"to its last. Its motion is that instability's, so its figures (forces, tracking) depend on the step and the "
+            f"start, and no method makes it stable: change the controller or its gains {skip}",
             UnstableLoopWarning,
             stacklevel=stacklevel,
         )
@@ -503,9 +512,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     controller, period = settings["controller"], settings["control_dt"]
     if hasattr(controller, "compiled_spec"):  # (the tries run without the checks)
         held = None if period is None else float(period)
-        _check_the_loop(
-            System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], held), q, v, t_final, 4
-        )
+        loop = System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], held)
+        _check_the_loop(run, loop, q, v, stacklevel=4)
     return _estimated(run, error, cpu_time=time.process_time() - cpu0)
 
 
