@@ -21,10 +21,10 @@ from .errors import (
     SceneWarning,
     SimulationError,
     SimulationInterrupted,
-    UnstableLoopWarning,
     StepBudgetError,
     SweepError,
     SweepInterrupted,
+    UnstableLoopWarning,
     ViewerError,
 )
 from .identify import Identification, Measurements, identify
@@ -97,7 +97,6 @@ __all__ = [
     "Sensitivity",
     "SimulationError",
     "SimulationInterrupted",
-    "UnstableLoopWarning",
     "Simulator",
     "StepBudgetError",
     "StepSensitivity",
@@ -105,6 +104,7 @@ __all__ = [
     "SweepInterrupted",
     "TrajectorySensitivity",
     "Transitions",
+    "UnstableLoopWarning",
     "ViewerError",
     "__version__",
     "advise",

@@ -345,6 +345,9 @@ def unstable_mode(system: System, q: np.ndarray, v: np.ndarray, duration: float,
     return f"a {abs(top.imag) / (2 * math.pi):.4g} Hz mode growing at {top.real:.3g} /s (×e every {1e3 / top.real:.3g} ms)"
 
 
+#: how a divergence's message says its loop was unstable from the start (a sweep's heat map reads it)
+UNSTABLE_AT_START = "From the start the closed loop is unstable"
+
 #: a sampled loop that grows by this much over a run's time explains its divergence by itself
 HOLD_EXPLAINS = 1e3
 

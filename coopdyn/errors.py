@@ -137,9 +137,9 @@ class ControlRateWarning(UserWarning):
 
 class UnstableLoopWarning(UserWarning):
     """The closed loop under a built-in controller, linearised exactly at the start, has an
-    oscillating mode that grows by more than e over the run, and the run's grasp forces grow ×2
-    from its first third to its last: its motion is that instability's, and its figures depend
-    on the step and the start (no method makes it stable)."""
+    oscillating mode that grows by more than e over the run (no method makes it stable). The
+    message says whether the run shows it — its grasp forces grow ×2 from its first third to its
+    last, and its figures are the instability's, dependent on the step — or not yet."""
 
 
 class SceneWarning(UserWarning):

@@ -96,6 +96,11 @@ class Measurements:
         Raises:
             SimulationError: uneven samples, rigid grasps (their wrench is a constraint's, which
                 the elastic model's fit cannot read), or torques that are not the held ones."""
+        if not isinstance(result, Result):
+            raise SimulationError(f"Measurements.from_result: result must be a coopdyn.Result, got {type(result).__name__}")
+        open_loop = _validate.flag(open_loop, "open_loop", SimulationError)
+        for name, value in (("joint_noise", joint_noise), ("force_noise", force_noise), ("torque_noise", torque_noise)):
+            _validate.positive(value, name, "rad, N or N·m", SimulationError)
         t = np.asarray(result.t)
         if len(t) < 2 or not np.allclose(np.diff(t), t[1] - t[0], rtol=1e-9, atol=0.0):
             raise SimulationError("Measurements.from_result: the run's samples must be evenly spaced, two at least")
@@ -118,8 +123,9 @@ class Measurements:
             if not gap < 1e-8:
                 raise SimulationError(
                     f"Measurements.from_result: the run's saved torques, each held for a period, do not replay it "
-                    f"({gap:.3g} apart): its controller was not sampled at the save period; simulate with "
-                    f"control_dt = {period:g} s (dt·save_every) for open-loop measurements, or fit the closed loop"
+                    f"({gap:.3g} apart): its controller was not sampled at the save period (simulate with "
+                    f"control_dt = {period:g} s, dt·save_every, for open-loop measurements, or fit the closed loop), "
+                    "or the run had an object_wrench, which the replay and the fit do not apply"
                 )
         noise = (joint_noise, force_noise, torque_noise)
         return cls(float(t[1] - t[0]), result.q[:, q_idx].copy(), wrench, torques, *noise, result.q[0].copy(), result.v[0].copy())
@@ -155,6 +161,8 @@ class Identification:
     cpu_time: float  #: CPU time of the fit [s]
     message: str  #: the optimiser's
     start: dict[str, float] = dataclasses.field(default_factory=dict)  #: the values the fit started from, by name
+    #: what came from differences when ``exact`` is False with the exact Jacobian ("the controller's derivative", …)
+    differenced: str = ""
 
     def interval(self, name: str, sigmas: float = 2.0) -> tuple[float, float]:
         """(low, high): the estimate ± ``sigmas``·σ of the parameter ``name``."""
@@ -175,7 +183,7 @@ class Identification:
         if self.wrench_rms is not None:
             fit += f", forces {self.wrench_rms[0]:.3g} N, moments {self.wrench_rms[1]:.3g} N·m"
         lines.append(fit)
-        how = self.jacobian if self.exact or self.jacobian != "exact" else "sensitivities; the controller's by differences"
+        how = self.jacobian if self.exact or self.jacobian != "exact" else f"sensitivities; {self.differenced} by differences"
         lines.append(f"{self.evaluations} runs, {self.jacobians} Jacobians ({how}), {self.cpu_time:.2f} s CPU: {self.message}")
         return "\n".join(lines)
 
@@ -256,7 +264,9 @@ def identify(
             (default the period).
         jacobian: ``"exact"`` (default) or ``"finite-differences"`` (forward differences of
             compiled rollouts, for comparison).
-        max_iterations: the optimiser's budget of runs (residual evaluations).
+        max_iterations: the optimiser's budget of runs of the model (residual evaluations, scipy's
+            ``max_nfev``); with ``jacobian="finite-differences"`` the runs of the differences
+            come on top (one per parameter and Jacobian).
         controller: the controller that ran the experiment (a closed-loop fit; see
             :class:`coopdyn.sensitivity.Sensitivity`): built for the nominal scene, it keeps its
             own model while the fit changes the plant's parameters. Its gain comes from central
@@ -278,6 +288,13 @@ def identify(
         raise SimulationError(
             f"identify: controller must be a callable controller(t, q, v) -> tau, got {type(controller).__name__}"
         )
+    if scene.constraints:
+        raise SceneError(
+            "identify: the scene has rigid grasps (constraints), whose wrenches no elastic law gives; fit the elastic scene "
+            "they stand for"
+        )
+    if initial is not None and not isinstance(initial, Mapping):
+        raise SimulationError(f"identify: initial must be a dict of start values by name, got {type(initial).__name__}")
     params = scene_parameters(scene, parameters)
     names = [p.name for p in params]
     start = dict(initial or {})
@@ -398,7 +415,8 @@ def identify(
     _warn_if_untrustworthy(names, fit.x, std, math.sqrt(s2), [p.unit for p in params], fit.active_mask, positions)
     if fit.status == 0:  # (the budget of runs spent before a convergence test passed)
         warnings.warn(
-            f"identify: stopped after max_iterations = {max_iterations} runs of the model before converging; the estimate "
+            f"identify: stopped after max_iterations = {max_iterations} runs of the model (residuals, not counting finite "
+            f"differences) before converging; the estimate "
             "may not be the best fit: raise max_iterations",
             FitWarning,
             stacklevel=2,
@@ -426,6 +444,7 @@ def identify(
         time.process_time() - cpu0,
         str(fit.message),
         dict(zip(names, map(float, x0), strict=True)),
+        "the controller's derivative" if controller is not None else "an element's tangent",
     )
 
 

@@ -126,10 +126,10 @@ def simulate(
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
             start (its gain by central differences: 1–15 ms): an oscillating mode that grows by
-            more than e over the run, in a run whose grasp forces grow ×2 from its first third to
-            its last, gives an ``UnstableLoopWarning`` — the run's figures are an instability's,
-            and depend on the step — and a ``control_dt`` too long for its gains a
-            ``ControlRateWarning``. ``"off"`` skips that too.
+            more than e over the run gives an ``UnstableLoopWarning`` (saying whether the run's
+            grasp forces show it: its figures are then an instability's, and depend on the step),
+            and a ``control_dt`` too long for its gains a ``ControlRateWarning``. ``"off"``
+            skips that too.
         control_dt: the controller's sample period [s], or ``None`` (default) to call it at every
             evaluation (a continuous-time controller: every stage of every step). With a period
             the controller runs as a digital one does: it is called at t = 0, k·control_dt, …
@@ -286,15 +286,14 @@ def simulate(
 
 def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray, stacklevel: int = 3) -> None:
     """Warn when the run's built-in controller makes its loop — linearised exactly at the start
-    (q, v) — unstable: an oscillating mode that grows by more than e over the run while the run's
-    own grasp forces (joint speeds without interconnections) grow ×:data:`~coopdyn.accuracy.UNSTABLE_GROWTH`
-    from its first third to its last (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`;
-    a start's instability the task's own forces cure, a squeeze that stiffens the grasps say, is
-    not one), or a control_dt too long for its gains (ControlRateWarning,
-    :func:`coopdyn.accuracy.sampled_instability`). A run that completes then shows that
-    instability, and nothing else says so (the accuracy check's reference is just as unstable).
-    A built-in controller keeps no state, so the 4·nv + 1 calls that give its gain change
-    nothing; a user's own is not probed."""
+    (q, v) — unstable: an oscillating mode that grows by more than e over the run
+    (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`), saying whether the run's own
+    grasp forces (joint speeds without interconnections) grew ×:data:`~coopdyn.accuracy.UNSTABLE_GROWTH`
+    from its first third to its last — its figures are then the instability's, and depend on the
+    step — or not yet; or a control_dt too long for its gains (ControlRateWarning,
+    :func:`coopdyn.accuracy.sampled_instability`). Nothing else says so: the accuracy check's
+    reference is just as unstable. A built-in controller keeps no state, so the 4·nv + 1 calls
+    that give its gain change nothing; a user's own is not probed."""
     t_final = float(result.t[-1])
     period = system.control_dt
     try:
@@ -306,16 +305,23 @@ def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray
     except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (a diagnosis never turns a run into an error)
         return
     skip = "(accuracy_check='off' skips this check)"
-    if mode and len(result.t) >= 3:
-        what = "grasp forces" if result.scene.links else "joint speeds"
-        grown = _growth(result.wrenches()[..., :3] if result.scene.links else result.v[:, None, :])
-        mode = mode if grown > screening.UNSTABLE_GROWTH else ""
     if mode:
+        what = "grasp forces" if result.scene.links else "joint speeds"
+        grown = _growth(result.wrenches()[..., :3] if result.scene.links else result.v[:, None, :]) if len(result.t) >= 3 else 1.0
+        if grown > screening.UNSTABLE_GROWTH:
+            shows = (
+                f"this {t_final:g} s run's {what} grow ×{grown:.3g} from its first third to its last: its motion is that "
+                "instability's, so its figures (forces, tracking) depend on the step and the start"
+            )
+        else:
+            shows = (
+                f"within this {t_final:g} s run it has not grown visibly (its {what} ×{grown:.3g} from its first third to its "
+                "last), so its figures hold for this duration, but a longer run, or a larger disturbance, would show it"
+            )
         _progress.warn(
             f"The closed loop under this controller is unstable: linearised exactly at the start (coopdyn.linearize with "
-            f"the controller), it has {mode}, and this {t_final:g} s run's {what} grow ×{grown:.3g} from its first third "
-            f"to its last. Its motion is that instability's, so its figures (forces, tracking) depend on the step and the "
-            f"start, and no method makes it stable: change the controller or its gains {skip}",
+            f"the controller), it has {mode}, and {shows}. No method makes it stable: change the controller or its gains "
+            f"{skip}",
             UnstableLoopWarning,
             stacklevel=stacklevel,
         )
@@ -888,7 +894,7 @@ class _Run:
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (never hiding the divergence itself)
             mode, hold = "", None
         if mode:
-            diagnosis += f". From the start the closed loop is unstable: linearised exactly there, it has {mode}"
+            diagnosis += f". {screening.UNSTABLE_AT_START}: linearised exactly there, it has {mode}"
         if hold is not None and hold.explains(t):  # (the methods' stability is the continuous loop's: in .advice)
             cause = (
                 f"The {hold.sentence.removeprefix('the ')} (this error's .advice has the methods' stability with the "

@@ -3,7 +3,7 @@
 Every pair runs the grip / lift / oscillate / hold task for 5 s; the object impedance keeps its
 damping ratio (damping scaled with √gain). The sweep collects one row per run — tracking error,
 peak internal force, status — into out/sweep_gains/table.parquet and draws both metrics as heat
-maps (heatmap.png). A run that diverges is a grey cell that says so.
+maps (heatmap.png). A run that diverges is a grey cell that says so; so is an unstable loop.
 
 Run:   python examples/sweep_gains.py            (local processes, every core)
        python examples/sweep_gains.py --serial   (this process)
@@ -38,14 +38,16 @@ def make_case(stiffness: float, gain: float) -> cd.Case:
     return cd.Case(scene, controller)
 
 
-def main(out: str = OUT, duration: float = 5.0, executor: str | None = None, stiffness=STIFFNESS, gain=GAIN):
-    """Run the sweep and draw the heat maps; return the table."""
+def main(out: str = OUT, duration: float = 5.0, executor: str | None = None, stiffness=STIFFNESS, gain=GAIN, dt: float = 1e-3):
+    """Run the sweep and draw the heat maps; return the table. A loop unstable from the start is an
+    "unstable loop" cell (it warned, or its divergence says so): its figures would change with
+    the step; every other cell's agree with a run at dt = 0.1 ms (tests/test_examples.py)."""
     table = cd.sweep(
         make_case,
         {"stiffness": stiffness, "gain": gain},
         duration=duration,
-        integrator="trapezoid",  # A-stable, second order and non-dissipative: the accuracy screen clears every row at 1 ms
-        dt=1e-3,
+        integrator="trapezoid",  # A-stable, second order and non-dissipative: no damping hides an unstable loop
+        dt=dt,
         executor=executor,
         out=out,
     )

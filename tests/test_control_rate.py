@@ -223,9 +223,7 @@ def test_a_divergence_caused_by_too_slow_a_controller_says_so_and_its_bound_hold
         growing = cd.simulate(scene, 1.0, pd, "trapezoid", dt=1.25e-4, control_dt=5e-4, accuracy_check="off")
     assert np.max(np.abs(calm.v[-100:])) < 1e-2 < 10.0 < np.max(np.abs(growing.v[-100:]))
     # the same controller closing the loop of a sensitivity run, sampled every 1 ms: the hold is named there too
-    with pytest.raises(
-        cd.errors.SimulationError, match=r"sensitivities: diverged.*The controller, sampled every period = 1 ms"
-    ):
+    with pytest.raises(cd.errors.SimulationError, match=r"sensitivities: diverged.*The controller, sampled every period = 1 ms"):
         cd.Sensitivity(scene, "trapezoid", controller=pd).trajectory(200, 1e-3)
     # rk4 beyond its limit on stiff grasps under a hold that is stable: the method is blamed, not the hold
     stiff = cd.scenes.facing_arms("panda", stiffness=1e6, damping=0.002)

@@ -94,6 +94,25 @@ def test_planar_beam_example_carries_the_beam_and_leaves_it_still(tmp_path: Path
 
 
 @pytest.mark.slow
+def test_the_gain_sweep_tells_the_resolved_runs_story(tmp_path: Path) -> None:
+    """The sweep as shipped (the trapezoid at 1 ms) and at 0.1 ms: the same six cells are unstable
+    loops — soft grasps under stiff gains: warned, or diverged saying so (at 1 ms two diverge that
+    complete with kN forces at 0.1 ms) —, and every other cell's figures agree within 0.1 mm and
+    0.05 N."""
+    from coopdyn.viz.plotting import _unstable
+
+    example = _load("sweep_gains")
+    shipped = example.main(out=str(tmp_path / "shipped"), executor="serial")
+    fine = example.main(out=str(tmp_path / "fine"), executor="serial", dt=1e-4)
+    unstable = _unstable(shipped)
+    assert unstable.tolist() == _unstable(fine).tolist() and unstable.sum() == 6
+    stable = ~unstable
+    assert (shipped["status"][stable] == "completed").all() and (fine["status"][stable] == "completed").all()
+    for metric, within in (("tracking_error_max_m", 1e-4), ("peak_internal_force_N", 0.05)):
+        np.testing.assert_allclose(shipped[metric][stable], fine[metric][stable], rtol=0, atol=within, err_msg=metric)
+
+
+@pytest.mark.slow
 def test_planar_beam_example_tells_the_resolved_runs_story(tmp_path: Path) -> None:
     """Over the grip and the lift (2 s) the example's figures at 1 ms match a run at 0.1 ms (within
     0.4 mN of 50 µs over the whole run: benchmarks/flexible_beam_check.py) within 0.05 N and 10 µm."""

@@ -497,6 +497,27 @@ def test_heatmap_marks_completed_runs_that_warned_or_pass_a_bound(tmp_path: Path
             sweep_heatmap(table, "k", "g", "tracking_error_max_m", limits=bad)  # type: ignore[arg-type]
 
 
+def test_heatmap_shows_an_unstable_loop_as_such(tmp_path: Path) -> None:
+    """A run whose loop was unstable from the start — completed with an UnstableLoopWarning, or
+    diverged saying so — is an "unstable loop" cell, not a figure (another step would give
+    another); a divergence for another reason stays "diverged"."""
+    from coopdyn.accuracy import UNSTABLE_AT_START
+    from coopdyn.viz.plotting import sweep_heatmap
+
+    table = pd.DataFrame(
+        {
+            "k": [1.0, 2.0, 3.0, 4.0],
+            "g": [1, 1, 1, 1],
+            "status": ["completed", "completed", "diverged", "diverged"],
+            "warnings": ["", "UnstableLoopWarning: The closed loop …", "", ""],
+            "message": ["", "", f"the simulation diverged … {UNSTABLE_AT_START}: linearised …", "the simulation diverged …"],
+            "tracking_error_max_m": [0.002, 0.357, np.nan, np.nan],
+        }
+    )
+    fig = sweep_heatmap(table, "k", "g", "tracking_error_max_m", tmp_path / "h.png")
+    assert [t.get_text() for t in fig.axes[0].texts] == ["2", "unstable loop", "unstable loop", "diverged"]
+
+
 def test_sweep_example(tmp_path: Path) -> None:
     import importlib.util
 

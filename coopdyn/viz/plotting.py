@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from .._files import write_atomically
-from ..errors import SweepError
+from ..accuracy import UNSTABLE_AT_START
+from ..errors import SweepError, UnstableLoopWarning
 from ..problems.linear_book import BookSolution
 from ..result import Result
 
@@ -202,7 +203,10 @@ def sweep_heatmap(
 ) -> Any:
     """One heat map per metric of a sweep table over two of its parameters (``x``, ``y``): each
     cell the mean over the cell's completed runs (several with seeds), written in the cell; a
-    cell with no completed run is grey and names what happened (diverged, failed, …). A cell
+    cell with no completed run is grey and names what happened (diverged, failed, …). A run
+    whose loop was unstable from the start — it completed with an ``UnstableLoopWarning``, or
+    its divergence says so — counts as an "unstable loop", not as a completed run: its figures
+    are an instability's, and another step would give others. A cell
     whose completed runs include one that warned (a non-empty ``warnings`` column: an accuracy,
     energy or scene warning, or a note such as a metric not computed), or one whose |value| of
     any metric in ``limits`` (metric → largest sensible value, in the column's units) passes
@@ -229,7 +233,7 @@ def sweep_heatmap(
     tx, ty = table[x].map(_tick), table[y].map(_tick)  # the cells, once for every metric
     xs, ys = list(dict.fromkeys(tx)), list(dict.fromkeys(ty))
     cells = table.groupby([tx, ty], sort=False).indices  # (x tick, y tick) → row positions
-    statuses = table["status"].to_numpy()
+    statuses = np.where(_unstable(table), "unstable loop", table["status"].to_numpy())
     completed = statuses == "completed"
     # per cell: its rows, the completed ones, and the other statuses (the same for every metric)
     cell_rows = [[cells.get((xv, yv), np.empty(0, dtype=int)) for xv in xs] for yv in ys]
@@ -289,6 +293,21 @@ def sweep_heatmap(
     if path is not None:
         save_figure(fig, path)
     return fig
+
+
+def _unstable(table: Any) -> np.ndarray:
+    """Which runs of a sweep table had a loop unstable from the start: an UnstableLoopWarning in
+    ``warnings``, or a divergence whose ``message`` says so."""
+    rows = len(table)
+    said = table["warnings"].fillna("").astype(str) if "warnings" in table.columns else None
+    warned = said.str.contains(UnstableLoopWarning.__name__, regex=False).to_numpy() if said is not None else np.zeros(rows, bool)
+    message = table["message"].fillna("").astype(str) if "message" in table.columns else None
+    diverged = (
+        ((table["status"] == "diverged") & message.str.contains(UNSTABLE_AT_START, regex=False)).to_numpy()
+        if message is not None
+        else np.zeros(rows, bool)
+    )
+    return np.asarray(warned | diverged)
 
 
 def _doubts(table: Any, rows: np.ndarray, warned: np.ndarray | None, limits: Mapping[str, float]) -> str:
