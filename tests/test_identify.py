@@ -178,6 +178,25 @@ def test_bad_measurements_are_refused(damped: cd.Scene) -> None:
     undamped = cd.scenes.facing_arms("panda", stiffness=1e4)
     with pytest.raises(SimulationError, match=r"left\.d_linear is 0 N·s/m in the scene.*initial=\{'left\.d_linear': \.\.\.\}"):
         identify(undamped, m, ["left.d_linear"])
+    with pytest.raises(SimulationError, match="initial must be a dict of start values by name, got str"):
+        identify(damped, m, ["left.k_x"], initial="left.k_x")  # type: ignore[arg-type]
+    for jacobian in ("exact", "finite-differences"):  # (differences read the rigid elements' zero wrench)
+        with pytest.raises(SceneError, match=r"rigid grasps .*fit the elastic scene they stand for"):
+            identify(cd.rigid_limit(damped), m, ["object.mass"], jacobian=jacobian)
+
+
+def test_measurements_from_a_run_refuse_bad_arguments(damped: cd.Scene) -> None:
+    run = cd.simulate(damped, 0.01, integrator="rk4", dt=1e-3, accuracy_check="off")
+    with pytest.raises(SimulationError, match=r"result must be a coopdyn\.Result, got NoneType"):
+        Measurements.from_result(None)  # type: ignore[arg-type]
+    bad_arguments = (
+        ({"joint_noise": -1.0}, "joint_noise"),
+        ({"force_noise": "a"}, "force_noise"),
+        ({"open_loop": "no"}, "open_loop"),
+    )
+    for bad, message in bad_arguments:
+        with pytest.raises(SimulationError, match=message):
+            Measurements.from_result(run, **bad)  # type: ignore[arg-type]
 
 
 def test_measurements_from_a_run_read_the_wrench_in_the_grasp_frames_axes(damped: cd.Scene) -> None:
