@@ -276,7 +276,8 @@ class Sensitivity:
             raise SimulationError("Sensitivity.step differentiates an open-loop step; a closed loop's: Sensitivity.trajectory")
         scene = self.scene
         q, v = _state(scene, q, v)
-        u = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
+        na = scene.n_actuated
+        u = np.zeros(na) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (na,), SimulationError)
         h = _validate.positive(dt, "dt", "s", SimulationError)
         nv, na, n_p = scene.nv, scene.n_actuated, len(self.params)
         seeds = _identity_seeds(nv, na, n_p)
@@ -308,11 +309,13 @@ class Sensitivity:
         """
         scene = self.scene
         q, v = _state(scene, q0, v0)
-        if self.controller is not None and isinstance(torques, int) and not isinstance(torques, bool):
+        initial_state = _validate.flag(initial_state, "initial_state", SimulationError)
+        if self.controller is not None and isinstance(torques, int | np.integer) and not isinstance(torques, bool):
+            torques = int(torques)
             if torques < 1:
                 raise SimulationError(f"trajectory: the number of periods must be >= 1, got {torques}")
             torques = np.zeros((torques, scene.n_actuated))
-        U = _torques(scene, torques)
+        U = _torques(scene, torques, closed=self.controller is not None)
         h, per = step_of(period, dt)
         na, nv, n_p, N = scene.n_actuated, scene.nv, len(self.params), len(U)
         m = n_p + (2 * nv if initial_state else 0)
@@ -522,10 +525,13 @@ def _state(scene: Scene, q: Any, v: Any) -> tuple[np.ndarray, np.ndarray]:
     return scene.check_state(scene.q0 if q is None else q, scene.v0 if v is None else v)
 
 
-def _torques(scene: Scene, torques: Any) -> np.ndarray:
+def _torques(scene: Scene, torques: Any, closed: bool = False) -> np.ndarray:
+    """``torques`` (N, n_actuated) checked; ``closed``: a closed loop's (added to its controller's,
+    which may also be given as the number of periods N)."""
     U = _validate.finite_array(torques, "torques [N·m or N]", error=SimulationError)
     if U.ndim != 2 or U.shape[0] < 1 or U.shape[1] != scene.n_actuated:
-        raise SimulationError(f"torques must be (N, {scene.n_actuated}): one row per period, got shape {U.shape}")
+        periods = ", or the number of periods N (an integer) under the controller alone" if closed else ""
+        raise SimulationError(f"torques must be (N, {scene.n_actuated}): one row per period{periods}, got shape {U.shape}")
     return U
 
 

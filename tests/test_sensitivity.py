@@ -397,6 +397,14 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
             step_sensitivity(pandas, dt=1e300, integrator="implicit_euler", backend=backend)
     with pytest.raises(SceneError, match="rigid grasps"):
         step_sensitivity(cd.rigid_limit(pandas))
+    with pytest.raises(SimulationError, match=r"tau \[N·m or N\] must have shape \(14,\)"):
+        cd.Sensitivity(pandas).step(tau=np.zeros(3))
+    closed = cd.Sensitivity(pandas, controller=cd.control.GravityCompensationPD(pandas))
+    assert len(closed.trajectory(np.int64(2), 1e-3).t) == 3  # (a numpy integer is a number of periods too)
+    with pytest.raises(SimulationError, match=r"one row per period, or the number of periods N \(an integer\)"):
+        closed.trajectory(np.array(2.5), 1e-3)
+    with pytest.raises(SimulationError, match="initial_state must be True or False"):
+        closed.trajectory(2, 1e-3, initial_state="yes")
     with pytest.raises(SceneError, match=r"unknown parameter 'left\.k'.*'left\.<kind>'.*k_linear.*'object\.mass'"):
         parameters(pandas, ["left.k"])
     with pytest.raises(SceneError, match="repeated"):
