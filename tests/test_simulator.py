@@ -148,6 +148,11 @@ def test_a_run_after_a_failed_one_and_after_a_retuning(pandas: cd.Scene) -> None
             sim.run(t_final),
             cd.simulate(pandas, t_final, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"),
         )
+    pd.kd = 8.0  # a scalar, as the constructor takes it: one value per joint (it once broke the compiled spec)
+    assert pd.kd.shape == (pandas.n_actuated,)
+    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"))
+    with pytest.raises(cd.SceneError, match=r"GravityCompensationPD: kp must be a scalar or one value per actuated joint"):
+        pd.kp = [1.0, 2.0]
 
 
 def test_a_python_controller_and_the_python_backend(pandas: cd.Scene) -> None:

@@ -15,6 +15,25 @@ from ..model.elastic_joints import motors_at_links, q_entries, turned
 from ..model.scene import Scene
 
 
+class _Gain:
+    """A joint gain, checked on every assignment — a scalar becomes one value per actuated joint —
+    so a controller retuned in place (``controller.kp = 100.0`` between Simulator runs) runs with
+    a gain of the shape its compiled twin reads."""
+
+    def __init__(self, unit: str) -> None:
+        self.unit = unit
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name, self.slot = name, "_" + name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        return self if obj is None else getattr(obj, self.slot)
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        who = f"{type(obj).__name__}: {self.name}"
+        setattr(obj, self.slot, _validate.gain(value, who, obj.scene.n_actuated, self.unit))
+
+
 def _scene(scene: Any, who: str, elastic: bool = False) -> Scene:
     if not isinstance(scene, Scene):
         raise SceneError(f"{who}: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -47,11 +66,13 @@ class GravityCompensationPD:
         q_des: desired arm configuration (n_actuated,) for 1-DOF joints; default the scene's q0.
     """
 
+    kp = _Gain("N·m/rad")
+    kd = _Gain("N·m·s/rad")
+
     def __init__(self, scene: Scene, kp: Any = 50.0, kd: Any = 5.0, q_des: Any = None) -> None:
         n = _scene(scene, "GravityCompensationPD").n_actuated
         self.scene = scene
-        self.kp = _validate.gain(kp, "GravityCompensationPD: kp", n, "N·m/rad")
-        self.kd = _validate.gain(kd, "GravityCompensationPD: kd", n, "N·m·s/rad")
+        self.kp, self.kd = kp, kd
         self._q_index = np.concatenate([a.q_index for a in scene.arms])
         self.q_des = scene.q0.copy()  # a full configuration: pin.difference handles any joint type
         if q_des is not None:
@@ -90,11 +111,13 @@ class ComputedTorque:
         reference: ``reference(t) -> (q_d, q̇_d, q̈_d)`` each (n_actuated,); default: hold q0.
     """
 
+    kp = _Gain("1/s²")
+    kd = _Gain("1/s")
+
     def __init__(self, scene: Scene, kp: Any = 400.0, kd: Any = 40.0, reference: Any = None) -> None:
         n = _scene(scene, "ComputedTorque").n_actuated
         self.scene = scene
-        self.kp = _validate.gain(kp, "ComputedTorque: kp", n, "1/s²")
-        self.kd = _validate.gain(kd, "ComputedTorque: kd", n, "1/s")
+        self.kp, self.kd = kp, kd
         self._q_index = np.concatenate([a.q_index for a in scene.arms])
         if reference is not None and not callable(reference):
             raise SceneError(
@@ -157,14 +180,15 @@ class MotorPD:
     """
 
     GRAVITY = ("online", "constant")
+    kp = _Gain("N·m/rad")
+    kd = _Gain("N·m·s/rad")
 
     def __init__(self, scene: Scene, kp: Any = 400.0, kd: Any = 40.0, q_des: Any = None, gravity: str = "online") -> None:
         n = _scene(scene, "MotorPD", elastic=True).n_actuated
         if gravity not in self.GRAVITY:
             raise SceneError(f"MotorPD: gravity must be one of {self.GRAVITY}, got {_validate._short(gravity)}")
         self.scene, self.gravity = scene, gravity
-        self.kp = _validate.gain(kp, "MotorPD: kp", n, "N·m/rad")
-        self.kd = _validate.gain(kd, "MotorPD: kd", n, "N·m·s/rad")
+        self.kp, self.kd = kp, kd
         model, self._data = scene.model, scene.model.createData()
         link_q = np.concatenate([a.q_index for a in scene.arms])
         q_ref = scene.q0.copy()
