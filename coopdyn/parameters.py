@@ -101,9 +101,9 @@ def parameters(scene: Scene, names: Sequence[str]) -> tuple[Parameter, ...]:
     out = []
     links = {lk.name: i for i, lk in enumerate(scene.links)}
     for name in names:
-        if not isinstance(name, str) or name.count(".") != 1:
+        if not isinstance(name, str) or "." not in name:
             raise SceneError(f"parameter {name!r}: a name is '<interconnection>.<kind>' or 'object.mass': {_names_help(scene)}")
-        owner, kind = name.split(".")
+        owner, kind = name.rsplit(".", 1)  # (an interconnection's own name may hold a dot)
         if name == "object.mass":
             if scene.object.with_mass(1.0) is None:
                 raise SceneError(

@@ -8,6 +8,7 @@ book's linear system against the closed forms of rk4's and symplectic Euler's st
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -409,6 +410,12 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
         parameters(pandas, ["left.k"])
     with pytest.raises(SceneError, match="repeated"):
         parameters(pandas, ["left.k_x", "left.k_x"])
+    grips = [  # (a dot in a name)
+        dataclasses.replace(spec, name=f"{link.name}.grip")
+        for spec, link in zip(pandas.interconnection_specs, pandas.links, strict=True)
+    ]
+    named = ["left.grip.k_x", "right.grip.d_linear"]
+    assert [p.name for p in parameters(cd.Scene(pandas.arm_specs, pandas.object, grips), named)] == named
     with pytest.raises(SceneError, match="non-empty list"):
         parameters(pandas, "left.k_x")
     with pytest.raises(SceneError, match="non-empty list"):
