@@ -458,7 +458,9 @@ class Sensitivity:
             carry: Carry = None  # (a new held torque: generalized-α starts afresh, as the integrators do)
             for s in range(per):
                 try:
-                    q1, v1, dq1, dv1, d, dW_dp, carry = self.stepper.step(q, v, applied[k], h, (dq, dv, du_k, dp), carry)
+                    q1, v1, dq1, dv1, d, dW_dp, carry = self.stepper.step(
+                        q, v, applied[k], h, (dq, dv, du_k, dp), carry, sampled=s == 0
+                    )
                 except (KernelError, StepMatrixError) as exc:  # (a stage's state, or its step matrix, is no longer finite)
                     raise SimulationError(
                         f"sensitivities: diverged in the step from t = {t0 + (k * per + s) * h:.6g} s ({exc}){_DIVERGED_HINT}"

@@ -211,18 +211,27 @@ class StepDerivative:
 
     # -- one step -----------------------------------------------------------------------------
     def step(
-        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...], carry: Carry = None
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        u: np.ndarray,
+        h: float,
+        seeds: tuple[np.ndarray, ...],
+        carry: Carry = None,
+        sampled: bool = True,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray, Carry]:
         """One step from (q, v) under u, with the derivatives of (δq⁺, v⁺) along the seed columns
         ``(dq, dv, du, dp)`` (each (n, m)); also the start's derivatives and ∂W/∂p there, and what
-        the method carries to the next step (generalized-α's acceleration; None: a fresh start)."""
+        the method carries to the next step (generalized-α's acceleration; None: a fresh start).
+        ``sampled``: whether the start's derivatives are wanted (the exponential method, whose step
+        needs none, skips them otherwise: they are most of its cost; the others have them anyway)."""
         dq0, dv0, du, dp = seeds
         if self.method.alpha is not None:
             return self._alpha_step(q, v, u, h, seeds, carry)
         if self.method.gamma is not None:
             return (*self._implicit_step(q, v, u, h, seeds), None)
         if self.method.exponential is not None:
-            return (*self._exponential_step(q, v, u, h, seeds), None)
+            return (*self._exponential_step(q, v, u, h, seeds, sampled), None)
         if self.method.tableau is None:  # symplectic Euler: v⁺ = v + h a(q, v), q⁺ = q ⊕ h v⁺
             d, da_dp, dW_dp = self.stage(q, v, u)
             v1 = v + h * d.acceleration
@@ -296,8 +305,8 @@ class StepDerivative:
             self._form_derivatives.append((dF, dG, dc))
 
     def _exponential_step(
-        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...]
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, np.ndarray]:
+        self, q: np.ndarray, v: np.ndarray, u: np.ndarray, h: float, seeds: tuple[np.ndarray, ...], sampled: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any, Any]:
         """The exponential integrator's step (the integrator's own, the torque held at u) and its
         derivative: ``x⁺ = Φ x + Γ u + γ`` with Φ, Γ, γ from ``expm`` of ``E = [[hF, hG, hc], 0]``,
         so ∂x⁺/∂x = Φ, ∂x⁺/∂u = Γ, and along a parameter the Fréchet derivative of ``expm`` at E
@@ -323,7 +332,7 @@ class StepDerivative:
         Phi, Gamma, frechet = self._steps[h]
         self._held = np.asarray(u, dtype=float)
         q1, v1 = method.step(self.system, 0.0, q, v, h, self._workspace)
-        d, _, dW_dp = self.stage(q, v, u)
+        d, _, dW_dp = self.stage(q, v, u) if sampled else (None, None, None)
         z = np.concatenate([q, v, u, [1.0]])
         dx = Phi @ np.vstack([dq, dv]) + Gamma @ du + np.einsum("pij,j->ip", frechet, z) @ dp
         return q1, v1, dx[:nv], dx[nv:], d, dW_dp

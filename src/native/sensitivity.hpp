@@ -8,7 +8,8 @@
 // a parameter's ∂q̈/∂p is M⁻¹ ∂Q/∂p, ∂Q/∂p the generalized force of a unit law (an element
 // built from the Python side's unit K or D: the law is linear in them) or, for the object's
 // mass, −J_jᵀ (I·a_gf + v ×* I v)/m with the object's body inertia I (RNEA's body force of the
-// object joint, linear in the inertia); the chart rate dexp⁻¹(δ)v is differentiated by complex
+// object joint, linear in the inertia), for a grasp position the wrench's variation as G moves
+// along δ on the object; the chart rate dexp⁻¹(δ)v is differentiated by complex
 // step of jlog6_of_log (exact to round-off).
 #pragma once
 
@@ -30,7 +31,8 @@ public:
   // kernel: the scene's (coopdyn.dynamics.native); A, b: an explicit tableau (rows of A below the
   // diagonal), or `symplectic` for symplectic Euler; charts: (idx_v, size) of the free-flyer (6)
   // and spherical (3) blocks; parameters: one tuple per parameter, ("element", link, kind,
-  // {K, D, ...}) for a unit law, or ("mass", joint, mass) for the object's mass.
+  // {K, D, ...}) for a unit law, ("offset", link, δ (6)) for a grasp position (G's right
+  // perturbation per metre), or ("mass", joint, mass) for the object's mass.
   // implicit: () for an explicit method, (γ, stages) for a linearly implicit one (1: implicit
   // Euler, 2: ROS2 or the trapezoid), (α_m, α_f, γ, β) for generalized-α.
   Sensitivity(bp::object kernel_obj, bp::list A, bp::list b, bool symplectic, bp::tuple implicit, bp::list charts,
