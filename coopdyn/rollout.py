@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate
+from .budget import MAX_STEPS, step_count
 from .control.joint import TorqueSequence
 from .errors import CoopdynError, SimulationError
 from .model.scene import Scene
@@ -63,6 +64,11 @@ def rollout(
     Returns:
         :class:`Rollouts`; a trajectory that diverges or fails keeps its samples up to the last
         one reached, NaN after, and its error's message in ``status`` — the others are unaffected.
+
+    Raises:
+        SimulationError, SceneError: a bad argument, or what stops every trajectory alike before
+            its first sample (a method the scene does not take, a shared start that is no state,
+            more than :data:`coopdyn.budget.MAX_STEPS` steps a trajectory).
     """
     if not isinstance(scene, Scene):
         raise SimulationError(f"rollout: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -82,6 +88,17 @@ def rollout(
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise SimulationError(f"rollout: threads must be a positive integer, got {threads!r}")
     t_final = N * period
+    if step_count(t_final, dt) > MAX_STEPS:
+        raise SimulationError(
+            f"rollout: {N} periods of {period:g} s at dt = {dt:g} s are {step_count(t_final, dt):,} steps a trajectory, more "
+            f"than {MAX_STEPS:,}: take a larger dt or fewer periods"
+        )
+    # what would stop every trajectory alike is refused here, not reported B times: the method (the
+    # scene it needs), a shared start that is not a valid state
+    sequence = TorqueSequence(scene, U[0], period)
+    first = Simulator(scene, sequence, integrator, dt, save_every=per, max_speed=max_speed, control_dt=period)
+    if all(np.ndim(x) <= 1 for x in (q0, v0)):
+        scene.check_state(starts[0][0], starts[1][0])
     Q = np.full((B, N + 1, scene.nq), np.nan)
     V = np.full((B, N + 1, scene.nv), np.nan)
     status = ["done"] * B
@@ -105,11 +122,14 @@ def rollout(
         Q[b, :n], V[b, :n] = res.q, res.v
 
     if threads == 1 or B == 1:
+        local.sequence, local.simulator = sequence, first  # (this thread's: the one made above)
         for b in range(B):
             one(b)
     else:
         with ThreadPoolExecutor(min(threads, B)) as pool:
             list(pool.map(one, range(B)))
+    if all(x != "done" for x in status) and np.isnan(Q[:, 0, 0]).all() and len(set(status)) == 1:
+        raise SimulationError(f"rollout: {status[0]}")  # (stopped before any sample, all alike: the setup's error)
     return Rollouts(np.arange(N + 1) * period, Q, V, tuple(status))
 
 

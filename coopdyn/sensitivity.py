@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from . import _validate
 from .accuracy import HoldInstability, sampled_instability, start_loop
+from .budget import MAX_MEMORY, MAX_STEPS
 from .closed_loop import Controller, System
 from .compiled import controller_settings
 from .dynamics.backend import kernel_module
@@ -314,11 +315,13 @@ class Sensitivity:
             torques = int(torques)
             if torques < 1:
                 raise SimulationError(f"trajectory: the number of periods must be >= 1, got {torques}")
+            _check_budget(scene, torques, 1, float(period) if isinstance(period, int | float) else 0.0, 1)  # (before the zeros)
             torques = np.zeros((torques, scene.n_actuated))
         U = _torques(scene, torques, closed=self.controller is not None)
         h, per = step_of(period, dt)
         na, nv, n_p, N = scene.n_actuated, scene.nv, len(self.params), len(U)
         m = n_p + (2 * nv if initial_state else 0)
+        _check_budget(scene, N, per, h, m)
         dq, dv, du, dp = np.zeros((nv, m)), np.zeros((nv, m)), np.zeros((na, m)), np.zeros((n_p, m))
         dp[:, :n_p] = np.eye(n_p)
         if initial_state:
@@ -377,6 +380,7 @@ class Sensitivity:
         U = _torques(scene, torques)
         h, per = step_of(period, dt)
         nv, na, n_p, N = scene.nv, scene.n_actuated, len(self.params), len(U)
+        _check_budget(scene, N, per, h, 2 * nv + na + n_p)
         seeds = _identity_seeds(nv, na, n_p)
         Q, V = np.empty((N + 1, scene.nq)), np.empty((N + 1, nv))
         A, B, P = np.empty((N, 2 * nv, 2 * nv)), np.empty((N, 2 * nv, na)), np.empty((N, 2 * nv, n_p))
@@ -487,6 +491,23 @@ class Sensitivity:
 def _stateful(when: str) -> SimulationError:
     """The refusal of a controller that answered the same call ``when`` ("at t = … s") differently."""
     return SimulationError(f"sensitivities: the controller answered the same call {when} differently: {_STATEFUL}")
+
+
+def _check_budget(scene: Scene, N: int, per: int, h: float, m: int) -> None:
+    """Refuse a run of N periods of ``per`` steps of h [s] with m derivative columns beyond
+    :data:`coopdyn.budget.MAX_STEPS` steps or :data:`coopdyn.budget.MAX_MEMORY` bytes of records
+    (simulate's defaults): before it starts, not after an hour or with a MemoryError."""
+    if N * per > MAX_STEPS:
+        raise SimulationError(
+            f"sensitivities: {N} periods of {per} steps of {h:g} s are {N * per:,} steps, more than {MAX_STEPS:,}: take a "
+            "larger dt, or split the trajectory (a piece's end state is the next one's start)"
+        )
+    size = 8.0 * (N + 1) * (2 * scene.nv + 6 * len(scene.elements)) * max(m, 1)
+    if size > MAX_MEMORY:
+        raise SimulationError(
+            f"sensitivities: {N} periods with {m} derivative columns would take {size / 1e9:.3g} GB, more than "
+            f"{MAX_MEMORY / 1e9:.3g} GB: split the trajectory or differentiate fewer columns"
+        )
 
 
 def _diverged_at(message: str) -> float | None:

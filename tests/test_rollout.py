@@ -87,12 +87,22 @@ def test_a_diverging_rollout_is_one_status_and_nans(pandas: cd.Scene) -> None:
         ({"q0": np.zeros(3)}, r"q0 must be \(21,\) or \(2, 21\)"),
         ({"threads": 0}, "threads must be a positive integer"),
         ({"torques": np.full((2, 3, 14), np.nan)}, "torques"),
+        # what stops every trajectory alike is an error, not B statuses
+        ({"dt": 1e-9}, r"30,000,000 steps a trajectory, more than 2,000,000: take a larger dt or fewer periods"),
+        ({"integrator": "exponential"}, "rollout: the exponential integrator needs a linear scene"),
     ],
 )
 def test_bad_input_is_named(pandas: cd.Scene, kwargs: dict, message: str) -> None:
     args = {"torques": np.zeros((2, 3, 14)), "period": 0.01, "dt": 1e-3, **kwargs}
     with pytest.raises(SimulationError, match=message):
         cd.rollout(pandas, args.pop("torques"), **args)
+
+
+def test_a_shared_start_that_is_no_state_is_refused(pandas: cd.Scene) -> None:
+    q0 = pandas.q0.copy()
+    q0[-4:] *= 2.0  # (the box's quaternion, no longer of unit norm)
+    with pytest.raises(cd.SceneError, match="not a valid configuration"):
+        cd.rollout(pandas, np.zeros((2, 3, 14)), period=0.01, q0=q0)
 
 
 def test_the_torque_sequence_refuses_a_wrong_table(pandas: cd.Scene) -> None:

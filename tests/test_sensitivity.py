@@ -406,6 +406,12 @@ def test_bad_requests_are_refused_with_what_to_do(pandas: cd.Scene) -> None:
         closed.trajectory(np.array(2.5), 1e-3)
     with pytest.raises(SimulationError, match="initial_state must be True or False"):
         closed.trajectory(2, 1e-3, initial_state="yes")
+    with pytest.raises(SimulationError, match=r"1,000,000,000 steps, more than 2,000,000: take a larger dt, or split"):
+        closed.trajectory(10**9, 1e-3)  # (refused before its torques are made: 112 GB)
+    with pytest.raises(SimulationError, match=r"are 50,000,000 steps, more than 2,000,000"):
+        cd.Sensitivity(pandas).trajectory(np.zeros((5, 14)), 1e-2, dt=1e-9)
+    with pytest.raises(SimulationError, match=r"would take .* GB, more than 4 GB: split the trajectory"):
+        cd.Sensitivity(pandas).transitions(np.zeros((200_000, 14)), 1e-3)
     with pytest.raises(SceneError, match=r"unknown parameter 'left\.k'.*'left\.<kind>'.*k_linear.*'object\.mass'"):
         parameters(pandas, ["left.k"])
     with pytest.raises(SceneError, match="repeated"):
