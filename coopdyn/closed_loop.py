@@ -64,6 +64,14 @@ class System:
         self.dynamics = dynamics
         self._scene = dynamics.scene
         self._model = dynamics.model
+        own = getattr(controller, "scene", None)  # (a built-in controller's scene: its own model of the robot)
+        sizes = [(getattr(x, "nq", None), getattr(x, "nv", None), getattr(x, "n_actuated", None)) for x in (own, self._scene)]
+        if own is not None and own is not self._scene and None not in sizes[0] and sizes[0] != sizes[1]:
+            raise ControllerError(
+                f"the controller ({type(controller).__name__}) was built for another scene, of nq = {sizes[0][0]}, "
+                f"nv = {sizes[0][1]} and {sizes[0][2]} actuated joints; this one has nq = {sizes[1][0]}, nv = {sizes[1][1]} "
+                f"and {sizes[1][2]}: build it for this scene"
+            )
         self.controller = controller
         self.object_wrench = object_wrench
         self.nv = self._scene.nv

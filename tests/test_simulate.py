@@ -137,3 +137,13 @@ def test_saved_torques_are_the_controllers_without_extra_calls(book: cd.Scene, m
         assert calls[0] <= res.n_rhs + 1
     expected = np.array([drives(t, q, v) + 10.0 * v[book.actuated] for t, q, v in zip(res.t, res.q, res.v, strict=True)])
     np.testing.assert_array_equal(res.tau, expected)
+
+
+def test_a_controller_built_for_another_scene_says_so() -> None:
+    """A built-in controller carries its scene (its own model of the robot): given another scene's
+    run, the error says so rather than that its gains have the wrong shape."""
+    from coopdyn.control import GravityCompensationPD
+
+    pandas = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    with pytest.raises(cd.ControllerError, match=r"\(GravityCompensationPD\) was built for another scene, of nq = 21"):
+        cd.simulate(cd.scenes.linear_book(), 0.01, GravityCompensationPD(pandas), "rk4", dt=1e-3)
