@@ -357,8 +357,9 @@ class HoldInstability:
     """A sampled controller too slow for its gains (:func:`sampled_instability`)."""
 
     sentence: str  #: what it is and what to do, lower case, no full stop
-    growth: float  #: the sampled loop's growth per period (> 1; inf when it overflows)
+    growth: float  #: the sampled loop's growth per period (> 1)
     period: float  #: [s]
+    continuous: float = 0.0  #: the continuous loop's growth over a period, as a logarithm (≤ 0: it does not grow)
 
     def explains(self, duration: float) -> bool:
         """Whether its growth over ``duration`` [s] explains a divergence by itself."""
@@ -382,7 +383,8 @@ def sampled_instability(loop: StartLoop, period: float, knob: str = "control_dt"
     sigma = float(np.max(np.linalg.eigvals(A + B @ G).real))  # the continuous loop's growth rate [1/s]
 
     def log_radius(T: float) -> float:
-        E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
+        with np.errstate(all="ignore"):  # (an exponential past the floats: inf, and said so below)
+            E = scipy.linalg.expm(np.block([[A * T, B * T], [np.zeros((m, n + m))]]))
         if not np.all(np.isfinite(E)):
             return math.inf
         radius = float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ G))))
@@ -392,6 +394,8 @@ def sampled_instability(loop: StartLoop, period: float, knob: str = "control_dt"
         return log_radius(T) <= max(0.0, sigma * T) + math.log1p(1e-6)
 
     sampled = log_radius(period)
+    if not math.isfinite(sampled):  # (past the floats over one period: nothing to tell the hold's part by)
+        return None
     if not (sampled > math.log1p(1e-3) and sampled > sigma * period + math.log1p(1e-3)):
         return None
     lo = period / 2.0
@@ -411,7 +415,7 @@ def sampled_instability(loop: StartLoop, period: float, knob: str = "control_dt"
         f"continuously it {applied}). No integrator makes that stable: sample every {lo * 1e3:.3g} ms or faster, or "
         "lower the gains"
     )
-    return HoldInstability(sentence, math.exp(sampled) if sampled < 709.0 else math.inf, period)
+    return HoldInstability(sentence, math.exp(sampled) if sampled < 709.0 else math.inf, period, sigma * period)
 
 
 def growth_factor(log_growth: float) -> str:

@@ -10,7 +10,6 @@ from . import _validate
 from .errors import SimulationError
 from .model.scene import Scene
 
-
 #: the most steps a run takes unless told otherwise (simulate's max_steps, a rollout's or a
 #: sensitivity run's limit) and the most bytes its records may take (simulate's max_memory)
 MAX_STEPS, MAX_MEMORY = 2 * 10**6, 4e9

@@ -64,7 +64,8 @@ class System:
         self.dynamics = dynamics
         self._scene = dynamics.scene
         self._model = dynamics.model
-        own = getattr(controller, "scene", None)  # (a built-in controller's scene: its own model of the robot)
+        # a built-in controller's scene (its own model of the robot); a user's class may hold any
+        own = getattr(controller, "scene", None) if type(controller).__module__.startswith("coopdyn.") else None
         sizes = [(getattr(x, "nq", None), getattr(x, "nv", None), getattr(x, "n_actuated", None)) for x in (own, self._scene)]
         if own is not None and own is not self._scene and None not in sizes[0] and sizes[0] != sizes[1]:
             raise ControllerError(

@@ -131,8 +131,9 @@ class AccuracyWarning(UserWarning):
 
 class ControlRateWarning(UserWarning):
     """A built-in controller sampled too slowly for its gains (``simulate(control_dt=…)``): the
-    sampled closed loop, linearised exactly at the start, is unstable where the same gains applied
-    continuously are not. The run completes, and its motion shows that instability."""
+    sampled closed loop, linearised exactly at the start, grows by more than e over the run where
+    the same gains applied continuously do not. The run completes; the message says whether its
+    motion already shows that instability."""
 
 
 class UnstableLoopWarning(UserWarning):

@@ -125,7 +125,7 @@ def simulate(
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
-            start (its gain by central differences: 1–15 ms): an oscillating mode that grows by
+            start (its gain by central differences; ms, growing with nv): an oscillating mode that grows by
             more than e over the run gives an ``UnstableLoopWarning`` (saying whether the run's
             grasp forces show it: its figures are then an instability's, and depend on the step),
             and a ``control_dt`` too long for its gains a ``ControlRateWarning``. ``"off"``
@@ -274,7 +274,7 @@ def simulate(
     finally:
         if bar is not None:
             bar.close()
-    if accuracy_check != "off" and t_final > 0 and hasattr(controller, "compiled_spec"):
+    if accuracy_check != "off" and t_final > 0 and _probed(controller, scene):
         _check_the_loop(result, system, q, v)
     if not judged:
         return result
@@ -287,13 +287,13 @@ def simulate(
 def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray, stacklevel: int = 3) -> None:
     """Warn when the run's built-in controller makes its loop — linearised exactly at the start
     (q, v) — unstable: an oscillating mode that grows by more than e over the run
-    (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`), saying whether the run's own
-    grasp forces (joint speeds without interconnections) grew ×:data:`~coopdyn.accuracy.UNSTABLE_GROWTH`
-    from its first third to its last — its figures are then the instability's, and depend on the
-    step — or not yet; or a control_dt too long for its gains (ControlRateWarning,
+    (UnstableLoopWarning, :func:`coopdyn.accuracy.unstable_mode`), saying whether the run shows
+    it (:func:`_shown`); or, the continuous loop stable, a control_dt too long for its gains, the
+    hold growing by more than e over the run (ControlRateWarning,
     :func:`coopdyn.accuracy.sampled_instability`). Nothing else says so: the accuracy check's
-    reference is just as unstable. A built-in controller keeps no state, so the 4·nv + 1 calls
-    that give its gain change nothing; a user's own is not probed."""
+    reference is just as unstable. Only a controller that runs as its own compiled twin
+    (:func:`_probed`) is checked: it keeps no state, so the 4·nv + 1 calls that give its gain
+    change nothing; a user's own code is not called."""
     t_final = float(result.t[-1])
     period = system.control_dt
     try:
@@ -301,38 +301,60 @@ def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray
         if loop is None:
             return
         mode = screening.unstable_mode(system, q, v, t_final, loop)
-        hold = screening.sampled_instability(loop, period) if period is not None else None
+        hold = screening.sampled_instability(loop, period) if period is not None and not mode else None
     except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (a diagnosis never turns a run into an error)
         return
     skip = "(accuracy_check='off' skips this check)"
     if mode:
-        what = "grasp forces" if result.scene.links else "joint speeds"
-        grown = _growth(result.wrenches()[..., :3] if result.scene.links else result.v[:, None, :]) if len(result.t) >= 3 else 1.0
-        if grown > screening.UNSTABLE_GROWTH:
-            shows = (
-                f"this {t_final:g} s run's {what} grow ×{grown:.3g} from its first third to its last: its motion is that "
-                "instability's, so its figures (forces, tracking) depend on the step and the start"
-            )
-        else:
-            shows = (
-                f"within this {t_final:g} s run it has not grown visibly (its {what} ×{grown:.3g} from its first third to its "
-                "last), so its figures hold for this duration, but a longer run, or a larger disturbance, would show it"
-            )
         _progress.warn(
             f"The closed loop under this controller is unstable: linearised exactly at the start (coopdyn.linearize with "
-            f"the controller), it has {mode}, and {shows}. No method makes it stable: change the controller or its gains "
-            f"{skip}",
+            f"the controller), it has {mode}, and {_shown(result)}. No method makes it stable: change the controller or its "
+            f"gains {skip}",
             UnstableLoopWarning,
             stacklevel=stacklevel,
         )
-    if hold is not None:
+    if hold is not None and hold.continuous <= 1e-6 and t_final / hold.period * math.log(hold.growth) > 1.0:
         total = screening.growth_factor(t_final / hold.period * math.log(hold.growth))
         _progress.warn(
-            f"{hold.sentence[0].upper()}{hold.sentence[1:]}. This {t_final:g} s run completed, and its motion shows that "
-            f"instability: over the run the linearised loop grows {total} {skip}",
+            f"{hold.sentence[0].upper()}{hold.sentence[1:]}. Over this {t_final:g} s run the linearised loop grows {total}, "
+            f"and {_shown(result)} {skip}",
             ControlRateWarning,
             stacklevel=stacklevel,
         )
+
+
+def _probed(controller: Any, scene: Scene) -> bool:
+    """Whether :func:`_check_the_loop` may call ``controller`` for its gain: it runs as its own
+    compiled twin (its class defines ``compiled_spec`` and gives one for this scene — not a
+    subclass, not a built-in law given a Python reference), so it keeps no state."""
+    try:
+        return compiled._own_spec(controller, scene) is not None
+    except CoopdynError:
+        return False
+
+
+#: samples a run needs, a third of them at least three, before its growth is told (:func:`_shown`)
+GROWTH_SAMPLES = 9
+
+
+def _shown(result: Result) -> str:
+    """Whether a run shows its loop's instability, as the warning's clause: its grasp forces (its
+    joint speeds without interconnections) grow ×2 from its first third to its last — its figures
+    are then the instability's — or not yet; or too few samples to tell."""
+    t_final, n = float(result.t[-1]), len(result.t)
+    what = "grasp forces" if result.scene.links else "joint speeds"
+    if n < GROWTH_SAMPLES:
+        return f"this {t_final:g} s run saved too few samples ({n}) to tell whether it shows it"
+    grown = _growth(result.wrenches()[..., :3] if result.scene.links else result.v[:, None, :])
+    if grown > screening.UNSTABLE_GROWTH:
+        return (
+            f"this {t_final:g} s run's {what} grow ×{grown:.3g} from its first third to its last: its motion is that "
+            "instability's, so its figures (forces, tracking) depend on the step and the start"
+        )
+    return (
+        f"within this {t_final:g} s run it has not grown visibly (its {what} ×{grown:.3g} from its first third to its last), "
+        "so its figures hold for this duration, but a longer run, or a larger disturbance, would show it"
+    )
 
 
 def _judge_forces(result: Result, system: System, method: Integrator, mode: str, streamed: bool, rerun: dict[str, Any]) -> Result:
@@ -464,7 +486,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         methods = [m for m in methods if _takes(scene, m)]
     for method in methods:
         check_integrator(scene, method)
-    _checked_choice("accuracy_check", settings.pop("accuracy_check"), ACCURACY_CHECKS)  # (not used: the search checks)
+    checks = settings.pop("accuracy_check")  # (the search checks the forces; "off" skips the loop's check)
+    _checked_choice("accuracy_check", checks, ACCURACY_CHECKS)
     method = methods[0]
     if not auto and (method.adaptive or method.exact_discretisation):
         raise SimulationError(
@@ -516,7 +539,7 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     for w in said:
         warnings.warn(w.message, w.category, stacklevel=3)
     controller, period = settings["controller"], settings["control_dt"]
-    if hasattr(controller, "compiled_spec"):  # (the tries run without the checks)
+    if checks != "off" and t_final > 0 and _probed(controller, scene):  # (the tries run without the checks)
         held = None if period is None else float(period)
         loop = System(Dynamics(scene, settings["backend"]), controller, settings["object_wrench"], held)
         _check_the_loop(run, loop, q, v, stacklevel=4)

@@ -267,7 +267,7 @@ def test_a_run_that_completes_under_too_slow_a_built_in_controller_warns() -> No
     assert message.startswith("The controller, sampled every control_dt = 0.5 ms and held, makes the loop unstable")
     assert "grows ×1.036 a period (applied continuously it decays)" in message
     assert "sample every 0.491 ms or faster" in message
-    assert "This 0.3 s run completed" in message and "the linearised loop grows ×1.646e+09" in message
+    assert "Over this 0.3 s run the linearised loop grows ×1.646e+09, and this 0.3 s run's grasp forces grow ×6.31" in message
     assert caught[0].filename == __file__  # (attributed to the caller of simulate)
     with warnings.catch_warnings(record=True) as caught:  # the step chosen for an accuracy: the same warning
         warnings.simplefilter("always")
@@ -287,6 +287,46 @@ def test_a_run_that_completes_under_too_slow_a_built_in_controller_warns() -> No
     user.inner = pd
     assert not rate_warnings(user, 5e-4)
     assert len(user.times) == 600  # one call per sample: not probed
+
+
+def test_the_loop_check_is_silent_where_it_cannot_tell_or_must_not_call() -> None:
+    """No ControlRateWarning for a hold whose loop is unstable anyway (the UnstableLoopWarning says
+    that: sampling faster would not help), for a run too short for the hold to grow ×e, or with
+    accuracy_check="off" through accuracy=; a subclass of a built-in controller (the user's own
+    code, maybe stateful) is not called for the check; a run saved too sparsely says it cannot
+    tell; and an exponential past the floats in one period blames no hold."""
+    from coopdyn.accuracy import StartLoop, sampled_instability
+    from coopdyn.cooperative import ObjectImpedance
+
+    undamped = cd.scenes.facing_arms("panda", stiffness=1e4)
+    damped = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    pd = GravityCompensationPD(damped, kp=100.0, kd=20.0)
+
+    def said(scene: cd.Scene, controller: object, t_final: float, **options: object) -> dict[type, str]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cd.simulate(scene, t_final, controller, "trapezoid", **options)  # type: ignore[arg-type]
+        return {w.category: str(w.message) for w in caught}
+
+    unstable = said(undamped, ObjectImpedance(undamped), 1.0, dt=1e-3, control_dt=1e-3)
+    assert cd.UnstableLoopWarning in unstable and cd.ControlRateWarning not in unstable
+    assert cd.ControlRateWarning not in said(damped, pd, 1e-3, dt=1.25e-4, control_dt=5e-4)  # (×1.07 over the run)
+    options = dict(dt=1.25e-4, control_dt=5e-4, accuracy=1.0, accuracy_check="off")
+    assert cd.ControlRateWarning not in said(damped, pd, 0.1, **options)
+    sparse = said(damped, pd, 0.3, dt=1.25e-4, control_dt=5e-4, save_every=1200)
+    assert "this 0.3 s run saved too few samples (3) to tell whether it shows it" in sparse[cd.ControlRateWarning]
+
+    class Remembering(GravityCompensationPD):
+        calls = 0
+
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            Remembering.calls += 1
+            return super().__call__(t, q, v)
+
+    assert cd.ControlRateWarning not in said(damped, Remembering(damped, kp=100.0, kd=20.0), 0.3, dt=1.25e-4, control_dt=5e-4)
+    assert Remembering.calls == 600  # (one per sample: not called for the check)
+    no_gain = StartLoop(np.array([[100.0]]), np.array([[1.0]]), np.array([[0.0]]))
+    assert sampled_instability(no_gain, 10.0) is None  # (e^1000 over a period: no hold to blame)
 
 
 def test_a_loop_that_grows_past_the_floats_over_a_period_is_still_reported_as_diverged() -> None:

@@ -145,5 +145,14 @@ def test_a_controller_built_for_another_scene_says_so() -> None:
     from coopdyn.control import GravityCompensationPD
 
     pandas = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    book = cd.scenes.linear_book()
     with pytest.raises(cd.ControllerError, match=r"\(GravityCompensationPD\) was built for another scene, of nq = 21"):
-        cd.simulate(cd.scenes.linear_book(), 0.01, GravityCompensationPD(pandas), "rk4", dt=1e-3)
+        cd.simulate(book, 0.01, GravityCompensationPD(pandas), "rk4", dt=1e-3)
+
+    class Holding:  # a user's controller may keep any scene it likes
+        scene = pandas
+
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return np.zeros(2)
+
+    assert cd.simulate(book, 0.01, Holding(), "rk4", dt=1e-3).status == "completed"

@@ -506,16 +506,22 @@ def test_heatmap_shows_an_unstable_loop_as_such(tmp_path: Path) -> None:
 
     table = pd.DataFrame(
         {
-            "k": [1.0, 2.0, 3.0, 4.0],
-            "g": [1, 1, 1, 1],
-            "status": ["completed", "completed", "diverged", "diverged"],
-            "warnings": ["", "UnstableLoopWarning: The closed loop …", "", ""],
-            "message": ["", "", f"the simulation diverged … {UNSTABLE_AT_START}: linearised …", "the simulation diverged …"],
-            "tracking_error_max_m": [0.002, 0.357, np.nan, np.nan],
+            "k": [1.0, 2.0, 3.0, 4.0, 5.0],
+            "g": [1, 1, 1, 1, 1],
+            "status": ["completed", "completed", "diverged", "diverged", "failed"],
+            "warnings": ["", "UnstableLoopWarning: The closed loop …", "", "", "UnstableLoopWarning: The closed loop …"],
+            "message": [
+                "",
+                "",
+                f"the simulation diverged … {UNSTABLE_AT_START}: linearised …",
+                "the simulation diverged …",
+                "KeyError: 'x' (at metrics.py:3 in metrics)",
+            ],
+            "tracking_error_max_m": [0.002, 0.357, np.nan, np.nan, np.nan],
         }
     )
     fig = sweep_heatmap(table, "k", "g", "tracking_error_max_m", tmp_path / "h.png")
-    assert [t.get_text() for t in fig.axes[0].texts] == ["2", "unstable loop", "unstable loop", "diverged"]
+    assert [t.get_text() for t in fig.axes[0].texts] == ["2", "unstable loop", "unstable loop", "diverged", "failed"]
 
 
 def test_sweep_example(tmp_path: Path) -> None:

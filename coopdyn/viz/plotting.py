@@ -296,11 +296,12 @@ def sweep_heatmap(
 
 
 def _unstable(table: Any) -> np.ndarray:
-    """Which runs of a sweep table had a loop unstable from the start: an UnstableLoopWarning in
-    ``warnings``, or a divergence whose ``message`` says so."""
+    """Which runs of a sweep table had a loop unstable from the start: a completed run with an
+    UnstableLoopWarning in ``warnings``, or a divergence whose ``message`` says so."""
     rows = len(table)
     said = table["warnings"].fillna("").astype(str) if "warnings" in table.columns else None
     warned = said.str.contains(UnstableLoopWarning.__name__, regex=False).to_numpy() if said is not None else np.zeros(rows, bool)
+    warned = warned & (table["status"] == "completed").to_numpy()  # (a run that failed afterwards stays "failed")
     message = table["message"].fillna("").astype(str) if "message" in table.columns else None
     diverged = (
         ((table["status"] == "diverged") & message.str.contains(UNSTABLE_AT_START, regex=False)).to_numpy()
