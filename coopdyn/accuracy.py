@@ -308,12 +308,12 @@ class StartLoop:
     G: np.ndarray  #: (n_actuated, 2nv)
 
 
-def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> StartLoop | None:
+def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0, gain: np.ndarray | None = None) -> StartLoop | None:
     """The system's loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`; the
     controller's gain by central differences, calling it 4·nv more times, without the hold of a
-    ``control_dt``), or None: no controller, or a loop that cannot be linearised (rigid grasps, a
-    joint without tangent coordinates, a controller that fails when probed — a diagnosis never
-    turns a run into an error)."""
+    ``control_dt`` — or ``gain`` when given, e.g. its compiled twin's), or None: no controller,
+    or a loop that cannot be linearised (rigid grasps, a joint without tangent coordinates, a
+    controller that fails when probed — a diagnosis never turns a run into an error)."""
     if system.controller is None:
         return None
     try:
@@ -321,7 +321,7 @@ def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> 
         continuous = System(system.dynamics, system.controller, system.object_wrench)  # (no hold: its gain)
         tau = continuous.torque(t, q, v)
         lin = linearize(system.dynamics.scene, q, v, tau, t=t, object_wrench=wrench)
-        return StartLoop(lin.A, lin.B, controller_gain(continuous, t, q, v))
+        return StartLoop(lin.A, lin.B, controller_gain(continuous, t, q, v) if gain is None else gain)
     except Exception:  # (whatever the controller raises when probed, the run stands)
         return None
 

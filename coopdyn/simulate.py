@@ -125,7 +125,7 @@ def simulate(
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
             Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
-            start (its gain by central differences; ms, growing with nv): an oscillating mode that grows by
+            start (its gain by central differences of its compiled twin): an oscillating mode that grows by
             more than e over the run gives an ``UnstableLoopWarning`` (saying whether the run's
             grasp forces show it: its figures are then an instability's, and depend on the step),
             and a ``control_dt`` too long for its gains a ``ControlRateWarning``. ``"off"``
@@ -293,11 +293,12 @@ def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray
     :func:`coopdyn.accuracy.sampled_instability`). Nothing else says so: the accuracy check's
     reference is just as unstable. Only a controller that runs as its own compiled twin
     (:func:`_probed`) is checked: it keeps no state, so the 4·nv + 1 calls that give its gain
-    change nothing; a user's own code is not called."""
+    change nothing (its compiled twin's, :func:`coopdyn.compiled.controller_gain`, on the native
+    backend); a user's own code is not called."""
     t_final = float(result.t[-1])
     period = system.control_dt
     try:
-        loop = screening.start_loop(system, q, v)
+        loop = screening.start_loop(system, q, v, gain=compiled.controller_gain(system, 0.0, q, v))
         if loop is None:
             return
         mode = screening.unstable_mode(system, q, v, t_final, loop)

@@ -390,6 +390,30 @@ def test_the_closed_loop_adds_the_controllers_gain() -> None:
         cd.linearize(scene, controller="pd")  # type: ignore[arg-type]
 
 
+def test_the_compiled_twins_gain_is_the_python_twins() -> None:
+    """coopdyn.compiled.controller_gain (the loop check's, through the kernel) gives a built-in
+    controller's ∂τ/∂x as linearize.controller_gain does — the same central differences on its
+    compiled twin — for the PD with gravity compensation and ObjectImpedance; a user's Python
+    controller, or the Python backend, gets None (the Python differences then)."""
+    from coopdyn.closed_loop import System
+    from coopdyn.compiled import controller_gain as compiled_gain
+    from coopdyn.control import GravityCompensationPD
+    from coopdyn.cooperative import ObjectImpedance
+    from coopdyn.linearize import controller_gain
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    q = pin.integrate(scene.model, scene.q0, 0.05 * np.random.default_rng(2).normal(size=scene.nv))
+    v = 0.3 * np.random.default_rng(3).normal(size=scene.nv)
+    for controller in (GravityCompensationPD(scene, 60.0, 6.0), ObjectImpedance(scene)):
+        system = System(Dynamics(scene, "native"), controller)
+        compiled, python = compiled_gain(system, 0.1, q, v), controller_gain(system, 0.1, q, v)
+        assert compiled is not None and compiled.shape == python.shape == (scene.n_actuated, 2 * scene.nv)
+        np.testing.assert_allclose(compiled, python, rtol=0.0, atol=1e-6 * np.max(np.abs(python)))
+    pd = GravityCompensationPD(scene)
+    assert compiled_gain(System(Dynamics(scene, "native"), lambda t, q, v: pd(t, q, v)), 0.0, q, v) is None
+    assert compiled_gain(System(Dynamics(scene, "python"), pd), 0.0, q, v) is None
+
+
 def test_a_subclass_that_changes_the_se3_law_loses_its_exact_tangent() -> None:
     """An SE3Spring subclass with its own evaluate and no gradient or tangent of its own is
     differentiated by central differences (and says so), not with the parent's exact tangent;

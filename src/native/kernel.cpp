@@ -177,7 +177,8 @@ BOOST_PYTHON_MODULE(_native) {
     bp::init<bp::object, bp::list, bp::list, bool, bp::tuple, bp::list, bp::list>(
       bp::args("self", "kernel", "A", "b", "symplectic", "implicit", "charts", "parameters")))
     .def("run", &cn::Sensitivity::run, bp::args("self", "q0", "v0", "U", "per", "h", "dq0", "dv0", "dU", "dP", "end_wrench", "max_speed", "t0"))
-    .def("set_controller", &sensitivity_controller, bp::args("self", "kernel", "controller"));
+    .def("set_controller", &sensitivity_controller, bp::args("self", "kernel", "controller"))
+    .def("controller_gain", &cn::Sensitivity::controller_gain, bp::args("self", "t", "q", "v"));
   bp::class_<Loop, std::shared_ptr<Loop>, boost::noncopyable>(
     "Loop", "A compiled simulation run (see coopdyn.compiled).", bp::no_init)
     .def("advance", &Loop::advance, bp::args("self", "budget"))

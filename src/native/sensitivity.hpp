@@ -94,6 +94,23 @@ public:
   // its gain ∂τ/∂x there by central differences (linearize.py: controller_gain, same steps).
   void set_controller(std::unique_ptr<Controller> controller) { ctrl_ = std::move(controller); }
 
+  // τ at (t, q, v) and the controller's whole gain ∂τ/∂(δq, v) (na, 2nv) by central differences
+  // (controller_probe's steps, linearize.py's controller_gain's): the loop check of a run under a
+  // built-in controller (coopdyn/compiled.py: controller_gain) in microseconds.
+  bp::tuple controller_gain(double t, const RefVec & q, const RefVec & v) {
+    if (!ctrl_) throw std::invalid_argument("Sensitivity: controller_gain needs a controller (set_controller)");
+    const Eigen::Index nv = model_.nv;
+    check_size(q, model_.nq, "q");
+    check_size(v, nv, "v");
+    const VectorXd q0 = q, v0 = v;
+    MatrixXd dq = MatrixXd::Zero(nv, 2 * nv), dv = MatrixXd::Zero(nv, 2 * nv), G;
+    dq.leftCols(nv).setIdentity();
+    dv.rightCols(nv).setIdentity();
+    VectorXd tau;
+    controller_probe(t, q0, v0, dq, dv, tau, G);
+    return bp::make_tuple(tau, G);
+  }
+
   // N periods of `per` steps of h [s] from (q0, v0) under U (N, na) — with a controller, under
   // its torque sampled at t = k·per·h (U is then added to it) —, the derivatives carried along the
   // seed columns (dq0, dv0: (nv, m); dU: (na, m), the same at every step; dP: (np, m)).
