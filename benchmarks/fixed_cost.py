@@ -7,6 +7,8 @@ of ``--calls`` calls each), BLAS on one thread:
 
 * ``simulate``, as a user calls it (the accuracy screen on, ``accuracy_check="auto"``);
 * ``simulate`` with ``accuracy_check="off"`` and ``energy_check="off"``;
+* both again under the demo's controller (``ObjectImpedance`` on the demo's damped grasps), whose
+  checks cost more (its loop check probes its compiled twin);
 * ``Simulator.run`` (set up once, then one run per call);
 * MuJoCo with the same law and controller as compiled callbacks (``coopdyn.mujoco``): reset,
   set the state, one ``mj_step``, read the state back — what a MuJoCo user's run costs;
@@ -35,6 +37,7 @@ from collections.abc import Callable
 import coopdyn as cd
 from coopdyn.bench import single_threaded_blas
 from coopdyn.control import GravityCompensationPD
+from coopdyn.cooperative import ObjectImpedance
 
 
 def _variants(method: str) -> dict[str, Callable[[], object]]:
@@ -43,9 +46,20 @@ def _variants(method: str) -> dict[str, Callable[[], object]]:
     sim = cd.Simulator(scene, pd, method, 1e-3)
     sim21 = cd.Simulator(scene, pd, method, 1e-3)
     off = dict(accuracy_check="off", energy_check="off")
+    demo = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    impedance = ObjectImpedance(demo)
     variants: dict[str, Callable[[], object]] = {
         "simulate": lambda: cd.simulate(scene, 1e-3, controller=pd, integrator=method, dt=1e-3),
         "simulate, checks off": lambda: cd.simulate(scene, 1e-3, controller=pd, integrator=method, dt=1e-3, **off),  # type: ignore[arg-type]
+        "simulate, ObjectImpedance": lambda: cd.simulate(demo, 1e-3, controller=impedance, integrator=method, dt=1e-3),
+        "simulate, ObjectImpedance, checks off": lambda: cd.simulate(
+            demo,
+            1e-3,
+            controller=impedance,
+            integrator=method,
+            dt=1e-3,
+            **off,  # type: ignore[arg-type]
+        ),
         "Simulator.run": lambda: sim.run(1e-3),
         "Simulator.run, 21 steps": lambda: sim21.run(21e-3),
     }
