@@ -47,8 +47,9 @@ class Simulator:
     ``t_final``, a Python controller) and collects its samples (a short run that completes
     without a warning straight into its Result). ``benchmarks/fixed_cost.py`` measures both.
 
-    What it leaves out, as the price of that: the accuracy judgement (``accuracy_check``: judge
-    one representative run with :func:`coopdyn.simulate` first), progress bars and
+    What it leaves out, as the price of that: the accuracy judgement and the loop check
+    (``accuracy_check``; the ``UnstableLoopWarning`` and ``ControlRateWarning``: judge one
+    representative run with :func:`coopdyn.simulate` first), progress bars and
     ``stream_to``, and an ``object_wrench`` (not taken). A run that cannot go to the compiled
     loop (the Python backend, a Python integrator) is an ordinary ``simulate`` call.
 
