@@ -93,11 +93,7 @@ def rollout(
             f"rollout: {N} periods of {period:g} s at dt = {dt:g} s are {step_count(t_final, dt):,} steps a trajectory, more "
             f"than {MAX_STEPS:,}: take a larger dt or fewer periods"
         )
-    # what would stop every trajectory alike is refused here, not reported B times: the method (the
-    # scene it needs), a shared start that is not a valid state
-    sequence = TorqueSequence(scene, U[0], period)
-    first = Simulator(scene, sequence, integrator, dt, save_every=per, max_speed=max_speed, control_dt=period)
-    if all(np.ndim(x) <= 1 for x in (q0, v0)):
+    if all(np.ndim(x) <= 1 for x in (q0, v0)):  # (a shared start that is no state stops every trajectory alike)
         scene.check_state(starts[0][0], starts[1][0])
     Q = np.full((B, N + 1, scene.nq), np.nan)
     V = np.full((B, N + 1, scene.nv), np.nan)
@@ -122,7 +118,6 @@ def rollout(
         Q[b, :n], V[b, :n] = res.q, res.v
 
     if threads == 1 or B == 1:
-        local.sequence, local.simulator = sequence, first  # (this thread's: the one made above)
         for b in range(B):
             one(b)
     else:
