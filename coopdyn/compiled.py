@@ -17,7 +17,9 @@ from typing import Any, NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from . import accuracy
 from ._spec import CompiledSpec, ExponentialSpec, NoControllerSpec, PythonControllerSpec
+from .accuracy import StartLoop
 from .closed_loop import System
 from .dynamics.backend import kernel_module
 from .errors import ControllerError, CoopdynError, SimulationError
@@ -203,6 +205,17 @@ def controller_gain(system: System, t: float, q: np.ndarray, v: np.ndarray) -> n
     probe = kernel_module().Sensitivity(kernel, [], [], True, (), [], [])  # (a symplectic stub: only its controller is used)
     probe.set_controller(kernel, settings)
     return np.asarray(probe.controller_gain(float(t), q, v)[1])
+
+
+def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> StartLoop | None:
+    """:func:`coopdyn.accuracy.start_loop` with the controller's gain from its compiled twin when it
+    has one (:func:`controller_gain`), from its Python differences otherwise — what every loop
+    diagnosis (a run's loop check, a divergence's, a sensitivity's) takes."""
+    try:
+        gain = controller_gain(system, t, q, v)
+    except Exception:  # (the compiled probe failed: the Python one says so, or gives no loop — never an error)
+        gain = None
+    return accuracy.start_loop(system, q, v, t, gain=gain)
 
 
 def twin_scenes(a: Scene, b: Scene) -> bool:

@@ -26,10 +26,10 @@ import numpy as np
 import pinocchio as pin
 
 from . import _validate
-from .accuracy import HoldInstability, sampled_instability, start_loop
+from .accuracy import HoldInstability, sampled_instability
 from .budget import MAX_MEMORY, MAX_STEPS
 from .closed_loop import Controller, System
-from .compiled import controller_settings
+from .compiled import controller_settings, start_loop
 from .dynamics.backend import kernel_module
 from .errors import KernelError, SceneError, SimulationError, StepMatrixError
 from .linearize import controller_gain
@@ -277,10 +277,9 @@ class Sensitivity:
             raise SimulationError("Sensitivity.step differentiates an open-loop step; a closed loop's: Sensitivity.trajectory")
         scene = self.scene
         q, v = _state(scene, q, v)
-        na = scene.n_actuated
+        nv, na, n_p = scene.nv, scene.n_actuated, len(self.params)
         u = np.zeros(na) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (na,), SimulationError)
         h = _validate.positive(dt, "dt", "s", SimulationError)
-        nv, na, n_p = scene.nv, scene.n_actuated, len(self.params)
         seeds = _identity_seeds(nv, na, n_p)
         Q, V, _, dX, _, _ = self._run(q, v, u[None], 1, h, seeds, end_wrench=False)
         D = dX[1]
@@ -311,16 +310,17 @@ class Sensitivity:
         scene = self.scene
         q, v = _state(scene, q0, v0)
         initial_state = _validate.flag(initial_state, "initial_state", SimulationError)
+        h, per = step_of(period, dt)
+        na, nv, n_p = scene.n_actuated, scene.nv, len(self.params)
+        m = n_p + (2 * nv if initial_state else 0)
         if self.controller is not None and isinstance(torques, int | np.integer) and not isinstance(torques, bool):
             torques = int(torques)
             if torques < 1:
                 raise SimulationError(f"trajectory: the number of periods must be >= 1, got {torques}")
-            _check_budget(scene, torques, 1, float(period) if isinstance(period, int | float) else 0.0, 1)  # (before the zeros)
-            torques = np.zeros((torques, scene.n_actuated))
+            _check_budget(scene, torques, per, h, m)  # (before its zeros are made)
+            torques = np.zeros((torques, na))
         U = _torques(scene, torques, closed=self.controller is not None)
-        h, per = step_of(period, dt)
-        na, nv, n_p, N = scene.n_actuated, scene.nv, len(self.params), len(U)
-        m = n_p + (2 * nv if initial_state else 0)
+        N = len(U)
         _check_budget(scene, N, per, h, m)
         dq, dv, du, dp = np.zeros((nv, m)), np.zeros((nv, m)), np.zeros((na, m)), np.zeros((n_p, m))
         dp[:, :n_p] = np.eye(n_p)
@@ -355,7 +355,7 @@ class Sensitivity:
         """The closed loop's controller, sampled every period and held, when that alone makes the
         loop linearised at (q, v) unstable (:func:`coopdyn.accuracy.sampled_instability`)."""
         assert self.system is not None
-        loop = start_loop(self.system, q, v)
+        loop = start_loop(self.system, q, v)  # (its compiled twin's gain, if any)
         try:
             return None if loop is None else sampled_instability(loop, period, knob="period")
         except (ArithmeticError, ValueError, np.linalg.LinAlgError):  # (never hiding the divergence itself)

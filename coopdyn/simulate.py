@@ -293,12 +293,12 @@ def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray
     :func:`coopdyn.accuracy.sampled_instability`). Nothing else says so: the accuracy check's
     reference is just as unstable. Only a controller that runs as its own compiled twin
     (:func:`_probed`) is checked: it keeps no state, so the 4·nv + 1 calls that give its gain
-    change nothing (its compiled twin's, :func:`coopdyn.compiled.controller_gain`, on the native
-    backend); a user's own code is not called."""
+    change nothing (its compiled twin's on the native backend: :func:`coopdyn.compiled.start_loop`);
+    a user's own code is not called."""
     t_final = float(result.t[-1])
     period = system.control_dt
     try:
-        loop = screening.start_loop(system, q, v, gain=compiled.controller_gain(system, 0.0, q, v))
+        loop = compiled.start_loop(system, q, v)
         if loop is None:
             return
         mode = screening.unstable_mode(system, q, v, t_final, loop)
@@ -314,8 +314,9 @@ def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray
             UnstableLoopWarning,
             stacklevel=stacklevel,
         )
-    if hold is not None and hold.continuous <= 1e-6 and t_final / hold.period * math.log(hold.growth) > 1.0:
-        total = screening.growth_factor(t_final / hold.period * math.log(hold.growth))
+    grown = t_final / hold.period * math.log(hold.growth) if hold is not None else 0.0  # (over the run, a logarithm)
+    if hold is not None and hold.continuous <= 1e-6 and grown > 1.0:
+        total = screening.growth_factor(grown)
         _progress.warn(
             f"{hold.sentence[0].upper()}{hold.sentence[1:]}. Over this {t_final:g} s run the linearised loop grows {total}, "
             f"and {_shown(result)} {skip}",
@@ -909,8 +910,8 @@ class _Run:
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
         # the loop at the start (by the blow-up the state is far from any linearisation): one
-        # linearisation, its controller probed 4·nv times, for both diagnoses
-        loop = screening.start_loop(self.system, self.start[0], self.start[1])
+        # linearisation, its controller probed 4·nv times (its compiled twin, if any), for both diagnoses
+        loop = compiled.start_loop(self.system, self.start[0], self.start[1])
         period = self.system.control_dt
         try:
             mode = screening.unstable_mode(self.system, self.start[0], self.start[1], t, loop) if loop is not None else ""
