@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -29,6 +30,11 @@ def test_work_precision_rows_and_outputs(tmp_path: Path) -> None:
     assert [r.stable for r in again] == [r.stable for r in rows]
     assert bench.plot_work_precision(rows, tmp_path / "wp.png").stat().st_size > 10_000
     assert "force err [N]" in bench.format_rows(rows)
+    # a scene named with more after its stiffness (the peer bench's elastic-joint task) is drawn too:
+    # "k=1e+05," once failed to parse and the whole 20-minute run ended in a ValueError
+    elastic = [dataclasses.replace(r, scene="task k=1e+05, elastic joints") for r in rows]
+    figure = bench.plot_work_precision(elastic, tmp_path / "elastic.png")
+    assert figure.stat().st_size > 10_000
 
 
 def test_diverging_points_are_marked_not_dropped() -> None:

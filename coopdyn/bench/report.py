@@ -82,7 +82,7 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
                     fontsize=6,
                     color="red",
                 )
-        ax.set_title(re.sub(r"k=(\S+)", lambda m: f"k = {_short(float(m.group(1)))} N/m", name))  # the scene's name, with units
+        ax.set_title(re.sub(r"k=([0-9.eE+-]+)", lambda m: f"k = {_short(float(m.group(1)))} N/m", name))  # with units
         ax.set_xlabel("CPU s per simulated s")
         ax.set_ylabel("max interconnection force error [N]")
         ax.grid(True, which="both", alpha=0.3)
