@@ -51,7 +51,7 @@ from .errors import SceneError, SimulationError
 from .integrators import (
     ROS2,
     AdaptiveROS2,
-    DormandPrince,
+    EmbeddedRungeKutta,
     ExplicitRungeKutta,
     Exponential,
     Integrator,
@@ -532,7 +532,7 @@ def step_method(integrator: Any) -> StepMethod:
         SimulationError: any other method, with the reason.
     """
     method = get_integrator(integrator)
-    tableau_family = next((base for base in (ExplicitRungeKutta, DormandPrince) if isinstance(method, base)), None)
+    tableau_family = next((base for base in (ExplicitRungeKutta, EmbeddedRungeKutta) if isinstance(method, base)), None)
     if tableau_family is not None and _keeps_step(method, tableau_family):
         return StepMethod((method.tableau.A, method.tableau.b))  # type: ignore[attr-defined]
     if type(method) is SymplecticEuler:
@@ -559,7 +559,7 @@ def step_method(integrator: Any) -> StepMethod:
     elif isinstance(
         method,
         ExplicitRungeKutta
-        | DormandPrince
+        | EmbeddedRungeKutta
         | LinearlyImplicitEuler
         | ROS2
         | Trapezoid

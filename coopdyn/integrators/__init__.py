@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
-from .explicit import RK4, ButcherTableau, DormandPrince, ExplicitRungeKutta, SymplecticEuler
+from .explicit import RK4, ButcherTableau, DormandPrince, EmbeddedRungeKutta, ExplicitRungeKutta, SymplecticEuler
 from .exponential import Exponential, LinearForm, linear_form
 from .implicit import ROS2, AdaptiveROS2, GeneralizedAlpha, LinearlyImplicitEuler, Trapezoid
 from .scipy_reference import ScipyReference
@@ -63,6 +63,7 @@ __all__ = [
     "Attempt",
     "ButcherTableau",
     "DormandPrince",
+    "EmbeddedRungeKutta",
     "ExplicitRungeKutta",
     "Exponential",
     "GeneralizedAlpha",

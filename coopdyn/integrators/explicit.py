@@ -1,5 +1,5 @@
-"""Explicit methods: symplectic Euler, Runge–Kutta from a Butcher tableau (RK4), and the
-adaptive Dormand–Prince 5(4) pair. Methods that differ only in coefficients differ only in data."""
+"""Explicit methods: symplectic Euler, Runge–Kutta from a Butcher tableau (RK4), and adaptive
+embedded pairs (Dormand–Prince 5(4)). Methods that differ only in coefficients differ only in data."""
 
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ class RK4(ExplicitRungeKutta):
 
 
 class _FirstSameAsLast:
-    """Dormand–Prince's workspace: the last stage's acceleration, reused as the next step's first
+    """An embedded pair's workspace: the last stage's acceleration, reused as the next step's first
     when that step starts from the same state array ``q`` with the same controller output (no
     new ``control_dt`` sample)."""
 
@@ -171,7 +171,49 @@ _DP_A = (
 )
 
 
-class DormandPrince(AdaptiveIntegrator):
+class EmbeddedRungeKutta(AdaptiveIntegrator):
+    """An adaptive explicit Runge–Kutta pair whose last stage is its solution (first same as
+    last): the last row of A is b, its c is 1 and its own weight 0, so the next step starts from
+    that stage's acceleration. ``b_hat`` gives the embedded solution; ``error_order`` is the
+    order of the error estimate ``b − b_hat`` (the step controller's exponent is 1/(p + 1)).
+    A subclass that only sets ``tableau``, ``name``, ``order`` and ``error_order`` is
+    differentiated by :mod:`coopdyn.sensitivity` as its tableau.
+    """
+
+    tableau: ClassVar[ButcherTableau]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        tab = cls.__dict__.get("tableau")
+        if tab is None:
+            return
+        if tab.b_hat is None or tuple(tab.A[-1]) != tuple(tab.b[:-1]) or tab.b[-1] != 0.0 or tab.c[-1] != 1.0:
+            raise SimulationError(
+                f"{cls.__name__}: an embedded pair's last stage must be its solution (first same as last): the last row "
+                "of A equal to b, its c 1 and its own weight 0, with b_hat given"
+            )
+
+    def _spec(self) -> RungeKuttaSpec:
+        return dataclasses.replace(_tableau_spec(self.tableau), adaptive=True, error_order=self.error_order)
+
+    def workspace(self, system: Problem) -> _FirstSameAsLast:
+        return _FirstSameAsLast()
+
+    def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
+        tab = self.tableau
+        a0 = ws.a if ws is not None and ws.q is q and not system.new_sample else None  # a new held torque: afresh
+        kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the solution
+        diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
+        err = self.error_norm(system, h * combine(diff, kd), h * combine(diff, ka), q, v, v_new)
+        if ws is not None:
+            ws.q, ws.a = q_new, ka[-1]
+        return Attempt(q_new, v_new, err)
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        return _rk_stability(self.tableau, z, self.tableau.b)
+
+
+class DormandPrince(EmbeddedRungeKutta):
     """Dormand–Prince 5(4): adaptive, error-controlled, 6 RHS per step (first-same-as-last).
 
     Args:
@@ -189,20 +231,4 @@ class DormandPrince(AdaptiveIntegrator):
     )
 
     def compiled_spec(self) -> RungeKuttaSpec:
-        return dataclasses.replace(_tableau_spec(self.tableau), adaptive=True, error_order=self.error_order)
-
-    def workspace(self, system: Problem) -> _FirstSameAsLast:
-        return _FirstSameAsLast()
-
-    def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:
-        tab = self.tableau
-        a0 = ws.a if ws is not None and ws.q is q and not system.new_sample else None  # a new held torque: afresh
-        kd, ka, (_, q_new, v_new) = _stages(tab, system, t, q, v, h, a0)  # the last stage is the 5th-order solution
-        diff = tuple(b - bh for b, bh in zip(tab.b, tab.b_hat or (), strict=True))
-        err = self.error_norm(system, h * combine(diff, kd), h * combine(diff, ka), q, v, v_new)
-        if ws is not None:
-            ws.q, ws.a = q_new, ka[-1]
-        return Attempt(q_new, v_new, err)
-
-    def stability_function(self, z: np.ndarray) -> np.ndarray:
-        return _rk_stability(self.tableau, z, self.tableau.b)
+        return self._spec()
