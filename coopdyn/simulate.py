@@ -41,7 +41,7 @@ from .errors import (
     StepMatrixError,
     UnstableLoopWarning,
 )
-from .integrators import AdaptiveIntegrator, DormandPrince, Integrator, get_integrator
+from .integrators import AdaptiveIntegrator, DormandPrince, EmbeddedRungeKutta, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
@@ -81,7 +81,7 @@ def simulate(
         integrator: a name from ``coopdyn.integrators.INTEGRATORS`` or an instance; or, with
             ``accuracy``, ``"auto"``: the method is chosen too (see ``accuracy``).
         dt: time step [s], > 0. The last step is shortened to end exactly at ``t_final``.
-            Adaptive methods (``dopri5``, ``ros2_adaptive``) choose their own steps and land on
+            Adaptive methods (``dopri5``, ``dop853``, ``ros2_adaptive``) choose their own steps and land on
             the output grid ``k·dt·save_every``; ``dt`` is then also their first trial step.
         save_every: keep every k-th step (the initial and final states are always kept).
         q0, v0: initial state (nq,), (nv,); default ``scene.q0`` and ``scene.v0``.
@@ -123,7 +123,8 @@ def simulate(
             budget or diverges is compared as far as it got (and one that diverges or grows to
             dwarf the run's forces is reported as an unstable loop the run's step hides).
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
-            Not for ``dopri5`` (error-controlled), ``exponential`` (exact) or rigid grasps.
+            Not for ``dopri5`` or ``dop853`` (error-controlled), ``exponential`` (exact) or rigid
+            grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
             start (its gain by central differences of its compiled twin): an oscillating mode that grows by
             more than e over the run gives an ``UnstableLoopWarning`` (saying whether the run's
@@ -216,7 +217,7 @@ def simulate(
         run.stream = SampleFiles(stream_to, n_samples, scene.nq, scene.nv, scene.n_actuated)
     judged = (
         accuracy_check != "off"
-        and method.name != "dopri5"
+        and not isinstance(method, EmbeddedRungeKutta)
         and not method.exact_discretisation
         and not has_constraints(scene)
         and t_final > 0

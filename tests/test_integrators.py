@@ -3,6 +3,8 @@ box, the exponential integrator, adaptive methods, stability prediction vs measu
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -59,6 +61,7 @@ PANDA_ORDERS = {
     "symplectic_euler": (1, [4e-4, 2e-4, 1e-4]),
     "rk4": (4, [8e-4, 4e-4, 2e-4]),
     "dopri5": (5, [8e-4, 4e-4, 2e-4]),
+    "dop853": (8, [5e-3, 4e-3, 2.5e-3]),  # (below 2.5 ms, 1e-11 and less, it is no longer one term's: not monotonic)
     "implicit_euler": (1, [4e-4, 2e-4, 1e-4]),
     "ros2": (2, [2e-4, 1e-4, 5e-5]),
     "trapezoid": (2, [2e-4, 1e-4, 5e-5]),
@@ -130,7 +133,7 @@ def test_advise_detects_linearity(book: cd.Scene, pandas: cd.Scene) -> None:
     assert not advice.linear and not next(m for m in advice.methods if m.name == "exponential").applicable
 
 
-@pytest.mark.parametrize("name", ["dopri5", "ros2_adaptive"])
+@pytest.mark.parametrize("name", ["dopri5", "dop853", "ros2_adaptive"])
 def test_adaptive_methods_meet_their_tolerance(book: cd.Scene, name: str) -> None:
     """The global error follows the tolerance, and outputs land on the save grid."""
     d1, d2 = cd.scenes.book_task()
@@ -243,6 +246,24 @@ def test_dopri5_fixed_step_order_on_the_linear_case(book: cd.Scene) -> None:
         t = dt * np.arange(len(qs))
         errors.append(np.max(np.abs(cd.scenes.book_positions(np.array(qs), book) - linear_book_exact(t, d1, d2).Y)))
     assert _slope(dts, errors) == pytest.approx(5.0, abs=0.3)
+
+
+def test_dop853_stability_function_matches_the_exponential_to_its_orders() -> None:
+    """On y' = λy a step is R(hλ): R(z) − eᶻ = O(z⁹) for the eighth-order solution, O(z⁶) for
+    the fifth-order embedded one (``b_hat`` as the weights); the nonlinear order is tested on two
+    Pandas (PANDA_ORDERS)."""
+    tableau = get_integrator("dop853").tableau
+    z = np.array([0.4, 0.2])
+    for weights, local_order in ((tableau.b, 9), (tableau.b_hat, 6)):
+        gap = np.abs(cd.integrators.explicit._rk_stability(tableau, z, weights) - np.exp(z))
+        assert np.log2(gap[0] / gap[1]) == pytest.approx(local_order, abs=0.3), (local_order, gap)
+
+
+def test_an_embedded_pair_must_end_on_its_solution() -> None:
+    """The step takes the last stage as the solution: a pair whose last row is not b is refused."""
+    rk4 = cd.integrators.RK4.tableau
+    with pytest.raises(cd.SimulationError, match=r"Pair: an embedded pair's last stage must be its solution"):
+        type("Pair", (cd.integrators.EmbeddedRungeKutta,), {"tableau": dataclasses.replace(rk4, b_hat=rk4.b)})
 
 
 def test_trapezoid_stability_function_is_the_cayley_map_and_rho_inf_sets_its_limit() -> None:

@@ -328,10 +328,10 @@ def test_the_command_line_describes_itself(capsys: pytest.CaptureFixture[str]) -
         assert rest.split("\n\n")[0].strip() and not rest.startswith("positional") and not rest.startswith("options"), command
     with pytest.raises(SystemExit):
         main(["demo", "--integrator", "rk45"])
-    assert "invalid choice: 'rk45' (choose from 'dopri5', 'exponential'" in capsys.readouterr().err
+    assert "invalid choice: 'rk45' (choose from 'dop853', 'dopri5', 'exponential'" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
-    assert "one of dopri5, exponential, generalized_alpha, implicit_euler," in " ".join(capsys.readouterr().out.split())
+    assert "one of dop853, dopri5, exponential, generalized_alpha, implicit_euler," in " ".join(capsys.readouterr().out.split())
 
 
 def test_a_divergence_names_the_mode_that_limits_the_step(pandas: cd.Scene) -> None:

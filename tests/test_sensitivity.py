@@ -105,7 +105,7 @@ def _stepper(
 
 
 @pytest.mark.parametrize(
-    "method", ["rk4", "symplectic_euler", "dopri5", "implicit_euler", "trapezoid", "ros2", "generalized_alpha"]
+    "method", ["rk4", "symplectic_euler", "dopri5", "dop853", "implicit_euler", "trapezoid", "ros2", "generalized_alpha"]
 )
 @pytest.mark.parametrize("name", CASES)
 def test_the_step_sensitivity_is_the_derivative_of_the_step(name: str, method: str) -> None:
@@ -133,9 +133,9 @@ def test_the_step_sensitivity_is_the_derivative_of_the_step(name: str, method: s
         e = np.eye(scene.n_actuated)[k]
         ref = richardson(lambda x, e=e: state(*_stepper(scene, method, tau + x * e)(q, v, h)), 1.0)
         assert _rel(s.dx_du[:, k], ref) < 1e-7
-    for k, p in enumerate(s.parameters):
+    for k, p in enumerate(s.parameters):  # (1e-2: smaller differences of one short step are round-off's)
         ref = richardson(
-            lambda x, p=p: state(*_stepper(with_parameters(scene, {p.name: p.value + x}), method, tau)(q, v, h)), _step(p, 1e-3)
+            lambda x, p=p: state(*_stepper(with_parameters(scene, {p.name: p.value + x}), method, tau)(q, v, h)), _step(p, 1e-2)
         )
         assert _rel(s.dx_dp[:, k], ref) < 1e-6, p.name
 
@@ -297,7 +297,9 @@ def test_trajectory_sensitivities_are_the_derivatives_of_compiled_rollouts(metho
         assert _rel(tr.dx_dx0[..., k].ravel(), ref) < 1e-6
 
 
-@pytest.mark.parametrize("method", ["rk4", "symplectic_euler", "implicit_euler", "ros2", "trapezoid", "generalized_alpha"])
+@pytest.mark.parametrize(
+    "method", ["rk4", "dop853", "symplectic_euler", "implicit_euler", "ros2", "trapezoid", "generalized_alpha"]
+)
 def test_both_backends_give_the_same_sensitivities(method: str) -> None:
     """The kernel's twin against the Python reference: a step, and a trajectory of three steps a
     period (generalized-α's carried acceleration), with the start's columns."""

@@ -81,7 +81,7 @@ def test_a_runaway_trial_stage_is_not_the_controllers_fault() -> None:
         ({"t_final": -1.0}, r"t_final must be >= 0 \[s\], got -1.0"),
         (
             {"integrator": "rk45"},
-            r"unknown integrator 'rk45'; valid: \['dopri5', 'exponential', 'generalized_alpha', 'implicit_euler', 'rk4', 'ros2',",
+            r"unknown integrator 'rk45'; valid: \['dop853', 'dopri5', 'exponential', 'generalized_alpha', 'implicit_euler',",
         ),
         ({"save_every": 0}, r"save_every must be an integer >= 1"),
         ({"q0": np.zeros(2)}, r"q \(a configuration\) must have shape \(3,\), got shape \(2,\)"),

@@ -46,7 +46,7 @@ def exudyn_available() -> bool:
 #: force-error levels of the comparison table [N]
 LEVELS = (10.0, 0.1, 1e-3, 1e-6)
 #: coopdyn methods in the comparison (fixed steps, or tolerances for the adaptive one)
-METHODS = ("implicit_euler", "trapezoid", "trapezoid rho_inf=0.7", "generalized_alpha", "ros2", "rk4", "dopri5")
+METHODS = ("implicit_euler", "trapezoid", "trapezoid rho_inf=0.7", "generalized_alpha", "ros2", "rk4", "dopri5", "dop853")
 #: settings of a method other than its default, by label (ρ∞ = 0.7: picked on this benchmark, at
 #: k = 1e4 and 5 ms, from 1, 0.9, 0.7, 0.5, 0 — a user's choice, shown beside the default)
 VARIANTS: dict[str, Callable[[], Integrator]] = {"trapezoid rho_inf=0.7": lambda: Trapezoid(rho_inf=0.7)}

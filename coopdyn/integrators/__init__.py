@@ -6,6 +6,7 @@ name                          order  adaptive  per step
 ``symplectic_euler``          1      no        1 RHS
 ``rk4``                       4      no        4 RHS
 ``dopri5``                    5(4)   yes       6 RHS (first same as last)
+``dop853``                    8(5)   yes       12 RHS (first same as last); tight accuracy
 ``implicit_euler``            1      no        1 RHS, 1 Jacobian, 1 factorisation
 ``ros2``                      2      no        2 RHS, 1 Jacobian, 1 factorisation
 ``ros2_adaptive``             2(1)   yes       as ros2
@@ -22,7 +23,15 @@ from __future__ import annotations
 
 from ..errors import SimulationError
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
-from .explicit import RK4, ButcherTableau, DormandPrince, EmbeddedRungeKutta, ExplicitRungeKutta, SymplecticEuler
+from .explicit import (
+    RK4,
+    ButcherTableau,
+    DormandPrince,
+    DormandPrince853,
+    EmbeddedRungeKutta,
+    ExplicitRungeKutta,
+    SymplecticEuler,
+)
 from .exponential import Exponential, LinearForm, linear_form
 from .implicit import ROS2, AdaptiveROS2, GeneralizedAlpha, LinearlyImplicitEuler, Trapezoid
 from .scipy_reference import ScipyReference
@@ -34,6 +43,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
         SymplecticEuler,
         RK4,
         DormandPrince,
+        DormandPrince853,
         LinearlyImplicitEuler,
         ROS2,
         AdaptiveROS2,
@@ -63,6 +73,7 @@ __all__ = [
     "Attempt",
     "ButcherTableau",
     "DormandPrince",
+    "DormandPrince853",
     "EmbeddedRungeKutta",
     "ExplicitRungeKutta",
     "Exponential",

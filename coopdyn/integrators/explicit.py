@@ -232,3 +232,43 @@ class DormandPrince(EmbeddedRungeKutta):
 
     def compiled_spec(self) -> RungeKuttaSpec:
         return self._spec()
+
+
+def _dop853_tableau() -> ButcherTableau:
+    """Hairer's DOP853 as a first-same-as-last pair: its 12 stages (scipy's coefficients, from
+    E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*, 2nd ed.,
+    §II.10), a 13th at the solution, and the embedded fifth-order solution ``b − E5``."""
+    from scipy.integrate._ivp import dop853_coefficients as hairer
+
+    n = hairer.N_STAGES
+    b = tuple(float(x) for x in hairer.B)
+    return ButcherTableau(
+        A=(*(tuple(float(x) for x in hairer.A[i, :i]) for i in range(n)), b),
+        b=(*b, 0.0),
+        c=(*(float(x) for x in hairer.C[:n]), 1.0),
+        b_hat=tuple(bi - float(e) for bi, e in zip((*b, 0.0), hairer.E5, strict=True)),
+    )
+
+
+class DormandPrince853(EmbeddedRungeKutta):
+    """Dormand–Prince 8(5) (Hairer's DOP853): adaptive, eighth order, 12 RHS per step
+    (first-same-as-last). For tight accuracy, where its order pays for its twice as many stages
+    per step; where a stiff mode limits the step (stiff interconnections) they buy little
+    (docs/benchmarks.md).
+
+    Its step is controlled by the fifth-order estimate alone (Hairer's code blends in a
+    third-order one, which lets its steps grow further at the same tolerance), so at a given
+    ``rtol`` its error is smaller than DOP853's elsewhere.
+
+    Args:
+        rtol, atol: tolerances of the embedded error estimate (see :class:`AdaptiveIntegrator`).
+    """
+
+    name = "dop853"
+    order = 8
+    error_order = 5
+    advised = False  # adaptive: its steps follow its accuracy; dopri5's row says what an explicit pair can take
+    tableau = _dop853_tableau()
+
+    def compiled_spec(self) -> RungeKuttaSpec:
+        return self._spec()
