@@ -124,7 +124,7 @@ def violation_message(t: float, growth: float, work: float, excess: float, rtol:
     """What :class:`EnergyMonitor` says when the balance breaks (the compiled loop says the same);
     ``method``: the integrator's name (a dissipative method is not told to use itself)."""
     if method in DISSIPATIVE:
-        fix = "reduce dt, or use an error-controlled method ('dopri5', 'ros2_adaptive')"
+        fix = "reduce dt, or use an error-controlled method ('dopri5', 'dop853', 'ros2_adaptive')"
     else:
         fix = f"reduce dt, or use {' or '.join(repr(m) for m in DISSIPATIVE)}"
     return (

@@ -186,8 +186,8 @@ class Sensitivity:
 
     Args:
         scene: an elastic scene (rigid grasps are refused).
-        integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` (a step of its
-            fifth-order solution at the h given — a fixed step: rollout and simulate adapt
+        integrator: ``"rk4"`` (default), ``"symplectic_euler"``, ``"dopri5"`` or ``"dop853"`` (a
+            step of its solution at the h given — a fixed step: rollout and simulate adapt
             theirs), an explicit :class:`~coopdyn.integrators.ExplicitRungeKutta`, or for stiff
             grasps a linearly implicit method: ``"implicit_euler"``, ``"ros2"``, ``"trapezoid"``,
             ``"generalized_alpha"`` (any ρ∞) — stable at steps where the explicit ones diverge —

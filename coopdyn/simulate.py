@@ -789,7 +789,8 @@ def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | N
             raise SimulationError(
                 f"control_dt = {period:g} s must be a whole multiple of dt = {dt:g} s: {method.name} takes fixed steps and "
                 f"each sample instant k·control_dt must be the start of a step (the held torque changes there). "
-                f"Use dt = {finer:.6g} s (or another divisor of control_dt), or an adaptive method (dopri5, ros2_adaptive)"
+                f"Use dt = {finer:.6g} s (or another divisor of control_dt), "
+                "or an adaptive method (dopri5, dop853, ros2_adaptive)"
             )
         return round(ratio) * dt  # the exact multiple: sample k is step k·ratio's start, however large k grows
     return period
@@ -1134,6 +1135,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
     method, system = run.method, run.system
     assert isinstance(method, AdaptiveIntegrator)
     t, h = 0.0, run.dt
+    after_rejection = False
     run.save(t, q, v)
     steps = itertools.chain(range(run.save_every, run.n_steps, run.save_every), [run.n_steps])
     outputs = (min(k * run.dt, run.t_final) for k in steps)
@@ -1162,6 +1164,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
             if not (out.error <= 1.0):  # also rejects NaN
                 system.dynamics.clear_rotation_alarm()  # a rejected attempt's stages may go anywhere
                 run.n_rejected += 1
+                after_rejection = True
                 if h < method.h_min:  # a non-finite error shrinks the step (next_step: 0.2 h) like a large one
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
                     raise SimulationError(
@@ -1169,6 +1172,9 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                         f"the step fell below h_min = {method.h_min:g} s"
                     )
                 continue
+            if after_rejection:  # no growth right after a rejection (as Hairer's codes): where stability caps the
+                h = min(h, h_try)  # step, growing at once would be rejected again and again
+            after_rejection = False
             t_new = t_land if h_try == t_land - t else t + h_try
             run.check(t_new, out.q, out.v, h_try)
             run.after_step(t_new)

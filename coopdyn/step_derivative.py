@@ -524,8 +524,8 @@ class StepMethod:
 
 
 def step_method(integrator: Any) -> StepMethod:
-    """The differentiated form of a method: an explicit Runge–Kutta method (rk4, dopri5's step, a
-    user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid, generalized-α or the
+    """The differentiated form of a method: an explicit Runge–Kutta method (rk4, dopri5's or dop853's
+    step, a user's tableau), symplectic Euler, implicit Euler, ROS2, the trapezoid, generalized-α or the
     exponential integrator.
 
     Raises:
@@ -571,7 +571,7 @@ def step_method(integrator: Any) -> StepMethod:
     else:
         why = "only the explicit Runge–Kutta methods, symplectic Euler and the linearly implicit methods are"
     raise SimulationError(
-        f"sensitivities: {name} is not differentiated: {why}; use 'rk4', 'dopri5', 'symplectic_euler', "
+        f"sensitivities: {name} is not differentiated: {why}; use 'rk4', 'dopri5', 'dop853', 'symplectic_euler', "
         "'implicit_euler', 'ros2', 'trapezoid', 'generalized_alpha', 'exponential' (linear scenes) or an explicit "
         "tableau (ExplicitRungeKutta)"
     )

@@ -324,6 +324,16 @@ def test_the_force_error_estimate_is_the_error_against_a_tight_reference(tmp_pat
     assert cd.Result.load(res.save(tmp_path / "r.npz")).force_error_estimate == res.force_error_estimate
 
 
+@pytest.mark.parametrize("method", ["dopri5", "dop853"])
+def test_an_error_controlled_explicit_pair_is_not_judged(method: str) -> None:
+    """Its steps are chosen for its error, and being explicit it cannot step over a mode: no
+    screen, no second run, even on stiff grasps at a loose tolerance."""
+    from coopdyn.integrators import INTEGRATORS
+
+    res, messages = _impedance_run(1e5, integrator=INTEGRATORS[method](rtol=1e-3, atol=1e-6), dt=1e-2)
+    assert res.force_error_estimate is None and messages == []
+
+
 def test_the_accuracy_check_can_be_limited_to_the_screen_or_turned_off() -> None:
     res, messages = _impedance_run(1e5, integrator="implicit_euler", dt=2e-3, accuracy_check="screen")
     (message,) = messages

@@ -112,7 +112,7 @@ def test_divergence_raises_instead_of_returning_nan() -> None:
         cd.simulate(stiff, 5.0, integrator="symplectic_euler", dt=1e-3)
     message = str(info.value)
     assert "the mode that limits symplectic_euler's step has |λ| = " in message
-    assert "stable at dt = 1 ms: implicit_euler, ros2, trapezoid, generalized_alpha, exponential" in message
+    assert "stable at dt = 1 ms: dop853, implicit_euler, ros2, trapezoid, generalized_alpha, exponential" in message
     partial = info.value.result
     assert isinstance(partial, cd.Result) and 0 < partial.t[-1] < 5.0 and np.all(np.isfinite(partial.q))
 

@@ -47,8 +47,8 @@ def check_integrator(scene: Scene, method: Any) -> None:
     if has_constraints(scene) and (method.a_stable or method.exact_discretisation):
         raise SimulationError(
             f"{method.name} cannot run a scene with rigid grasps (the rigid limit): they are solved as constraints, "
-            "which the linearly implicit and exponential steps do not take. Use an explicit method: rk4, dopri5 or "
-            "symplectic_euler"
+            "which the linearly implicit and exponential steps do not take. Use an explicit method: rk4, dopri5, "
+            "dop853 or symplectic_euler"
         )
 
 
@@ -101,7 +101,7 @@ class ConstrainedDynamics(PythonDynamics):
     def implicit_terms(
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        raise KernelError("a scene with rigid grasps runs with explicit integrators only (rk4, dopri5, symplectic_euler)")
+        raise KernelError("a scene with rigid grasps runs with explicit integrators only (rk4, dopri5, dop853, symplectic_euler)")
 
     def constraint_wrenches(
         self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, object_wrench: np.ndarray | None = None

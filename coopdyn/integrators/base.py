@@ -195,7 +195,8 @@ class AdaptiveIntegrator(Integrator):
         return float(np.sqrt((np.sum((e_delta / sc_d) ** 2) + np.sum((e_v / sc_v) ** 2)) / (2 * e_v.size)))
 
     def next_step(self, h: float, error: float) -> float:
-        """Step-size controller: ``h·min(5, max(0.2, 0.9·err^(-1/(p+1))))``."""
+        """Step-size controller: ``h·min(5, max(0.2, 0.9·err^(-1/(p+1))))`` (the loop takes at most ``h``
+        for the step after an accepted one that followed a rejection)."""
         if error == 0.0:
             return 5.0 * h
         return h * min(5.0, max(0.2, 0.9 * error ** (-1.0 / (self.error_order + 1))))

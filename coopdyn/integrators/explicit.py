@@ -187,6 +187,8 @@ class EmbeddedRungeKutta(AdaptiveIntegrator):
         tab = cls.__dict__.get("tableau")
         if tab is None:
             return
+        if not isinstance(getattr(cls, "error_order", None), int):
+            raise SimulationError(f"{cls.__name__}: an embedded pair needs its error_order, the order of b − b_hat (an int)")
         if tab.b_hat is None or tuple(tab.A[-1]) != tuple(tab.b[:-1]) or tab.b[-1] != 0.0 or tab.c[-1] != 1.0:
             raise SimulationError(
                 f"{cls.__name__}: an embedded pair's last stage must be its solution (first same as last): the last row "
@@ -230,7 +232,7 @@ class DormandPrince(EmbeddedRungeKutta):
         b_hat=(5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40),
     )
 
-    def compiled_spec(self) -> RungeKuttaSpec:
+    def compiled_spec(self) -> RungeKuttaSpec:  # (in each class: only a class's own compiled_spec is run compiled)
         return self._spec()
 
 
@@ -256,9 +258,9 @@ class DormandPrince853(EmbeddedRungeKutta):
     per step; where a stiff mode limits the step (stiff interconnections) they buy little
     (docs/benchmarks.md).
 
-    Its step is controlled by the fifth-order estimate alone (Hairer's code blends in a
-    third-order one, which lets its steps grow further at the same tolerance), so at a given
-    ``rtol`` its error is smaller than DOP853's elsewhere.
+    Its step is controlled by the fifth-order estimate alone. Hairer's code (and scipy's
+    ``DOP853``) blends in a third-order one, an estimate never larger, so at the same ``rtol``
+    their steps are longer and their error larger than this method's.
 
     Args:
         rtol, atol: tolerances of the embedded error estimate (see :class:`AdaptiveIntegrator`).
@@ -267,8 +269,7 @@ class DormandPrince853(EmbeddedRungeKutta):
     name = "dop853"
     order = 8
     error_order = 5
-    advised = False  # adaptive: its steps follow its accuracy; dopri5's row says what an explicit pair can take
     tableau = _dop853_tableau()
 
-    def compiled_spec(self) -> RungeKuttaSpec:
+    def compiled_spec(self) -> RungeKuttaSpec:  # (its own: see DormandPrince)
         return self._spec()

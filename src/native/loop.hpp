@@ -132,6 +132,7 @@ public:
     status_ = RUNNING;
     t_ = 0.0;
     h_ = first_h_;
+    after_rejection_ = false;
     k_step_ = 0;
     n_rhs_ = n_jac_ = n_accepted_ = n_rejected_ = 0;
     n_factor_ = n_factor0_;
@@ -576,6 +577,7 @@ private:
         method_->rejected();
         k_.clear_rotation_alarm();
         ++n_rejected_;
+        after_rejection_ = true;
         if (h_ < h_min_) {  // a non-finite error shrinks the step (next_step: 0.2 h) like a large one
           if (diverged(t_ + h_try, q_new_, v_new_, h_try)) return;
           fail_t_ = t_;
@@ -585,6 +587,8 @@ private:
         continue;
       }
       method_->accepted();
+      if (after_rejection_) h_ = std::min(h_, h_try);  // no growth right after a rejection (simulate.py: _adaptive)
+      after_rejection_ = false;
       const double t_new = (h_try == t_land - t_) ? t_land : t_ + h_try;
       if (!accept(t_, t_new, h_try, reused)) return;
       if (t_ >= t_out) {
@@ -600,6 +604,7 @@ private:
   std::unique_ptr<Method> method_;
   bool adaptive_;
   int error_order_;
+  bool after_rejection_ = false;  // the step being attempted follows a rejected attempt
   VectorXd kp_, kd_;
   double dt_, t_final_;
   long n_steps_, every_;

@@ -1,5 +1,5 @@
 // Explicit Runge–Kutta methods given by their Butcher tableau (coopdyn/integrators/explicit.py:
-// rk4, and dopri5 with its embedded error and first-same-as-last stage), stages taken in the
+// rk4, and the embedded pairs dopri5 and dop853 with their error and first-same-as-last stage), stages taken in the
 // chart around q.
 #pragma once
 
@@ -73,7 +73,7 @@ public:
   }
 
 private:
-  // Σ cᵢ kᵢ over the first n stages' non-zero coefficients (explicit.py: _combine).
+  // Σ cᵢ kᵢ over the first n stages' non-zero coefficients (explicit.py: combine).
   static void combine(const std::vector<double> & coeffs, const std::vector<VectorXd> & ks, std::size_t n,
                       VectorXd & out) {
     out.setZero(ks[0].size());
