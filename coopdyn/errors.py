@@ -14,6 +14,11 @@ class SceneError(CoopdynError, ValueError):
     """A scene description (arm, object, interconnection, parameter) is invalid."""
 
 
+class GraspGeometryError(SceneError):
+    """The grasps' geometry admits no squeeze direction (grasp points at their centroid). An
+    adaptive method's trial stage can fling the grasps there: its attempt is then rejected."""
+
+
 class ModelLoadError(SceneError):
     """A robot model could not be found or parsed."""
 

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from .errors import SceneError
+from .errors import GraspGeometryError, SceneError
 
 
 def grasp_matrix(points: np.ndarray, center: np.ndarray | None = None) -> np.ndarray:
@@ -61,7 +61,7 @@ def squeeze_directions(points: np.ndarray) -> np.ndarray:
     d = P.mean(axis=-2, keepdims=True) - P
     n = np.linalg.norm(d, axis=-1, keepdims=True)
     if np.any(n < 1e-9):
-        raise SceneError("grasp points coincide with their centroid: no squeeze direction")
+        raise GraspGeometryError("grasp points coincide with their centroid: no squeeze direction")
     return d / n
 
 

@@ -31,6 +31,7 @@ from .errors import (
     DivergenceError,
     EnergyBalanceError,
     EnergyBalanceWarning,
+    GraspGeometryError,
     KernelError,
     LogMapWarning,
     SceneError,
@@ -41,7 +42,7 @@ from .errors import (
     StepMatrixError,
     UnstableLoopWarning,
 )
-from .integrators import AdaptiveIntegrator, DormandPrince, EmbeddedRungeKutta, Integrator, get_integrator
+from .integrators import AdaptiveIntegrator, Attempt, DormandPrince, EmbeddedRungeKutta, Integrator, get_integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL, EnergyMonitor, violation_message
 from .result import Result, SampleFiles
@@ -1151,8 +1152,11 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 h_try = t_land - t
             try:
                 out = method.attempt(system, t, q, v, h_try, run.ws)
+                geometry = None
             except StepMatrixError as exc:
                 raise run.step_failed(exc, t, h_try) from None
+            except GraspGeometryError as exc:  # a trial stage flung the grasps together (a step far too long for
+                out, geometry = Attempt(q, v, math.inf), exc  # the stiffest mode): rejected, as a non-finite error
             run.settle_torque()
             h = method.next_step(h_try, out.error)
             if run.budget is not None and run.n_accepted + run.n_rejected + 1 >= run.budget:
@@ -1166,6 +1170,8 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 run.n_rejected += 1
                 after_rejection = True
                 if h < method.h_min:  # a non-finite error shrinks the step (next_step: 0.2 h) like a large one
+                    if geometry is not None:  # at every step down to h_min: the grasps' own geometry
+                        raise SceneError(f"{geometry} (at t = {t:.6g} s)") from None
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
                     raise SimulationError(
                         f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "

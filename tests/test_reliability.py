@@ -1030,3 +1030,30 @@ def test_the_old_flexible_beam_setting_is_flagged_as_an_unstable_loop() -> None:
     with pytest.warns(cd.AccuracyWarning, match=said):
         res = cd.simulate(scene, 5.0, controller=ctrl, integrator="implicit_euler", dt=1e-3, save_every=10)
     assert np.abs(res.wrenches()[..., :3]).max() < 10.0  # (the calm the integrator drew)
+
+
+@pytest.mark.parametrize("loop", ["compiled", "python"])
+@pytest.mark.parametrize("method", ["dopri5", "dop853"])
+def test_a_trial_stage_that_flings_the_grasps_together_is_a_rejected_attempt(loop: str, method: str) -> None:
+    """dop853's first 10 ms trial step on grasps of 1e7 N/m drives a stage so far that the grasp
+    points meet (no squeeze direction): the attempt is rejected and the step shrinks, as for a
+    non-finite error; before, ObjectImpedance's SceneError stopped the run at t = 0."""
+    from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
+    from coopdyn.integrators import INTEGRATORS
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e7, damping=0.002)
+    controller = ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0))
+    integrator = INTEGRATORS[method](rtol=1e-3, atol=1e-6)
+    res = cd.simulate(scene, 0.01, controller=controller, integrator=integrator, dt=0.01, loop=loop, accuracy_check="off")
+    assert res.loop == loop and res.n_rejected >= 1 and np.all(np.isfinite(res.q))
+
+
+def test_coinciding_grasp_points_are_a_grasp_geometry_error_and_a_scene_error() -> None:
+    """The error the adaptive loops take for a rejected attempt is its own class, still a SceneError
+    for whoever caught that before."""
+    from coopdyn.errors import GraspGeometryError
+    from coopdyn.grasp import squeeze_directions
+
+    with pytest.raises(GraspGeometryError, match="grasp points coincide with their centroid") as info:
+        squeeze_directions(np.zeros((2, 3)))
+    assert isinstance(info.value, cd.SceneError)

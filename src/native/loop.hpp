@@ -570,7 +570,14 @@ private:
         fsal_p_start_ = fsal_p_;
         fsal_tau_start_ = fsal_tau_;
       }
-      const double err = step(t_, h_try);
+      double err;
+      try {
+        err = step(t_, h_try);
+        geometry_.clear();
+      } catch (const GraspGeometryError & e) {  // a trial stage flung the grasps together (a step far too long
+        err = std::numeric_limits<double>::infinity();  // for the stiffest mode): rejected, as a non-finite error
+        geometry_ = e.what();  // (simulate.py: _adaptive)
+      }
       settle(t_, reused);
       h_ = next_step(h_try, err);
       if (!(err <= 1.0)) {
@@ -579,6 +586,11 @@ private:
         ++n_rejected_;
         after_rejection_ = true;
         if (h_ < h_min_) {  // a non-finite error shrinks the step (next_step: 0.2 h) like a large one
+          if (!geometry_.empty()) {  // at every step down to h_min: the grasps' own geometry
+            fail_t_ = t_;
+            fail(SCENE, geometry_);
+            return;
+          }
           if (diverged(t_ + h_try, q_new_, v_new_, h_try)) return;
           fail_t_ = t_;
           status_ = H_MIN;
@@ -605,6 +617,7 @@ private:
   bool adaptive_;
   int error_order_;
   bool after_rejection_ = false;  // the step being attempted follows a rejected attempt
+  std::string geometry_;  // why the last attempt failed, when the grasps' geometry did
   VectorXd kp_, kd_;
   double dt_, t_final_;
   long n_steps_, every_;
