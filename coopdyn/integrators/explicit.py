@@ -255,8 +255,8 @@ def _dop853_tableau() -> ButcherTableau:
 class DormandPrince853(EmbeddedRungeKutta):
     """Dormand–Prince 8(5) (Hairer's DOP853): adaptive, eighth order, 12 RHS per step
     (first-same-as-last). For tight accuracy, where its order pays for its twice as many stages
-    per step; where a stiff mode limits the step (stiff interconnections) they buy little
-    (docs/benchmarks.md).
+    per step (docs/benchmarks.md: the cheapest coopdyn run at 1e-6 N on the peer benchmarks);
+    where a stiff mode sets the step at a loose tolerance, they can cost more than ``dopri5``'s.
 
     Its step is controlled by the fifth-order estimate alone. Hairer's code (and scipy's
     ``DOP853``) blends in a third-order one, an estimate never larger, so at the same ``rtol``
