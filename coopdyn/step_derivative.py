@@ -534,7 +534,10 @@ def step_method(integrator: Any) -> StepMethod:
     method = get_integrator(integrator)
     tableau_family = next((base for base in (ExplicitRungeKutta, EmbeddedRungeKutta) if isinstance(method, base)), None)
     if tableau_family is not None and _keeps_step(method, tableau_family):
-        return StepMethod((method.tableau.A, method.tableau.b))  # type: ignore[attr-defined]
+        A, b = method.tableau.A, method.tableau.b  # type: ignore[attr-defined]
+        while len(b) > 1 and b[-1] == 0.0:  # a last stage of no weight (a pair's first-same-as-last one) feeds no
+            A, b = A[:-1], b[:-1]  # later stage: its derivative would be wasted
+        return StepMethod((A, b))
     if type(method) is SymplecticEuler:
         return StepMethod(None)
     if type(method) is LinearlyImplicitEuler and method.jacobian_every == 1:
