@@ -22,7 +22,7 @@ from ._spec import CompiledSpec, ExponentialSpec, NoControllerSpec, PythonContro
 from .accuracy import StartLoop
 from .closed_loop import System
 from .dynamics.backend import kernel_module
-from .errors import ControllerError, CoopdynError, SimulationError
+from .errors import ControllerError, CoopdynError, GraspGeometryError, SimulationError
 from .integrators import Integrator
 from .model.scene import Scene
 from .monitor import ENERGY_RTOL
@@ -74,13 +74,18 @@ class PythonCallback:
         self.controller = system.controller
         self.error: BaseException | None = None
 
-    def raised(self, t: float, exc: BaseException) -> None:
+    def raised(self, t: float, exc: BaseException) -> bool:
         """The controller raised ``exc`` at t: keep what the run raises for it (what naming it
-        raises, when it does: as in the Python loop)."""
+        raises, when it does: as in the Python loop) and return False — or return True for a
+        :class:`~coopdyn.errors.GraspGeometryError`, which the loop handles as the compiled
+        controllers' (an adaptive method's rejected attempt)."""
+        if isinstance(exc, GraspGeometryError):
+            return True
         try:
             self.error = self.system.controller_failure(t, exc)
         except BaseException as failure:  # e.g. an exception whose str() raises
             self.error = failure
+        return False
 
     def check(self, t: float, q: np.ndarray, v: np.ndarray, out: object) -> np.ndarray | None:
         """The controller's output ``out`` at (t, q, v), converted and checked; None (the error

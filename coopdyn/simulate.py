@@ -34,7 +34,6 @@ from .errors import (
     GraspGeometryError,
     KernelError,
     LogMapWarning,
-    SceneError,
     SceneWarning,
     SimulationError,
     SimulationInterrupted,
@@ -1117,8 +1116,8 @@ def _compiled_loop(
             error, callback.error = callback.error, None  # (kept, it would make a cycle through the C++ loop: a leak)
             raise error
         raise ControllerError(f"the controller returned non-finite torques at t = {t:.6g} s (entries {message})")
-    if status == compiled.SCENE:
-        raise SceneError(f"{message} (at t = {t:.6g} s)")
+    if status == compiled.SCENE:  # (the grasps' geometry: the only error the kernel reports so)
+        raise GraspGeometryError(f"{message} (at t = {t:.6g} s)")
     raise KernelError(f"the compiled loop stopped at t = {run.t[-1]:.6g} s: {message}")
 
 
@@ -1171,7 +1170,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                 after_rejection = True
                 if h < method.h_min:  # a non-finite error shrinks the step (next_step: 0.2 h) like a large one
                     if geometry is not None:  # at every step down to h_min: the grasps' own geometry
-                        raise SceneError(f"{geometry} (at t = {t:.6g} s)") from None
+                        raise GraspGeometryError(f"{geometry} (at t = {t:.6g} s)") from None
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
                     raise SimulationError(
                         f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "

@@ -1033,17 +1033,19 @@ def test_the_old_flexible_beam_setting_is_flagged_as_an_unstable_loop() -> None:
 
 
 @pytest.mark.parametrize("loop", ["compiled", "python"])
-@pytest.mark.parametrize("method", ["dopri5", "dop853"])
-def test_a_trial_stage_that_flings_the_grasps_together_is_a_rejected_attempt(loop: str, method: str) -> None:
+@pytest.mark.parametrize("wrapped", [False, True], ids=["built-in", "python-callable"])
+def test_a_trial_stage_that_flings_the_grasps_together_is_a_rejected_attempt(loop: str, wrapped: bool) -> None:
     """dop853's first 10 ms trial step on grasps of 1e7 N/m drives a stage so far that the grasp
     points meet (no squeeze direction): the attempt is rejected and the step shrinks, as for a
-    non-finite error; before, ObjectImpedance's SceneError stopped the run at t = 0."""
+    non-finite error — in both loops, with the built-in controller and with a user's Python
+    callable that calls it; before, its SceneError stopped the run at t = 0."""
     from coopdyn.cooperative import GripLiftOscillate, ObjectImpedance
     from coopdyn.integrators import INTEGRATORS
 
     scene = cd.scenes.facing_arms("panda", stiffness=1e7, damping=0.002)
-    controller = ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0))
-    integrator = INTEGRATORS[method](rtol=1e-3, atol=1e-6)
+    impedance = ObjectImpedance(scene, GripLiftOscillate(start=cd.scenes.object_start(scene), squeeze=20.0))
+    controller = (lambda t, q, v: impedance(t, q, v)) if wrapped else impedance
+    integrator = INTEGRATORS["dop853"](rtol=1e-3, atol=1e-6)
     res = cd.simulate(scene, 0.01, controller=controller, integrator=integrator, dt=0.01, loop=loop, accuracy_check="off")
     assert res.loop == loop and res.n_rejected >= 1 and np.all(np.isfinite(res.q))
 

@@ -42,7 +42,13 @@ public:
       const bp::object exc{bp::handle<>(bp::allow_null(value))};
       Py_XDECREF(type);
       Py_XDECREF(trace);
-      wrapper([&] { raised_(t, exc); });
+      bool geometry = false;  // the grasps' geometry (a trial stage flung them together): the C++ error, which an
+      std::string what;       // adaptive loop takes as a rejected attempt (loop.hpp: run_adaptive)
+      wrapper([&] {
+        geometry = bp::extract<bool>(raised_(t, exc));
+        if (geometry) what = bp::extract<std::string>(bp::str(exc));
+      });
+      if (geometry) throw GraspGeometryError(what);
       throw CallbackError("the Python controller raised (re-raised by Python)");
     }
     if (take(out, tau, true)) return;
