@@ -576,7 +576,7 @@ private:
         geometry_.clear();
       } catch (const GraspGeometryError & e) {  // a trial stage flung the grasps together (a step far too long
         err = std::numeric_limits<double>::infinity();  // for the stiffest mode): rejected, as a non-finite error
-        geometry_ = e.what();  // (simulate.py: _adaptive)
+        geometry_ = e.what();  // (simulate.py: _adaptive_loop)
       }
       settle(t_, reused);
       h_ = next_step(h_try, err);
@@ -599,7 +599,7 @@ private:
         continue;
       }
       method_->accepted();
-      if (after_rejection_) h_ = std::min(h_, h_try);  // no growth right after a rejection (simulate.py: _adaptive)
+      if (after_rejection_) h_ = std::min(h_, h_try);  // no growth right after a rejection (simulate.py: _adaptive_loop)
       after_rejection_ = false;
       const double t_new = (h_try == t_land - t_) ? t_land : t_ + h_try;
       if (!accept(t_, t_new, h_try, reused)) return;
