@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ._signals import sigterm_as_interrupt
-from .errors import CoopdynError, SimulationInterrupted, SweepError
+from .errors import CoopdynError, SimulationError, SimulationInterrupted, SweepError
 
 
 def _book(args: argparse.Namespace) -> int:
@@ -93,8 +93,12 @@ def _plot(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from .bench import run_benchmarks, run_peer_comparison
 
-    run = run_peer_comparison if args.peers else run_benchmarks
-    print(run(args.out, quick=args.quick)["report"])
+    if not args.peers:
+        if args.tables or args.stiffness:
+            raise SimulationError("bench: --tables and --stiffness select the peer comparison's runs; give --peers too")
+        print(run_benchmarks(args.out, quick=args.quick)["report"])
+        return 0
+    print(run_peer_comparison(args.out, quick=args.quick, tables=args.tables, stiffnesses=args.stiffness)["report"])
     return 0
 
 
@@ -253,6 +257,7 @@ def _cli_message(exc: BaseException) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     from . import __version__
+    from .bench import PEER_TABLES
     from .integrators import INTEGRATORS
 
     methods = sorted(INTEGRATORS)
@@ -358,6 +363,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--peers",
         action="store_true",
         help="instead: coopdyn vs MuJoCo, Drake and Exudyn on the Panda scenes, interleaved (needs mujoco; others if installed)",
+    )
+    bench.add_argument(
+        "--tables",
+        nargs="+",
+        choices=PEER_TABLES,
+        metavar="TABLE",
+        help=f"with --peers, only these tables: {', '.join(PEER_TABLES)} (default: all)",
+    )
+    bench.add_argument(
+        "--stiffness",
+        nargs="+",
+        type=float,
+        metavar="K",
+        help="with --peers, these interconnection stiffnesses [N/m] instead of each table's (the one-Panda case at the first)",
     )
     bench.set_defaults(func=_bench)
     sweep = command(

@@ -109,3 +109,34 @@ def test_single_threaded_blas_limits_then_restores() -> None:
         with single_threaded_blas():
             assert blas_threads() == {1}
         assert blas_threads() == {2}
+
+
+def test_peer_comparison_runs_only_the_tables_and_stiffnesses_asked_for(tmp_path: Path, monkeypatch) -> None:
+    """``coopdyn bench --peers --tables task --stiffness 1e7``: one row of the comparison — only
+    that table is run, at that stiffness, and only its files are written; a table or a stiffness
+    that does not exist is refused before anything runs."""
+    import pytest
+
+    pytest.importorskip("mujoco")
+    from coopdyn.bench import panda_peers
+    from coopdyn.errors import SimulationError
+
+    calls = []
+    case = bench.linear_case(0.5)
+    rows = bench.work_precision([case], ["rk4"], quick=True, repeats=1, progress=False)
+
+    def fake_compare(stiffnesses, **keywords):  # records what would run; the rows of a tiny real sweep
+        calls.append((tuple(stiffnesses), keywords.get("task", False), keywords.get("joints") is not None))
+        return {"rows": rows, "checks": {}, "rounds": 1, "t_final": 0.5, "task": keywords.get("task", False), "load": (0.0, 0.0)}
+
+    monkeypatch.setattr(panda_peers, "compare", fake_compare)
+    result = bench.run_peer_comparison(tmp_path, quick=True, progress=False, tables=["task"], stiffnesses=[1e7])
+    assert calls == [((1e7,), True, False)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["task_peers.csv", "task_peers.png"]
+    assert set(result["files"]) == {"task_rows", "task_chart"} and "rows" not in result
+    calls.clear()
+    bench.run_peer_comparison(tmp_path / "all", quick=True, progress=False)
+    assert calls == [((1e4, 1e6), False, False), ((1e4, 1e6), True, False), ((1e5,), True, True)]  # (quick)
+    for tables, ks in ((["tasks"], None), ([], None), (None, [0.0]), (None, [math.nan]), (None, [])):
+        with pytest.raises(SimulationError):
+            bench.run_peer_comparison(tmp_path / "no", quick=True, progress=False, tables=tables, stiffnesses=ks)

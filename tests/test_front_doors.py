@@ -134,6 +134,7 @@ def test_command_line_refusals(tmp_path: Path, capsys: pytest.CaptureFixture[str
         (["view", str(tmp_path), "--html", str(tmp_path / "a.html"), "--fps", "1e300"], "fps must be at most 1000"),
         (["view", "/tmp/" + "a" * 300], "too long a path"),
         (["plot", str(tmp_path), "--out", str(tmp_path / "p.xyz")], "must end in"),
+        (["bench", "--tables", "task", "--out", str(tmp_path / "b")], "give --peers too"),
     ]:
         assert main(argv) == 2, argv
         assert match in capsys.readouterr().err, argv

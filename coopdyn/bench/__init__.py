@@ -8,10 +8,13 @@ compares with a reference of a *different* method, and writes a table (CSV) and 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .. import _validate
 from ..dynamics.backend import resolve
+from ..errors import SimulationError
 from ..integrators import INTEGRATORS
 from .cases import ELASTIC_JOINTS, Case, Row, linear_case, panda_case
 from .measure import _implicit_cost, peer_rows, rhs_timing, single_threaded_blas, stability_sweep, work_precision
@@ -28,9 +31,17 @@ from .report import (
 )
 from .stability import is_stable_at, measure_stable_dt
 
+#: the tables of ``coopdyn bench --peers``, in the order they run
+PEER_TABLES = ("perturbed", "task", "elastic_joints")
+
 
 def run_peer_comparison(
-    out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True
+    out: str | os.PathLike[str] = "out/bench",
+    *,
+    quick: bool = False,
+    progress: bool = True,
+    tables: Sequence[str] | None = None,
+    stiffnesses: Sequence[float] | None = None,
 ) -> dict[str, Any]:
     """coopdyn against MuJoCo (with coopdyn's law compiled, and with it in Python), and Drake and
     Exudyn when installed (:mod:`.panda_peers`): the perturbed benchmark on two Pandas, k = 1e4
@@ -41,55 +52,73 @@ def run_peer_comparison(
     ``elastic_joints_peers.csv``/``.png`` (work–precision, every simulator on the same axes) and
     returns the measurements with ``"report"`` (``coopdyn bench --peers`` prints it).
 
+    ``tables`` (of :data:`PEER_TABLES`; default all) runs only those tables and writes only their
+    files; ``stiffnesses`` [N/m] replaces each selected table's (the one-Panda case of the
+    perturbed table runs at the first) — one row of the comparison in minutes instead of the
+    whole run's half hour.
+
     Raises:
         MissingDependencyError: MuJoCo is not installed (``pip install -e ".[peers]"``).
+        SimulationError: an unknown table, or a stiffness that is not a positive finite number.
     """
     from .._optional import require
     from .panda_peers import compare, format_comparison
 
     require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
+    chosen = _peer_tables(tables)
+    ks = None if stiffnesses is None else _stiffnesses(stiffnesses)
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     rounds = 1 if quick else 5
-    with single_threaded_blas():
-        result = compare(t_final=0.2 if quick else 1.0, quick=quick, rounds=rounds, progress=progress)
-        task = compare(
-            (1e4, 1e6) if quick else (1e4, 1e5, 1e6, 1e7),
-            t_final=0.4 if quick else 1.25,
-            quick=quick,
-            rounds=rounds,
-            progress=progress,
-            task=True,
-        )
-        elastic = compare(
+    # table → (its stiffnesses, compare's keywords, its files' stem)
+    plans: dict[str, tuple[tuple[float, ...], dict[str, Any], str]] = {
+        "perturbed": ((1e4, 1e6), {"t_final": 0.2 if quick else 1.0}, "peers"),
+        "task": ((1e4, 1e6) if quick else (1e4, 1e5, 1e6, 1e7), {"t_final": 0.4 if quick else 1.25, "task": True}, "task_peers"),
+        "elastic_joints": (
             (1e5,),
-            t_final=0.4 if quick else 1.25,
-            quick=quick,
-            rounds=rounds,
-            progress=progress,
-            task=True,
-            joints=ELASTIC_JOINTS,
-        )
-    files = {
-        "rows": write_csv(result["rows"], out_dir / "peers.csv"),
-        "chart": plot_work_precision(result["rows"], out_dir / "peers.png"),
-        "task_rows": write_csv(task["rows"], out_dir / "task_peers.csv"),
-        "task_chart": plot_work_precision(task["rows"], out_dir / "task_peers.png"),
-        "elastic_rows": write_csv(elastic["rows"], out_dir / "elastic_joints_peers.csv"),
-        "elastic_chart": plot_work_precision(elastic["rows"], out_dir / "elastic_joints_peers.png"),
+            {"t_final": 0.4 if quick else 1.25, "task": True, "joints": ELASTIC_JOINTS},
+            "elastic_joints_peers",
+        ),
     }
-    report = "\n\n".join(
-        [
-            format_rows(result["rows"]),
-            format_comparison(result),
-            format_rows(task["rows"]),
-            format_comparison(task),
-            format_rows(elastic["rows"]),
-            format_comparison(elastic),
-            "\n".join(f"wrote {path}  ({name})" for name, path in files.items()),
-        ]
-    )
-    return {**result, "task": task, "elastic_joints": elastic, "files": files, "report": report}
+    results: dict[str, dict[str, Any]] = {}
+    with single_threaded_blas():
+        for name in chosen:
+            default, keywords, _ = plans[name]
+            results[name] = compare(ks or default, quick=quick, rounds=rounds, progress=progress, **keywords)
+    files: dict[str, Path] = {}
+    for name, result in results.items():
+        stem = plans[name][2]
+        prefix = "" if name == "perturbed" else f"{name}_"
+        files[f"{prefix}rows"] = write_csv(result["rows"], out_dir / f"{stem}.csv")
+        files[f"{prefix}chart"] = plot_work_precision(result["rows"], out_dir / f"{stem}.png")
+    parts = [text for result in results.values() for text in (format_rows(result["rows"]), format_comparison(result))]
+    report = "\n\n".join([*parts, "\n".join(f"wrote {path}  ({name})" for name, path in files.items())])
+    first = {k: v for k, v in results.get("perturbed", {}).items() if k != "task"}  # (its "task": False)
+    return {**first, **{k: v for k, v in results.items() if k != "perturbed"}, "files": files, "report": report}
+
+
+def _peer_tables(tables: Sequence[str] | None) -> list[str]:
+    """The tables asked for, in :data:`PEER_TABLES`' order; an unknown one is refused."""
+    if tables is None:
+        return list(PEER_TABLES)
+    if isinstance(tables, str):
+        tables = [tables]
+    unknown = [t for t in tables if t not in PEER_TABLES]
+    if unknown or not tables:
+        raise SimulationError(f"bench --peers: tables must be some of {list(PEER_TABLES)}, got {list(tables)}")
+    return [t for t in PEER_TABLES if t in tables]
+
+
+def _stiffnesses(values: Sequence[float]) -> tuple[float, ...]:
+    """Positive finite stiffnesses [N/m], in the order given, without repeats."""
+    out = []
+    for k in values:
+        x = _validate.positive(k, "bench --peers: stiffness", "N/m", SimulationError)
+        if x not in out:
+            out.append(x)
+    if not out:
+        raise SimulationError("bench --peers: give at least one stiffness [N/m]")
+    return tuple(out)
 
 
 def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = False, progress: bool = True) -> dict[str, Any]:
@@ -126,6 +155,7 @@ def run_benchmarks(out: str | os.PathLike[str] = "out/bench", *, quick: bool = F
 
 
 __all__ = [
+    "PEER_TABLES",
     "Case",
     "Row",
     "is_stable_at",
