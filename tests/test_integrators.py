@@ -4,6 +4,7 @@ box, the exponential integrator, adaptive methods, stability prediction vs measu
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pinocchio as pin
@@ -435,3 +436,29 @@ def test_a_butcher_tableau_is_checked_when_it_is_made(tableau: dict[str, object]
 
     with pytest.raises(cd.SimulationError, match=message):
         ButcherTableau(**tableau)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", sorted(n for n, c in INTEGRATORS.items() if c.adaptive))
+def test_adaptive_methods_refuse_tolerances_that_control_nothing(name: str) -> None:
+    """rtol is a fraction of each coordinate's size: 0 < rtol < 1 (at 1 or more any error as large
+    as the solution passes and the step grows unchecked); atol > 0; both finite."""
+    from coopdyn.errors import SimulationError
+
+    for bad in (0.0, -1e-6, math.nan, math.inf, 1.0, 1e300):
+        with pytest.raises(SimulationError, match="rtol"):
+            INTEGRATORS[name](rtol=bad)
+    for bad in (0.0, -1e-9, math.nan, math.inf):
+        with pytest.raises(SimulationError, match="atol"):
+            INTEGRATORS[name](atol=bad)
+    assert INTEGRATORS[name](rtol=0.5).rtol == 0.5
+
+
+
+def test_the_scipy_reference_refuses_the_same_tolerances() -> None:
+    from coopdyn.errors import SimulationError
+    from coopdyn.integrators.scipy_reference import ScipyReference
+
+    for bad in (0.0, math.nan, 1.0, 1e300):
+        with pytest.raises(SimulationError, match="rtol"):
+            ScipyReference(rtol=bad)
+    assert ScipyReference(rtol=1e-8).rtol == 1e-8

@@ -154,11 +154,24 @@ class Attempt(NamedTuple):
     error: float  #: scaled error norm (accept when ≤ 1)
 
 
+def relative_tolerance(rtol: Any) -> float:
+    """``rtol`` as a float: finite, above 0 and below 1 (a fraction of each coordinate's size; at 1
+    or more an error as large as the solution itself passes, and nothing is controlled)."""
+    from .._validate import positive
+    from ..errors import SimulationError
+
+    x = positive(rtol, "rtol", "1", SimulationError)
+    if x >= 1.0:
+        raise SimulationError(f"rtol is a fraction of each coordinate's size and must be below 1 (e.g. 1e-6), got {x:g}")
+    return x
+
+
 class AdaptiveIntegrator(Integrator):
     """A method with an embedded error estimate; ``simulate`` controls its step.
 
     Args:
-        rtol: relative tolerance. atol: absolute tolerance [m, rad, m/s, rad/s].
+        rtol: relative tolerance, a fraction of each coordinate's size (0 < rtol < 1).
+        atol: absolute tolerance [m, rad, m/s, rad/s].
         h_min: smallest step before the run is declared failed [s].
     """
 
@@ -170,7 +183,7 @@ class AdaptiveIntegrator(Integrator):
         from .._validate import positive
         from ..errors import SimulationError
 
-        self.rtol = positive(rtol, "rtol", "1", SimulationError)
+        self.rtol = relative_tolerance(rtol)
         self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
         self.h_min = positive(h_min, "h_min", "s", SimulationError)
 

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..errors import SimulationError
-from .base import Integrator, Problem
+from .base import Integrator, Problem, relative_tolerance
 
 _METHODS = ("DOP853", "RK45", "Radau", "BDF", "LSODA")
 
@@ -36,7 +36,7 @@ class ScipyReference(Integrator):
         if not isinstance(method, str) or method not in _METHODS:
             raise SimulationError(f"unknown scipy method {method!r}; valid: {list(_METHODS)}")
         self.method = method
-        self.rtol = positive(rtol, "rtol", "1", SimulationError)
+        self.rtol = relative_tolerance(rtol)
         self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
 
     def step(
