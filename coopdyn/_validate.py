@@ -111,11 +111,19 @@ def integral(value: Any) -> bool:
     return isinstance(value, int | np.integer) and not isinstance(value, bool | np.timedelta64)
 
 
+#: the largest count taken: every integer up to it is a double's, and a C long's (the compiled
+#: loop's counters) by far
+MAX_COUNT = 2**53
+
+
 def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none: str | None = None) -> int:
-    """An integer >= 1 (not a bool, not a float); ``none`` names what ``None`` means, if allowed."""
+    """An integer in [1, :data:`MAX_COUNT`] (not a bool, not a float); ``none`` names what
+    ``None`` means, if allowed."""
     if not (integral(value) and value >= 1):
         also = f" or None ({none})" if none else ""
         raise error(f"{name} must be an integer >= 1{also}, got {_short(value)}")
+    if value > MAX_COUNT:
+        raise error(f"{name} must be at most 2**53 = {MAX_COUNT}, got {_short(value)}")
     return int(value)
 
 

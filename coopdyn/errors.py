@@ -65,6 +65,11 @@ class StepBudgetError(_CarriesResult, SimulationError):
     trajectory so far."""
 
 
+class StepSizeError(StepBudgetError):
+    """An adaptive method's step fell below its ``h_min`` without meeting its tolerances (a
+    :class:`StepBudgetError`: its step control gave up). ``result`` holds the trajectory so far."""
+
+
 class StepMatrixError(_CarriesResult, SimulationError):
     """The step matrix of a linearly implicit step, M + γh·D̃ + (γh)²·K̃, is not positive definite
     (a negative gain or stiffness, or a state that is no longer finite). Raised by ``simulate``

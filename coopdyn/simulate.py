@@ -39,6 +39,7 @@ from .errors import (
     SimulationInterrupted,
     StepBudgetError,
     StepMatrixError,
+    StepSizeError,
     UnstableLoopWarning,
 )
 from .integrators import AdaptiveIntegrator, Attempt, DormandPrince, EmbeddedRungeKutta, Integrator, get_integrator
@@ -169,7 +170,8 @@ def simulate(
         SimulationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``), carrying the trajectory so far.
         StepMatrixError: an implicit method's step matrix is not positive definite (with .result).
         EnergyBalanceError: with ``energy_check="raise"``, when the energy balance breaks.
-        StepBudgetError: an adaptive method used up ``max_steps`` (with .result).
+        StepBudgetError: an adaptive method used up ``max_steps`` (with .result); its subclass
+            StepSizeError: the step fell below the method's ``h_min`` (with .result).
         SimulationError: on invalid arguments and runs refused as too long or too large.
         ControllerError: a controller that is not callable or returns a bad output.
         KernelError: what the compiled kernel refuses.
@@ -400,7 +402,13 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
             raise SimulationInterrupted(f"interrupted while checking the run's forces against {name}", result=result) from None
         except (StepBudgetError, DivergenceError) as exc:  # compared as far as the reference got
             diverged = isinstance(exc, DivergenceError)
-            stop = f"{name} diverged" if diverged else f"{name} needed more than {budget} steps"
+            stop = (
+                f"{name} diverged"
+                if diverged
+                else f"{name}'s step fell below its h_min"
+                if isinstance(exc, StepSizeError)
+                else f"{name} needed more than {budget} steps"
+            )
             partial = exc.result
             if isinstance(partial, Result) and len(partial.t) > 1 and partial.t[-1] > 0:
                 checked = partial
@@ -480,10 +488,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     tighter and tighter rtol) against one dopri5 reference on the same grid."""
     tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
     auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
-    try:
-        methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"])]
-    except SimulationError as exc:  # (with an accuracy, "auto" is a choice too)
-        raise SimulationError(f'{exc}, or "auto" (the method chosen for the accuracy too)') from None
+    also = ', or "auto" (the method chosen for the accuracy too)'  # (with an accuracy, "auto" is a choice too)
+    methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"], also)]
     del settings["integrator"]
     if auto:  # the methods the scene takes (rigid grasps: the explicit ones)
         methods = [m for m in methods if _takes(scene, m)]
@@ -502,6 +508,12 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
         raise SimulationError("accuracy= runs the scene several times: it cannot stream to files; drop stream_to")
     t_final = _checked_duration(t_final)
     dt, every, _ = _checked_steps(settings.pop("dt"), settings.pop("save_every"), settings["max_speed"])
+    for name, valid in (("energy_check", ENERGY_CHECKS), ("loop", LOOPS)):  # (checked before the reference runs)
+        _checked_choice(name, settings[name], valid)
+    settings["progress"] = _validate.flag(settings["progress"], "progress", SimulationError)
+    if settings["max_steps"] is not None:
+        settings["max_steps"] = _validate.count(settings["max_steps"], "max_steps", SimulationError, none="no limit")
+    _control_period(settings["control_dt"], dt, method if not auto else DormandPrince())  # (auto: each try checks its own)
     q, v = scene.check_state(
         scene.q0 if settings["q0"] is None else settings["q0"], scene.v0 if settings["v0"] is None else settings["v0"]
     )
@@ -583,9 +595,14 @@ def _accuracy_reference(scene: Scene, t_final: float, tolerance: float, spacing:
             f"the reference of accuracy= (dopri5 at rtol {rtol:g}) diverged{when}: the closed loop itself is unstable "
             "(coopdyn.linearize with the controller shows its modes); no step fixes that"
         ) from None
-    except StepBudgetError:
+    except StepBudgetError as exc:
+        why = (
+            "its step fell below h_min"
+            if isinstance(exc, StepSizeError)
+            else f"needed more than {ACCURACY_REFERENCE_STEPS} steps"
+        )
         raise SimulationError(
-            f"the reference of accuracy= (dopri5 at rtol {rtol:g}) needed more than {ACCURACY_REFERENCE_STEPS} steps: the "
+            f"the reference of accuracy= (dopri5 at rtol {rtol:g}) {why}: the "
             "scene is too stiff for it; choose the step yourself (coopdyn.advise) or use an implicit method at a small dt"
         ) from None
     forces = reference.wrenches()[..., :3]
@@ -620,13 +637,16 @@ def _attempt(
 ) -> tuple[Result | None, list[warnings.WarningMessage], str]:
     """One run of an ``accuracy=`` search, its warnings kept (shown for the run returned only),
     and what became of it: the run and "completed", or None and "diverged" (it diverged or broke
-    the energy balance: past the method's stability limit) or "out of steps" (max_steps)."""
+    the energy balance: past the method's stability limit), "out of steps" (max_steps) or, for an
+    adaptive method, "could not keep its step above h_min"."""
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         try:
             return simulate(scene, t_final, accuracy_check="off", **_tries(settings), **run), said, "completed"
         except SimulationInterrupted:
             raise SimulationInterrupted(f"interrupted while trying {run['integrator']} for accuracy=") from None
+        except StepSizeError:
+            return None, said, "could not keep its step above h_min"
         except StepBudgetError:
             return None, said, "out of steps"
         except (DivergenceError, StepMatrixError, EnergyBalanceError):
@@ -787,13 +807,21 @@ def _control_period(control_dt: Any, dt: float, method: Integrator) -> float | N
         if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * ratio:
             finer = period / math.ceil(ratio * (1.0 - 1e-9) + 1e-9) if ratio >= 1.0 else period
             raise SimulationError(
-                f"control_dt = {period:g} s must be a whole multiple of dt = {dt:g} s: {method.name} takes fixed steps and "
+                f"control_dt = {_exact(period)} s must be a whole multiple of dt = {_exact(dt)} s: {method.name} takes fixed "
+                "steps and "
                 f"each sample instant k·control_dt must be the start of a step (the held torque changes there). "
                 f"Use dt = {finer:.6g} s (or another divisor of control_dt), "
                 "or an adaptive method (dopri5, dop853, ros2_adaptive)"
             )
         return round(ratio) * dt  # the exact multiple: sample k is step k·ratio's start, however large k grows
     return period
+
+
+def _exact(x: float) -> str:
+    """``x`` as ``:g`` prints it when that reads back as ``x``, else all its digits (a float32's
+    0.001 is 0.0010000000474974513: printed as 0.001 it would contradict the message it is in)."""
+    short = f"{x:g}"
+    return short if float(short) == x else repr(float(x))
 
 
 def _check_samples(t_final: float, control_dt: float | None, max_steps: int | None) -> None:
@@ -835,6 +863,17 @@ class _Run:
         self.start = start  #: (q, v) at t = 0 (a streamed run drops its samples as it goes)
         self.max_speed = max_speed
         self._max_speed_sq = max_speed * max_speed
+        if method.adaptive and not method.h_min < dt:  # type: ignore[attr-defined]
+            raise SimulationError(
+                f"{method.name}'s h_min = {method.h_min:g} s is not below dt = {dt:g} s, the first step it tries: give a "  # type: ignore[attr-defined]
+                "smaller h_min (the smallest step it may take) or a larger dt"
+            )
+        fastest = float(np.abs(start[1]).max(initial=0.0))
+        if fastest > max_speed:
+            raise SimulationError(
+                f"v0 has a joint velocity of {fastest:g} rad/s or m/s, above max_speed = {max_speed:g}, the speed a run takes "
+                "for divergence: give a slower start or a larger max_speed"
+            )
         self.n_steps = step_count(t_final, dt)
         self.save_every = save_every
         self.t: list[float] = []
@@ -872,6 +911,16 @@ class _Run:
             "An L-stable method (implicit_euler, ros2) steps over stiff modes; coopdyn.advise(scene) lists what is stable "
             "at which dt. Pass max_steps=None to let it run",
             result=partial,
+        )
+
+    def step_too_small(self, t: float) -> StepSizeError:
+        """The error to raise when an adaptive method's step fell below its h_min at ``t``."""
+        m = self.method
+        return StepSizeError(
+            f"{m.name} could not meet rtol = {m.rtol:g}, atol = {m.atol:g} at t = {t:.6g} s: the step fell below "  # type: ignore[attr-defined]
+            f"h_min = {m.h_min:g} s. A fast mode it cannot step over, or tolerances tighter than round-off: an L-stable "  # type: ignore[attr-defined]
+            "method (implicit_euler, ros2) steps over stiff modes; coopdyn.advise(scene) lists what is stable at which dt",
+            result=self.result("stopped"),
         )
 
     def save(self, t: float, q: np.ndarray, v: np.ndarray, step_follows: bool = True) -> None:
@@ -1104,12 +1153,8 @@ def _compiled_loop(
         run.check(t, np.asarray(q, dtype=float), np.asarray(v, dtype=float), h)
     if status == compiled.STEP_MATRIX:
         raise run.step_failed(StepMatrixError(message), t, h)
-    method = run.method
     if status == compiled.H_MIN:
-        raise SimulationError(
-            f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "  # type: ignore[attr-defined]
-            f"the step fell below h_min = {method.h_min:g} s"  # type: ignore[attr-defined]
-        )
+        raise run.step_too_small(t)
     if status == compiled.CONTROLLER:
         callback = config["controller"].get("callback")
         if callback is not None and callback.error is not None:  # a Python controller raised: its own error
@@ -1172,10 +1217,7 @@ def _adaptive_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonit
                     if geometry is not None:  # at every step down to h_min: the grasps' own geometry
                         raise GraspGeometryError(f"{geometry} (at t = {t:.6g} s)") from None
                     run.check(t + h_try, out.q, out.v, h_try)  # non-finite → DivergenceError
-                    raise SimulationError(
-                        f"{method.name} could not meet rtol = {method.rtol:g}, atol = {method.atol:g} at t = {t:.6g} s: "
-                        f"the step fell below h_min = {method.h_min:g} s"
-                    )
+                    raise run.step_too_small(t)
                 continue
             if after_rejection:  # no growth right after a rejection (as Hairer's codes): where stability caps the
                 h = min(h, h_try)  # step, growing at once would be rejected again and again

@@ -462,3 +462,42 @@ def test_the_scipy_reference_refuses_the_same_tolerances() -> None:
         with pytest.raises(SimulationError, match="rtol"):
             ScipyReference(rtol=bad)
     assert ScipyReference(rtol=1e-8).rtol == 1e-8
+
+
+@pytest.mark.parametrize("loop", ["python", "auto"])
+def test_a_setting_changed_on_the_instance_is_the_one_that_runs(book: cd.Scene, loop: str) -> None:
+    """ρ∞ set after construction sets the method's γ (or α's) with it: the run is the one of a
+    method built with that ρ∞, bit for bit, in both loops — before, the old γ ran while
+    ``repr`` and the stability function said the new ρ∞."""
+    d1, d2 = cd.scenes.book_task()
+    ctrl = cd.scenes.drives_controller(d1, d2)
+
+    def run(method: cd.integrators.Integrator) -> np.ndarray:
+        return cd.simulate(book, 0.05, ctrl, method, 2e-3, loop=loop, accuracy_check="off").q
+
+    for cls, old, new in ((cd.integrators.Trapezoid, 1.0, 0.0), (GeneralizedAlpha, 0.9, 0.2)):
+        changed = cls(old)
+        changed.rho_inf = new
+        assert np.array_equal(run(changed), run(cls(new)))
+        assert not np.array_equal(run(changed), run(cls(old)))
+        z = np.array([-1e6 + 0j])
+        assert np.allclose(changed.stability_function(z), cls(new).stability_function(z), rtol=0, atol=1e-15)
+
+
+def test_settings_set_on_the_instance_are_checked_as_at_construction() -> None:
+    from coopdyn.errors import SimulationError
+
+    dopri = INTEGRATORS["dopri5"]()
+    for name, bad in (("rtol", "1e-3"), ("rtol", -5.0), ("rtol", 2.0), ("atol", 1e-300), ("h_min", math.nan), ("h_min", -1.0)):
+        with pytest.raises(SimulationError, match=name):
+            setattr(dopri, name, bad)
+    assert (dopri.rtol, dopri.atol, dopri.h_min) == (1e-6, 1e-9, 1e-12)  # unchanged by the refusals
+    dopri.rtol = np.float64(1e-8)
+    assert dopri.rtol == 1e-8 and type(dopri.rtol) is float
+    with pytest.raises(SimulationError, match="rho_inf"):
+        cd.integrators.Trapezoid().rho_inf = 1.5
+    with pytest.raises(SimulationError, match="jacobian_every"):
+        INTEGRATORS["implicit_euler"]().jacobian_every = 2.0
+    assert INTEGRATORS["implicit_euler"](np.int64(3)).jacobian_every == 3
+    with pytest.raises(SimulationError, match="at most 2"):
+        INTEGRATORS["implicit_euler"](2**63)

@@ -68,14 +68,64 @@ SIMULATE_CASES = [
     ({"object_wrench": lambda t: "x"}, cd.ControllerError, r"object_wrench\(t\) must be numeric"),
     ({"max_steps": 0}, cd.SimulationError, r"max_steps must be an integer >= 1 or None \(no limit\), got 0"),
     ({"max_memory": "lots"}, cd.SimulationError, r"max_memory \[bytes\] must be numeric"),
+    ({"save_every": 2**63}, cd.SimulationError, r"save_every must be at most 2\*\*53"),
+    ({"integrator": cd.integrators.RK4}, cd.SimulationError, r"the class RK4, not an instance: give RK4\(\)"),
+    ({"integrator": "RK4"}, cd.SimulationError, r"unknown integrator 'RK4'.* Did you mean 'rk4'\?"),
+    ({"integrator": cd.integrators.DormandPrince(h_min=1.0), "dt": 1e-3}, cd.SimulationError, r"h_min = 1 s is not below dt"),
+    ({"v0": [0.0, 0.0, 2e4]}, cd.SimulationError, r"v0 has a joint velocity of 20000 .* above max_speed = 10000"),
+    (  # a float32's 0.001 is not 0.001: the message shows it, not a contradiction
+        {"dt": np.float32(1e-3), "control_dt": 2e-3},
+        cd.SimulationError,
+        r"control_dt = 0.002 s must be a whole multiple of dt = 0.0010000000474974513 s",
+    ),
 ]
 
 
 @pytest.mark.parametrize(("kwargs", "error", "message"), SIMULATE_CASES)
-def test_simulate_refuses_bad_arguments(book: cd.Scene, kwargs: dict[str, Any], error: type, message: str) -> None:
+@pytest.mark.parametrize("loop", ["auto", "python"])
+def test_simulate_refuses_bad_arguments(book: cd.Scene, kwargs: dict[str, Any], error: type, message: str, loop: str) -> None:
+    """The same refusal, with the same message, from either loop (an integer beyond a C long once
+    ran in the Python loop and failed in the compiled one)."""
     kwargs = {"t_final": 0.01, **kwargs}
     with pytest.raises(error, match=message):
-        cd.simulate(book, **kwargs)
+        cd.simulate(book, **kwargs, loop=loop)
+
+
+ACCURACY_CASES = [  # refused before the reference run, with simulate's own messages
+    ({"max_steps": "x"}, r"max_steps must be an integer >= 1 or None \(no limit\), got 'x'"),
+    ({"max_steps": -5}, r"max_steps must be an integer >= 1"),
+    ({"progress": "yes"}, r"progress must be True or False"),
+    ({"control_dt": 3e-3, "dt": 2e-3}, r"control_dt = 0.003 s must be a whole multiple of dt = 0.002 s"),
+    ({"loop": "fast"}, r"loop must be one of"),
+]
+
+
+@pytest.mark.parametrize(("kwargs", "message"), ACCURACY_CASES)
+def test_simulate_with_accuracy_refuses_bad_arguments_before_it_runs(book: cd.Scene, kwargs: dict[str, Any], message: str) -> None:
+    d1, d2 = cd.scenes.book_task()
+    ran = []
+
+    def controller(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:  # counts the reference's calls
+        ran.append(t)
+        return cd.scenes.drives_controller(d1, d2)(t, q, v)
+
+    kwargs = {"dt": 1e-3, **kwargs}
+    with pytest.raises(cd.SimulationError, match=message):
+        cd.simulate(book, 0.02, controller, "trapezoid", accuracy=1.0, **kwargs)
+    assert not ran  # nothing ran first
+
+
+@pytest.mark.parametrize("loop", ["auto", "python"])
+def test_a_step_below_h_min_stops_with_the_trajectory_so_far(book: cd.Scene, loop: str) -> None:
+    """Tolerances no step above h_min meets: a StepSizeError (a StepBudgetError) carrying the run
+    up to where the step control gave up, the same in both loops."""
+    d1, d2 = cd.scenes.book_task()
+    method = cd.integrators.DormandPrince(rtol=1e-14, atol=1e-30, h_min=1e-4)
+    with pytest.raises(cd.StepSizeError, match=r"the step fell below h_min = 0.0001 s") as info:
+        cd.simulate(book, 0.05, cd.scenes.drives_controller(d1, d2), method, 1e-3, loop=loop, accuracy_check="off")
+    assert isinstance(info.value, cd.StepBudgetError)
+    partial = info.value.result
+    assert isinstance(partial, cd.Result) and partial.t[0] == 0.0 and partial.status == "stopped"
 
 
 def test_a_complex_input_is_refused_not_silently_made_real(book: cd.Scene) -> None:

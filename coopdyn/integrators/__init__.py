@@ -21,7 +21,7 @@ name                          order  adaptive  per step
 
 from __future__ import annotations
 
-from ..errors import SimulationError
+from ..errors import SimulationError, did_you_mean
 from .base import AdaptiveIntegrator, Attempt, Integrator, Problem
 from .explicit import (
     RK4,
@@ -55,13 +55,23 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 }
 
 
-def get_integrator(integrator: str | Integrator) -> Integrator:
-    """An integrator instance from a name in :data:`INTEGRATORS` or an instance."""
+def get_integrator(integrator: str | Integrator, also: str = "") -> Integrator:
+    """An integrator instance from a name in :data:`INTEGRATORS` or an instance; ``also`` adds to
+    the valid choices an unknown one is told."""
     if isinstance(integrator, Integrator):
         return integrator
     if isinstance(integrator, str) and integrator in INTEGRATORS:
         return INTEGRATORS[integrator]()
-    raise SimulationError(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)} or an Integrator instance")
+    if isinstance(integrator, type) and issubclass(integrator, Integrator):
+        raise SimulationError(
+            f"integrator is the class {integrator.__name__}, not an instance: give {integrator.__name__}() (with its "
+            "settings), or its name"
+        )
+    hint = ""
+    if isinstance(integrator, str):  # a case slip ('RK4') or a near miss ('dopri')
+        folded = [name for name in INTEGRATORS if name == integrator.lower()]
+        hint = f" Did you mean {folded[0]!r}?" if folded else did_you_mean(integrator, INTEGRATORS)
+    raise SimulationError(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)}, an Integrator instance{also}.{hint}")
 
 
 __all__ = [

@@ -166,13 +166,53 @@ def relative_tolerance(rtol: Any) -> float:
     return x
 
 
-class AdaptiveIntegrator(Integrator):
+#: [m, rad, m/s, rad/s] the smallest absolute tolerance: below it no double resolves an error
+#: (and scipy's LSODA, asked for 1e-200, spins without end)
+MIN_ATOL = 1e-30
+
+
+def absolute_tolerance(atol: Any) -> float:
+    """``atol`` as a float: finite and at least :data:`MIN_ATOL`."""
+    from .._validate import positive
+    from ..errors import SimulationError
+
+    x = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
+    if x < MIN_ATOL:
+        raise SimulationError(f"atol must be at least {MIN_ATOL:g} [m, rad, m/s, rad/s] (no double resolves less), got {x:g}")
+    return x
+
+
+class Tolerances:
+    """``rtol`` and ``atol``, checked whenever they are set (at construction or after)."""
+
+    @property
+    def rtol(self) -> float:
+        """Relative tolerance (0 < rtol < 1)."""
+        return self._rtol
+
+    @rtol.setter
+    def rtol(self, value: float) -> None:
+        self._rtol = relative_tolerance(value)
+
+    @property
+    def atol(self) -> float:
+        """Absolute tolerance [m, rad, m/s, rad/s]."""
+        return self._atol
+
+    @atol.setter
+    def atol(self, value: float) -> None:
+        self._atol = absolute_tolerance(value)
+
+
+class AdaptiveIntegrator(Tolerances, Integrator):
     """A method with an embedded error estimate; ``simulate`` controls its step.
 
     Args:
         rtol: relative tolerance, a fraction of each coordinate's size (0 < rtol < 1).
-        atol: absolute tolerance [m, rad, m/s, rad/s].
+        atol: absolute tolerance [m, rad, m/s, rad/s], at least :data:`MIN_ATOL`.
         h_min: smallest step before the run is declared failed [s].
+
+    The three may be changed on the instance (``method.rtol = 1e-8``); each is checked as it is set.
     """
 
     adaptive = True
@@ -180,12 +220,21 @@ class AdaptiveIntegrator(Integrator):
     error_order: ClassVar[int]
 
     def __init__(self, rtol: float = 1e-6, atol: float = 1e-9, h_min: float = 1e-12) -> None:
+        self.rtol = rtol
+        self.atol = atol
+        self.h_min = h_min
+
+    @property
+    def h_min(self) -> float:
+        """Smallest step before the run is declared failed [s]."""
+        return self._h_min
+
+    @h_min.setter
+    def h_min(self, value: float) -> None:
         from .._validate import positive
         from ..errors import SimulationError
 
-        self.rtol = relative_tolerance(rtol)
-        self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
-        self.h_min = positive(h_min, "h_min", "s", SimulationError)
+        self._h_min = positive(value, "h_min", "s", SimulationError)
 
     @abstractmethod
     def attempt(self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None) -> Attempt:

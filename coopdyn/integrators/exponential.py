@@ -89,9 +89,18 @@ class Exponential(Integrator):
     exact_discretisation = True
 
     def __init__(self, hold: str = "cubic") -> None:
-        if not isinstance(hold, str) or hold not in HOLDS:
-            raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {hold!r}")
         self.hold = hold
+
+    @property
+    def hold(self) -> str:
+        """How the input is held over a step (one of :data:`HOLDS`)."""
+        return self._hold
+
+    @hold.setter
+    def hold(self, value: str) -> None:
+        if not isinstance(value, str) or value not in HOLDS:
+            raise SimulationError(f"hold must be one of {sorted(HOLDS)}, got {value!r}")
+        self._hold = value
 
     def compiled_spec(self) -> ExponentialSpec:
         return ExponentialSpec()

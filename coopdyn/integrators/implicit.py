@@ -54,9 +54,18 @@ class LinearlyImplicitEuler(Integrator):
     a_stable = True
 
     def __init__(self, jacobian_every: int = 1) -> None:
-        if isinstance(jacobian_every, bool) or not isinstance(jacobian_every, int) or jacobian_every < 1:
-            raise SimulationError(f"jacobian_every must be an integer >= 1, got {jacobian_every!r}")
         self.jacobian_every = jacobian_every
+
+    @property
+    def jacobian_every(self) -> int:
+        """Steps between two Jacobians (≥ 1)."""
+        return self._jacobian_every
+
+    @jacobian_every.setter
+    def jacobian_every(self, value: int) -> None:
+        from .._validate import count
+
+        self._jacobian_every = count(value, "jacobian_every", SimulationError)
 
     def compiled_spec(self) -> ImplicitEulerSpec:
         return ImplicitEulerSpec(jacobian_every=self.jacobian_every)
@@ -214,8 +223,22 @@ class Trapezoid(Integrator):
     a_stable = True
 
     def __init__(self, rho_inf: float = 1.0) -> None:
-        self.rho_inf = _check_rho(rho_inf)
-        self.gamma = gamma_for(self.rho_inf)
+        self.rho_inf = rho_inf
+
+    @property
+    def rho_inf(self) -> float:
+        """ρ∞ in [0, 1]; setting it sets γ too."""
+        return self._rho_inf
+
+    @rho_inf.setter
+    def rho_inf(self, value: float) -> None:
+        self._rho_inf = _check_rho(value)
+        self._gamma = gamma_for(self._rho_inf)
+
+    @property
+    def gamma(self) -> float:
+        """The scheme's γ, from ρ∞ (:func:`gamma_for`)."""
+        return self._gamma
 
     def step(
         self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
@@ -317,8 +340,33 @@ class GeneralizedAlpha(Integrator):
     a_stable = True
 
     def __init__(self, rho_inf: float = 0.9) -> None:
-        self.rho_inf = _check_rho(rho_inf)
-        self.alpha_m, self.alpha_f, self.gamma, self.beta = alpha_parameters(self.rho_inf)
+        self.rho_inf = rho_inf
+
+    @property
+    def rho_inf(self) -> float:
+        """ρ∞ in [0, 1]; setting it sets α_m, α_f, γ and β too."""
+        return self._rho_inf
+
+    @rho_inf.setter
+    def rho_inf(self, value: float) -> None:
+        self._rho_inf = _check_rho(value)
+        self._parameters = alpha_parameters(self._rho_inf)
+
+    @property
+    def alpha_m(self) -> float:
+        return self._parameters[0]
+
+    @property
+    def alpha_f(self) -> float:
+        return self._parameters[1]
+
+    @property
+    def gamma(self) -> float:
+        return self._parameters[2]
+
+    @property
+    def beta(self) -> float:
+        return self._parameters[3]
 
     def workspace(self, system: Problem) -> _AlphaState:
         return _AlphaState()

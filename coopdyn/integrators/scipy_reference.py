@@ -13,12 +13,12 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..errors import SimulationError
-from .base import Integrator, Problem, relative_tolerance
+from .base import Integrator, Problem, Tolerances
 
 _METHODS = ("DOP853", "RK45", "Radau", "BDF", "LSODA")
 
 
-class ScipyReference(Integrator):
+class ScipyReference(Tolerances, Integrator):
     """``solve_ivp`` over every step.
 
     Args:
@@ -31,13 +31,11 @@ class ScipyReference(Integrator):
     advised = False  # no stability function of its own
 
     def __init__(self, method: str = "DOP853", rtol: float = 1e-10, atol: float = 1e-12) -> None:
-        from .._validate import positive
-
         if not isinstance(method, str) or method not in _METHODS:
             raise SimulationError(f"unknown scipy method {method!r}; valid: {list(_METHODS)}")
         self.method = method
-        self.rtol = relative_tolerance(rtol)
-        self.atol = positive(atol, "atol", "m, rad, m/s, rad/s", SimulationError)
+        self.rtol = rtol
+        self.atol = atol
 
     def step(
         self, system: Problem, t: float, q: np.ndarray, v: np.ndarray, h: float, ws: Any = None
