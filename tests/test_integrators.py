@@ -453,7 +453,6 @@ def test_adaptive_methods_refuse_tolerances_that_control_nothing(name: str) -> N
     assert INTEGRATORS[name](rtol=0.5).rtol == 0.5
 
 
-
 def test_the_scipy_reference_refuses_the_same_tolerances() -> None:
     from coopdyn.errors import SimulationError
     from coopdyn.integrators.scipy_reference import ScipyReference

@@ -101,7 +101,9 @@ ACCURACY_CASES = [  # refused before the reference run, with simulate's own mess
 
 
 @pytest.mark.parametrize(("kwargs", "message"), ACCURACY_CASES)
-def test_simulate_with_accuracy_refuses_bad_arguments_before_it_runs(book: cd.Scene, kwargs: dict[str, Any], message: str) -> None:
+def test_simulate_with_accuracy_refuses_bad_arguments_before_it_runs(
+    book: cd.Scene, kwargs: dict[str, Any], message: str
+) -> None:
     d1, d2 = cd.scenes.book_task()
     ran = []
 
