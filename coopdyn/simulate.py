@@ -868,8 +868,8 @@ class _Run:
                 f"{method.name}'s h_min = {method.h_min:g} s is not below dt = {dt:g} s, the first step it tries: give a "  # type: ignore[attr-defined]
                 "smaller h_min (the smallest step it may take) or a larger dt"
             )
-        fastest = float(np.abs(start[1]).max(initial=0.0))
-        if fastest > max_speed:
+        v0 = start[1]
+        if not float(v0 @ v0) <= self._max_speed_sq and (fastest := float(np.abs(v0).max(initial=0.0))) > max_speed:
             raise SimulationError(
                 f"v0 has a joint velocity of {fastest:g} rad/s or m/s, above max_speed = {max_speed:g}, the speed a run takes "
                 "for divergence: give a slower start or a larger max_speed"
