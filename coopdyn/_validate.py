@@ -123,7 +123,8 @@ def count(value: Any, name: str, error: type[CoopdynError] = SceneError, *, none
         also = f" or None ({none})" if none else ""
         raise error(f"{name} must be an integer >= 1{also}, got {_short(value)}")
     if value > MAX_COUNT:
-        raise error(f"{name} must be at most 2**53 = {MAX_COUNT}, got {_short(value)}")
+        also = f" or None ({none})" if none else ""
+        raise error(f"{name} must be at most 2**53 = {MAX_COUNT}{also}, got {_short(value)}")
     return int(value)
 
 

@@ -89,6 +89,9 @@ class System:
         self._act = dynamics.actuated_index
         # (q, v, net power [W], τ) of evaluations: the step's first and last, the previous step's last
         self._first: _Record | None = None
+        #: D̃ (nv, nv) of the current step's :meth:`implicit_terms`, None before it or for a step
+        #: without them (the energy monitor's allowance for a velocity that alternates)
+        self.step_damping: np.ndarray | None = None
         self._last: _Record | None = None
         self._previous_last: _Record | None = None
         self.control_dt = control_dt
@@ -305,6 +308,7 @@ class System:
         :meth:`recorded_torque`) and take the controller's sample there when one is due
         (:meth:`sample`); the simulation loops call it before every step or attempt."""
         self._previous_last, self._first = self._last, None
+        self.step_damping = None
         if t is not None and q is not None and v is not None:
             self.sample(t, q, v)
 
@@ -312,12 +316,27 @@ class System:
         """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
         reused from the step's own first evaluation there (or the previous step's last one, for
         first-same-as-last methods), computed when no evaluation was made at that state."""
+        return self.power_and_torque_at(t, q, v)[0]
+
+    def power_and_torque_at(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float, np.ndarray]:
+        """:meth:`power_at` and the torque (n_actuated,) at that state."""
         record = self._recorded(q, v)
         if record is not None:
-            return record[2]
+            return record[2], record[3]
         tau, w = self._inputs(t, q, v)
         self.dynamics.acceleration(q, v, tau, w)
-        return self._net_power(q, v, tau, w)
+        return self._net_power(q, v, tau, w), tau
+
+    def torque_jump(self, t: float) -> np.ndarray | None:
+        """The change of the held torques (n_actuated,) a sample taken at t made, None when no
+        sample was taken at t (:meth:`power_jump` is its power)."""
+        return self._jump if t == self._sampled_at else None
+
+    @property
+    def actuated_index(self) -> np.ndarray | slice:
+        """Where the actuated joints' velocities sit in v (indices, or a slice when contiguous):
+        the torques act on ``v[actuated_index]``."""
+        return self._act
 
     def implicit_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(f, M, K̃, D̃)`` at (t, q, v) from one kinematics pass: ``f = M q̈`` (nv,) and the
@@ -329,6 +348,7 @@ class System:
         tau, w = self._inputs(t, q, v)
         terms = self.dynamics.implicit_terms(q, v, tau, w)
         self._record(q, v, tau, w)
+        self.step_damping = terms[3]
         return terms
 
     def factor(self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, gh2: float | None = None) -> None:

@@ -111,7 +111,8 @@ class Result:
     n_factor: int = 0
     n_steps: int = 0
     n_rejected: int = 0
-    status: str = "completed"  #: "completed", "interrupted" (Ctrl-C), "diverged" or "stopped" (step budget)
+    #: "completed", "interrupted" (Ctrl-C), "diverged" or "stopped" (step budget, or a step below h_min)
+    status: str = "completed"
     backend: str | None = None  #: the dynamics backend of the run; readouts use the same
     loop: str = "python"  #: the step loop that ran: "compiled" or "python" (see coopdyn.simulate)
     force_error_estimate: float | None = None  #: [N] (see above)

@@ -489,7 +489,8 @@ def _to_accuracy(accuracy: Any, scene: Scene, t_final: float, **settings: Any) -
     tolerance = _validate.positive(accuracy, "accuracy (the force error the run may have)", "N", SimulationError)
     auto = isinstance(settings["integrator"], str) and settings["integrator"] == "auto"
     also = ', or "auto" (the method chosen for the accuracy too)'  # (with an accuracy, "auto" is a choice too)
-    methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(settings["integrator"], also)]
+    chosen = settings["integrator"]
+    methods = [get_integrator(name) for name in AUTO_METHODS] if auto else [get_integrator(chosen, also, ("auto",))]
     del settings["integrator"]
     if auto:  # the methods the scene takes (rigid grasps: the explicit ones)
         methods = [m for m in methods if _takes(scene, m)]
@@ -863,16 +864,17 @@ class _Run:
         self.start = start  #: (q, v) at t = 0 (a streamed run drops its samples as it goes)
         self.max_speed = max_speed
         self._max_speed_sq = max_speed * max_speed
-        if method.adaptive and not method.h_min < dt:  # type: ignore[attr-defined]
+        if method.adaptive and method.h_min > dt:  # type: ignore[attr-defined]
             raise SimulationError(
-                f"{method.name}'s h_min = {method.h_min:g} s is not below dt = {dt:g} s, the first step it tries: give a "  # type: ignore[attr-defined]
-                "smaller h_min (the smallest step it may take) or a larger dt"
+                f"{method.name}'s h_min = {_exact(method.h_min)} s is above dt = {_exact(dt)} s, the first step it tries: "  # type: ignore[attr-defined]
+                "give a smaller h_min (the smallest step it may take) or a larger dt"
             )
         v0 = start[1]
-        if not float(v0 @ v0) <= self._max_speed_sq and (fastest := float(np.abs(v0).max(initial=0.0))) > max_speed:
+        if not float(v0 @ v0) <= self._max_speed_sq and float(np.abs(v0).max(initial=0.0)) > max_speed:
+            i = int(np.argmax(np.abs(v0)))
             raise SimulationError(
-                f"v0 has a joint velocity of {fastest:g} rad/s or m/s, above max_speed = {max_speed:g}, the speed a run takes "
-                "for divergence: give a slower start or a larger max_speed"
+                f"v0[{i}] = {_exact(float(v0[i]))} [rad/s or m/s] is faster than max_speed = {_exact(max_speed)}, the speed a "
+                "run takes for divergence: give a slower start or a larger max_speed"
             )
         self.n_steps = step_count(t_final, dt)
         self.save_every = save_every

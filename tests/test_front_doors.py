@@ -318,11 +318,7 @@ def _writes_its_input(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
             cd.SweepError,
             "count from 1",
         ),
-        (
-            lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", n_steps=10**400),
-            cd.SimulationError,
-            r"n_steps must be at most 2\*\*53",
-        ),
+        (lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", n_steps=10**400), cd.SimulationError, "n_steps in"),
         (
             lambda: cd.measure_stable_dt(cd.scenes.linear_book(), "rk4", rel_tol=1e-300, n_steps=50),
             cd.SimulationError,

@@ -64,31 +64,36 @@ def run_peer_comparison(
     from .._optional import require
     from .panda_peers import compare, format_comparison
 
-    require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
     chosen = _peer_tables(tables)
     ks = None if stiffnesses is None else _stiffnesses(stiffnesses)
+    require("mujoco", "the MuJoCo peer", "coopdyn[peers]")
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     rounds = 1 if quick else 5
-    # table → (its stiffnesses, compare's keywords, its files' stem)
-    plans: dict[str, tuple[tuple[float, ...], dict[str, Any], str]] = {
-        "perturbed": ((1e4, 1e6), {"t_final": 0.2 if quick else 1.0}, "peers"),
-        "task": ((1e4, 1e6) if quick else (1e4, 1e5, 1e6, 1e7), {"t_final": 0.4 if quick else 1.25, "task": True}, "task_peers"),
+    # table → (its stiffnesses, compare's keywords, its files' stem, the prefix of its files' keys)
+    plans: dict[str, tuple[tuple[float, ...], dict[str, Any], str, str]] = {
+        "perturbed": ((1e4, 1e6), {"t_final": 0.2 if quick else 1.0}, "peers", ""),
+        "task": (
+            (1e4, 1e6) if quick else (1e4, 1e5, 1e6, 1e7),
+            {"t_final": 0.4 if quick else 1.25, "task": True},
+            "task_peers",
+            "task_",
+        ),
         "elastic_joints": (
             (1e5,),
             {"t_final": 0.4 if quick else 1.25, "task": True, "joints": ELASTIC_JOINTS},
             "elastic_joints_peers",
+            "elastic_",
         ),
     }
     results: dict[str, dict[str, Any]] = {}
     with single_threaded_blas():
         for name in chosen:
-            default, keywords, _ = plans[name]
+            default, keywords, _, _ = plans[name]
             results[name] = compare(ks or default, quick=quick, rounds=rounds, progress=progress, **keywords)
     files: dict[str, Path] = {}
     for name, result in results.items():
-        stem = plans[name][2]
-        prefix = "" if name == "perturbed" else f"{name}_"
+        stem, prefix = plans[name][2:]
         files[f"{prefix}rows"] = write_csv(result["rows"], out_dir / f"{stem}.csv")
         files[f"{prefix}chart"] = plot_work_precision(result["rows"], out_dir / f"{stem}.png")
     parts = [text for result in results.values() for text in (format_rows(result["rows"]), format_comparison(result))]

@@ -28,13 +28,14 @@ def is_stable_at(
 ) -> bool:
     """Run ``n_steps`` of ``integrator`` at ``dt`` [s]; stable when the state stays finite and the
     largest velocity stays below ``growth·(1 + max|v₀|)``."""
-    from .._validate import _short, count, finite_array, positive
+    from .._validate import _short, count, finite_array, integral, positive
 
     method = get_integrator(integrator)
     if isinstance(method, ScipyReference) or method.adaptive:
         raise SimulationError("measure the stability of fixed-step methods only")
     dt = positive(dt, "dt", "s", SimulationError)
-    n_steps = count(n_steps, "n_steps", SimulationError)
+    if not (integral(n_steps) and n_steps > 10**6):  # (beyond: the range check below names the limit)
+        n_steps = count(n_steps, "n_steps", SimulationError)
     growth = positive(growth, "growth", "1", SimulationError)
     if n_steps > 10**6 or not n_steps * dt < 1e9 or not 1.0 <= growth <= 1e100:
         raise SimulationError(
@@ -78,12 +79,13 @@ def measure_stable_dt(
     the bracket's relative width at the end (1e-6 to 1), ``n_steps`` the steps a run at each
     trial step takes (100 to 10⁶: in fewer, an instability cannot grow past the velocity bound,
     and a method stable only below a limit would be measured stable at any step)."""
-    from .._validate import _short, count, positive
+    from .._validate import _short, count, integral, positive
 
     method = get_integrator(integrator)
     guess = positive(guess, "guess", "s", SimulationError)
     rel_tol = positive(rel_tol, "rel_tol", "1", SimulationError)
-    n_steps = count(n_steps, "n_steps", SimulationError)
+    if not (integral(n_steps) and n_steps > 10**6):  # (beyond: the range check below names the limit)
+        n_steps = count(n_steps, "n_steps", SimulationError)
     if not 1e-9 <= guess <= 1.0 or not 1e-6 <= rel_tol <= 1.0 or not 100 <= n_steps <= 10**6:
         raise SimulationError(
             f"measure_stable_dt takes guess in [1e-9, 1] s, rel_tol in [1e-6, 1] and n_steps in [100, 1e6]; got guess = "

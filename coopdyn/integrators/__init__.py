@@ -55,23 +55,27 @@ INTEGRATORS: dict[str, type[Integrator]] = {
 }
 
 
-def get_integrator(integrator: str | Integrator, also: str = "") -> Integrator:
+def get_integrator(integrator: str | Integrator, also: str = "", extra: tuple[str, ...] = ()) -> Integrator:
     """An integrator instance from a name in :data:`INTEGRATORS` or an instance; ``also`` adds to
-    the valid choices an unknown one is told."""
+    the valid choices an unknown one is told, ``extra`` names the suggestions may add."""
     if isinstance(integrator, Integrator):
         return integrator
     if isinstance(integrator, str) and integrator in INTEGRATORS:
         return INTEGRATORS[integrator]()
     if isinstance(integrator, type) and issubclass(integrator, Integrator):
+        name = getattr(integrator, "name", None)
         raise SimulationError(
             f"integrator is the class {integrator.__name__}, not an instance: give {integrator.__name__}() (with its "
-            "settings), or its name"
+            "settings)" + (f", or its name {name!r}" if isinstance(name, str) and name in INTEGRATORS else "")
         )
     hint = ""
     if isinstance(integrator, str):  # a case slip ('RK4') or a near miss ('dopri')
-        folded = [name for name in INTEGRATORS if name == integrator.lower()]
-        hint = f" Did you mean {folded[0]!r}?" if folded else did_you_mean(integrator, INTEGRATORS)
-    raise SimulationError(f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)}, an Integrator instance{also}.{hint}")
+        names = [*INTEGRATORS, *extra]
+        folded = [name for name in names if name == integrator.lower()]
+        hint = f" Did you mean {folded[0]!r}?" if folded else did_you_mean(integrator, names)
+    raise SimulationError(
+        f"unknown integrator {integrator!r}; valid: {sorted(INTEGRATORS)} or an Integrator instance{also}.{hint}"
+    )
 
 
 __all__ = [

@@ -354,18 +354,22 @@ class GeneralizedAlpha(Integrator):
 
     @property
     def alpha_m(self) -> float:
+        """α_m, from ρ∞ (:func:`alpha_parameters`)."""
         return self._parameters[0]
 
     @property
     def alpha_f(self) -> float:
+        """α_f, from ρ∞."""
         return self._parameters[1]
 
     @property
     def gamma(self) -> float:
+        """Newmark's γ, from ρ∞."""
         return self._parameters[2]
 
     @property
     def beta(self) -> float:
+        """Newmark's β, from ρ∞."""
         return self._parameters[3]
 
     def workspace(self, system: Problem) -> _AlphaState:

@@ -47,7 +47,7 @@ RESERVED = frozenset((*STATUS, *SETTINGS, *COUNTERS, *TIMING, *VERSIONS, "warnin
 STATUSES = {
     "completed": "the run reached its duration",
     "diverged": "the state stopped being finite or exceeded max_speed (message: the stability diagnosis)",
-    "stopped": "an adaptive method used up max_steps",
+    "stopped": "an adaptive method used up max_steps, or its step fell below its h_min",
     "failed": "an exception: building the case, simulating or computing the metrics (message: what and where)",
     "crashed": "the worker process running it died (message: its exit code or signal)",
     "not run": "the sweep was interrupted (Ctrl-C) before this run finished",

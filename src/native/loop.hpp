@@ -42,6 +42,20 @@ struct Monitor {
   bool has_pending = false, has_before = false, violated = false;
   double pending_h = 0, pending_p = 0, before_h = 0, before_p = 0;
   long steps = 0;
+  // The step whose work the next step's start closes: h, Δq̇ on the actuated joints, τ at its
+  // start and Δq̇ᵀ D̃ Δq̇ (EnergyMonitor._open).
+  bool has_open = false;
+  double open_h = 0, open_dissipation = 0;
+  VectorXd open_dv, open_tau;
+
+  // The open step's work taken at its mean velocity and torque: h/4 (Δq̇ᵀ D̃ Δq̇ − Δτ·Δq̇) added to
+  // the point rule's, its torque ending at tau_end (EnergyMonitor._close_step).
+  void close_step(const VectorXd & tau_end) {
+    if (!has_open) return;
+    const double input = (tau_end - open_tau).dot(open_dv);
+    work += 0.25 * open_h * (open_dissipation - input);
+    has_open = false;
+  }
 
   // (p_next: the next interval's start power; fresh: after a jump of the held torques, no
   // three-point rule across it)
@@ -284,6 +298,7 @@ public:
     kinematics_and_torque(t, q, v, true);
     k_.terms(q, v, tau_);
     record(v);
+    step_damping_ = true;
   }
   // Implicit Euler's v⁺ at (t, q, v) in one kernel call: RHS, Jacobian and factorisation, counted.
   void implicit_euler_velocity(double t, const VectorXd & q, const VectorXd & v, double h, VectorXd & v_new) {
@@ -372,6 +387,7 @@ private:
   // A step from (t, q, v) begins: the controller's sample is taken when one is due (System.begin_step).
   void begin_step(double t, const VectorXd & q, const VectorXd & v) {
     have_first_ = false;
+    step_damping_ = false;
     if (sample(t, q, v)) method_->restart();
   }
   // With a control_dt: τ at (t, q, v), held, when t is on or past the next sample instant (to
@@ -469,20 +485,37 @@ private:
       if (m.raise) status_ = ENERGY;
     }
   }
-  void monitor_after_step(double t0, const VectorXd & q0, const VectorXd & v0, double h, bool reused_start) {
+  void monitor_after_step(double t0, const VectorXd & q0, const VectorXd & v0, const VectorXd & v1, double h,
+                          bool reused_start) {
     const double p = start_power(reused_start);
+    const VectorXd & tau = reused_start ? fsal_tau_start_ : first_tau_;  // (as settle())
     double jump = 0.0;  // a new control sample at t0: the last hold ends on the power before it
     const bool sampled = t0 == sampled_at_;
-    if (sampled)
+    if (sampled) {
       for (Eigen::Index i = 0; i < na_; ++i) jump += jump_[i] * v0[act_[i]];
+      monitor_.close_step(tau - jump_);
+    } else {
+      monitor_.close_step(tau);
+    }
     monitor_.close_interval(p - jump, h, true, p, sampled);
-    ++monitor_.steps;
-    if (monitor_.steps % monitor_.every == 0) monitor_check(t0, q0, v0);
+    Monitor & m = monitor_;
+    if (step_damping_) {  // (a linearly implicit step's D̃; the other methods' work is the point rule's)
+      dv_ = v1 - v0;
+      m.open_h = h;
+      m.open_dissipation = dv_.dot(k_.damping_matrix() * dv_);
+      m.open_dv.resize(na_);
+      for (Eigen::Index i = 0; i < na_; ++i) m.open_dv[i] = dv_[act_[i]];
+      m.open_tau = tau;
+      m.has_open = true;
+    }
+    ++m.steps;
+    if (m.steps % m.every == 0) monitor_check(t0, q0, v0);
   }
   void monitor_finish(double t, const VectorXd & q, const VectorXd & v) {
     kinematics_and_torque(t, q, v, false);
     k_.accel(q, v, tau_);
     const double p = net_power(v);
+    monitor_.close_step(tau_);
     monitor_.close_interval(p, 0.0, false, p, false);
     monitor_check(t, q, v);
   }
@@ -520,7 +553,7 @@ private:
     if (diverged(t_new, q_new_, v_new_, h)) return false;
     after_step(t_new);
     if (monitor_.on) {
-      monitor_after_step(t, q_, v_, h, reused_start);
+      monitor_after_step(t, q_, v_, v_new_, h, reused_start);
       if (status_ != RUNNING) return false;
     }
     t_ = t_new;
@@ -651,6 +684,8 @@ private:
   std::vector<Event> events_;
   std::vector<int> warned_;
   Monitor monitor_;
+  bool step_damping_ = false;  // this step's implicit_terms() left its D̃ in the kernel
+  VectorXd dv_;                // (the monitor's scratch: a step's Δq̇)
   std::string message_;
   double fail_t_ = 0.0, fail_h_ = 0.0;
   VectorXd q_fail_, v_fail_;
