@@ -493,16 +493,18 @@ private:
     const bool sampled = t0 == sampled_at_;
     if (sampled) {
       for (Eigen::Index i = 0; i < na_; ++i) jump += jump_[i] * v0[act_[i]];
-      monitor_.close_step(tau - jump_);
+      held_.noalias() = tau - jump_;  // (no allocation after the first)
+      monitor_.close_step(held_);
     } else {
       monitor_.close_step(tau);
     }
     monitor_.close_interval(p - jump, h, true, p, sampled);
     Monitor & m = monitor_;
     if (step_damping_) {  // (a linearly implicit step's D̃; the other methods' work is the point rule's)
-      dv_ = v1 - v0;
+      dv_.noalias() = v1 - v0;
+      Ddv_.noalias() = k_.damping_matrix() * dv_;  // (scratch: no allocation after the first step)
       m.open_h = h;
-      m.open_dissipation = dv_.dot(k_.damping_matrix() * dv_);
+      m.open_dissipation = dv_.dot(Ddv_);
       m.open_dv.resize(na_);
       for (Eigen::Index i = 0; i < na_; ++i) m.open_dv[i] = dv_[act_[i]];
       m.open_tau = tau;
@@ -685,7 +687,7 @@ private:
   std::vector<int> warned_;
   Monitor monitor_;
   bool step_damping_ = false;  // this step's implicit_terms() left its D̃ in the kernel
-  VectorXd dv_;                // (the monitor's scratch: a step's Δq̇)
+  VectorXd dv_, Ddv_, held_;   // (the monitor's scratch: a step's Δq̇, D̃ Δq̇, the held torque)
   std::string message_;
   double fail_t_ = 0.0, fail_h_ = 0.0;
   VectorXd q_fail_, v_fail_;
