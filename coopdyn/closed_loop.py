@@ -177,12 +177,6 @@ class System:
         self._next_sample = math.floor(t / period + 1e-9) + 1
         self.new_sample = True
 
-    def power_jump(self, t: float, v: np.ndarray) -> float | None:
-        """[W] how much a sample taken at t changed the torques' power at the velocity v
-        (``Δτ·q̇``), None when no sample was taken at t: the energy monitor ends the last hold's
-        work integral on the power before the jump."""
-        return float(self._jump @ v[self._act]) if t == self._sampled_at else None
-
     def next_sample_time(self) -> float:
         """[s] the next sample instant a step must land on (inf without ``control_dt``)."""
         return math.inf if self.control_dt is None else self._next_sample * self.control_dt
@@ -247,7 +241,7 @@ class System:
 
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """q̈ (nv,) at (t, q, v); counts one right-hand-side evaluation and records the net power
-        ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_at`)."""
+        ``τ·q̇ − dissipation`` [W] of that state (see :meth:`power_and_torque_at`)."""
         self.n_rhs += 1
         tau, w = self._inputs(t, q, v)
         a = self.dynamics.acceleration(q, v, tau, w)
@@ -304,7 +298,7 @@ class System:
             raise ControllerError(f"{exc} at t = {t:.6g} s; it must return 6 finite real numbers [N, N·m]") from None
 
     def begin_step(self, t: float | None = None, q: np.ndarray | None = None, v: np.ndarray | None = None) -> None:
-        """Mark the start of a step from (t, q, v) (for :meth:`power_at` and
+        """Mark the start of a step from (t, q, v) (for :meth:`power_and_torque_at` and
         :meth:`recorded_torque`) and take the controller's sample there when one is due
         (:meth:`sample`); the simulation loops call it before every step or attempt."""
         self._previous_last, self._first = self._last, None
@@ -312,14 +306,11 @@ class System:
         if t is not None and q is not None and v is not None:
             self.sample(t, q, v)
 
-    def power_at(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
-        """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v):
-        reused from the step's own first evaluation there (or the previous step's last one, for
-        first-same-as-last methods), computed when no evaluation was made at that state."""
-        return self.power_and_torque_at(t, q, v)[0]
-
     def power_and_torque_at(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float, np.ndarray]:
-        """:meth:`power_at` and the torque (n_actuated,) at that state."""
+        """Net power ``τ·q̇ − dissipation`` [W] into the system at a step's start state (q, v), and
+        the torque (n_actuated,) there: reused from the step's own first evaluation there (or the
+        previous step's last one, for first-same-as-last methods), computed when no evaluation
+        was made at that state."""
         record = self._recorded(q, v)
         if record is not None:
             return record[2], record[3]
@@ -329,7 +320,8 @@ class System:
 
     def torque_jump(self, t: float) -> np.ndarray | None:
         """The change of the held torques (n_actuated,) a sample taken at t made, None when no
-        sample was taken at t (:meth:`power_jump` is its power)."""
+        sample was taken at t: the energy monitor ends the last hold's work on the torque (and
+        power) before the jump."""
         return self._jump if t == self._sampled_at else None
 
     @property

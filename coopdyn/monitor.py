@@ -77,13 +77,13 @@ class EnergyMonitor:
     def after_step(self, t0: float, q0: np.ndarray, v0: np.ndarray, h: float, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """Call right after a step from (t0, q0, v0) of length h [s] to (t, q, v)."""
         p, tau = self.system.power_and_torque_at(t0, q0, v0)
-        jump = self.system.power_jump(t0, v0)  # a new control sample at t0: the last hold ends before it
-        held = self.system.torque_jump(t0)
-        self._close_step(tau if held is None else tau - held)
-        if jump is None:
+        held = self.system.torque_jump(t0)  # a new control sample at t0: the last hold ends before it
+        if held is None:
+            self._close_step(tau)
             self._close_interval(p, h)
         else:
-            self._close_interval(p - jump, h, p, fresh=True)
+            self._close_step(tau - held)
+            self._close_interval(p - float(held @ v0[self._act]), h, p, fresh=True)
         damping = self.system.step_damping  # (a linearly implicit step's D̃; None for the other methods)
         if damping is not None:
             dv = v - v0

@@ -402,13 +402,12 @@ def _judge_forces(result: Result, system: System, method: Integrator, mode: str,
             raise SimulationInterrupted(f"interrupted while checking the run's forces against {name}", result=result) from None
         except (StepBudgetError, DivergenceError) as exc:  # compared as far as the reference got
             diverged = isinstance(exc, DivergenceError)
-            stop = (
-                f"{name} diverged"
-                if diverged
-                else f"{name}'s step fell below its h_min"
-                if isinstance(exc, StepSizeError)
-                else f"{name} needed more than {budget} steps"
-            )
+            if diverged:
+                stop = f"{name} diverged"
+            elif isinstance(exc, StepSizeError):
+                stop = f"{name}'s step fell below its h_min"
+            else:
+                stop = f"{name} needed more than {budget} steps"
             partial = exc.result
             if isinstance(partial, Result) and len(partial.t) > 1 and partial.t[-1] > 0:
                 checked = partial

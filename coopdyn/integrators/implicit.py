@@ -202,7 +202,24 @@ def _check_rho(rho_inf: object) -> float:
     return rho
 
 
-class Trapezoid(Integrator):
+class _RhoInf:
+    """ρ∞ in [0, 1], checked whenever it is set; :meth:`_derive` sets what follows from it."""
+
+    @property
+    def rho_inf(self) -> float:
+        """The high-frequency spectral radius ρ∞ in [0, 1]."""
+        return self._rho_inf
+
+    @rho_inf.setter
+    def rho_inf(self, value: float) -> None:
+        self._rho_inf = _check_rho(value)
+        self._derive(self._rho_inf)
+
+    def _derive(self, rho: float) -> None:
+        raise NotImplementedError
+
+
+class Trapezoid(_RhoInf, Integrator):
     """The linearly implicit trapezoidal rule on the Lie group: ROS2's two stages at γ = ½.
 
     Second order with any Jacobian approximation, A-stable, and **non-dissipative**: its
@@ -225,15 +242,8 @@ class Trapezoid(Integrator):
     def __init__(self, rho_inf: float = 1.0) -> None:
         self.rho_inf = rho_inf
 
-    @property
-    def rho_inf(self) -> float:
-        """ρ∞ in [0, 1]; setting it sets γ too."""
-        return self._rho_inf
-
-    @rho_inf.setter
-    def rho_inf(self, value: float) -> None:
-        self._rho_inf = _check_rho(value)
-        self._gamma = gamma_for(self._rho_inf)
+    def _derive(self, rho: float) -> None:
+        self._gamma = gamma_for(rho)
 
     @property
     def gamma(self) -> float:
@@ -308,7 +318,7 @@ def alpha_amplification(Aq: np.ndarray, Av: np.ndarray, h: float, rho_inf: float
     return np.concatenate([top, mid, bottom], axis=-2)
 
 
-class GeneralizedAlpha(Integrator):
+class GeneralizedAlpha(_RhoInf, Integrator):
     """Generalized-α on the Lie group (Chung & Hulbert 1993; Arnold & Brüls 2007; Brüls,
     Cardona & Arnold 2012) — the structural-dynamics method of flexible-multibody codes, with
     the high-frequency dissipation ρ∞ as its one parameter:
@@ -342,15 +352,8 @@ class GeneralizedAlpha(Integrator):
     def __init__(self, rho_inf: float = 0.9) -> None:
         self.rho_inf = rho_inf
 
-    @property
-    def rho_inf(self) -> float:
-        """ρ∞ in [0, 1]; setting it sets α_m, α_f, γ and β too."""
-        return self._rho_inf
-
-    @rho_inf.setter
-    def rho_inf(self, value: float) -> None:
-        self._rho_inf = _check_rho(value)
-        self._parameters = alpha_parameters(self._rho_inf)
+    def _derive(self, rho: float) -> None:
+        self._parameters = alpha_parameters(rho)
 
     @property
     def alpha_m(self) -> float:
