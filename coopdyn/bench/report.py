@@ -53,9 +53,11 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
     methods = list(dict.fromkeys(r.method for r in rows))
     palette = (*plt.get_cmap("tab10").colors, "black", "#999999", "#b8860b", "#00ced1", "#8b008b")
     colour = {m: palette[i % len(palette)] for i, m in enumerate(methods)}  # one colour per method in every panel
-    fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), constrained_layout=True, squeeze=False)
+    most = max((len({r.method for r in rows if r.scene == n and not r.stable}) for n in names), default=0)
+    height = 4.2 + 0.1 * most  # (room for the divergence notes under the panels)
+    fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), height), constrained_layout=True, squeeze=False)
     for ax, name in zip(axes[0], names, strict=True):
-        n_bad = 0
+        notes = []
         for method in dict.fromkeys(r.method for r in rows if r.scene == name):
             pts = [r for r in rows if r.scene == name and r.method == method and r.stable]
             if pts:
@@ -72,18 +74,23 @@ def plot_work_precision(rows: Sequence[Row], path: Path) -> Path:
                 )
             bad = [r for r in rows if r.scene == name and r.method == method and not r.stable]
             if bad:  # one line per method: how many of its settings diverged, from which step up
-                n_bad += 1
                 steps = [r.dt for r in bad if r.setting.startswith("dt=")]
                 where = f" (dt ≥ {min(steps):.3g} s)" if len(steps) == len(bad) else ""
-                ax.annotate(
-                    f"× {method}: {len(bad)} of {len(bad) + len(pts)} settings diverged{where}",
-                    (0.02, 0.045 * n_bad - 0.025),
-                    xycoords="axes fraction",
-                    fontsize=6,
-                    color="red",
-                )
+                notes.append(f"× {method}: {len(bad)} of {len(bad) + len(pts)} settings diverged{where}")
         ax.set_title(re.sub(r"k=([0-9.eE+-]+)", lambda m: f"k = {_short(float(m.group(1)))} N/m", name))  # with units
         ax.set_xlabel("CPU s per simulated s")
+        if notes:  # under the panel, not over its lower-left corner, where the tightest runs are drawn
+            ax.annotate(
+                "\n".join(notes),
+                xy=(0.0, 0.0),
+                xycoords=("axes fraction", ax.xaxis.label),
+                xytext=(0, -4),
+                textcoords="offset points",
+                ha="left",
+                va="top",
+                fontsize=6,
+                color="red",
+            )
         ax.set_ylabel("max interconnection force error [N]")
         ax.grid(True, which="both", alpha=0.3)
     handles: dict[str, Any] = {}
