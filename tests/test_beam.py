@@ -10,6 +10,7 @@ import pytest
 import scipy.linalg
 
 import coopdyn as cd
+from coopdyn.errors import StepMatrixError
 from coopdyn.model.elements.beam import tip_stiffness
 
 STEEL = {"E": 210e9, "rho": 7850.0}
@@ -163,14 +164,17 @@ def test_beam_damping_dissipates() -> None:
     assert np.all(np.diff(res.energy().total) < 1e-12)
 
 
-def test_kernel_and_python_agree_on_a_beam_held_by_two_pandas() -> None:
+@pytest.mark.parametrize(("n_elements", "damping"), [(4, 0.0), (7, 0.002)])
+def test_kernel_and_python_agree_on_a_beam_held_by_two_pandas(n_elements: int, damping: float) -> None:
     """The beam elements run on the kernel's SE(3) twin with the beam's K and D: accelerations
-    and implicit terms agree with the Python elements to round-off."""
+    and implicit terms agree with the Python elements to round-off (the kernel assembles each
+    element's K̃ and D̃ on its two nodes' columns only, and each grasp's on its arm's and node's:
+    undamped and damped grasps)."""
     from coopdyn.dynamics import backend
 
     if not backend.native_available():
         pytest.skip("coopdyn._native is not built")
-    scene = cd.scenes.held_beam(n_elements=4)
+    scene = cd.scenes.held_beam(n_elements=n_elements, damping=damping)
     native, python = cd.Dynamics(scene, "native"), cd.Dynamics(scene, "python")
     rng = np.random.default_rng(2)
     for _ in range(3):
@@ -180,6 +184,56 @@ def test_kernel_and_python_agree_on_a_beam_held_by_two_pandas() -> None:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(b).max())
         for x, y in zip(native.implicit_terms(q, v, tau), python.implicit_terms(q, v, tau), strict=True):
             np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * np.abs(y).max())
+
+
+def _native_beam(n_elements: int) -> tuple[cd.Scene, cd.Dynamics, cd.Dynamics]:
+    from coopdyn.dynamics import backend
+
+    if not backend.native_available():
+        pytest.skip("coopdyn._native is not built")
+    scene = cd.scenes.held_beam(n_elements=n_elements, damping=0.002)
+    return scene, cd.Dynamics(scene, "native"), cd.Dynamics(scene, "python")
+
+
+def test_the_kernel_factors_a_beam_scene_s_step_matrix_sparse_as_the_dense_solve() -> None:
+    """The step matrix of a beam held by two Pandas is sparse (the nodes hang on the world, each
+    element joins two of them): the kernel factors it with a sparse Cholesky factor, and an
+    implicit Euler update from it equals the Python backend's dense solve, and the kernel's own
+    dense factor, to round-off."""
+    scene, native, python = _native_beam(7)
+    kernel = native._kernel  # type: ignore[attr-defined]
+    assert kernel.sparse_step_matrix
+    rng = np.random.default_rng(5)
+    q = pin.integrate(scene.model, scene.q0, 0.02 * rng.normal(size=scene.nv))
+    v, tau = rng.normal(size=scene.nv), rng.normal(size=scene.n_actuated)
+    kp, kd = np.full(scene.n_actuated, 50.0), np.full(scene.n_actuated, 5.0)
+    expected = python.implicit_euler_velocity(q, v, tau, 1e-3, kp, kd)
+    sparse = native.implicit_euler_velocity(q, v, tau, 1e-3, kp, kd)
+    kernel.sparse_step_matrix = False
+    dense = native.implicit_euler_velocity(q, v, tau, 1e-3, kp, kd)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(sparse, expected, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(dense, expected, rtol=0, atol=1e-10 * scale)
+    assert not kernel.sparse_step_matrix
+
+
+def test_the_sparse_step_matrix_says_when_it_is_not_positive_definite() -> None:
+    """A gain that makes the beam scene's step matrix indefinite is a StepMatrixError from the
+    sparse factor, as from the dense one."""
+    scene, native, _ = _native_beam(7)
+    assert native._kernel.sparse_step_matrix  # type: ignore[attr-defined]
+    kp = np.full(scene.n_actuated, -1e12)
+    with pytest.raises(StepMatrixError, match="not positive definite"):
+        native.implicit_euler_velocity(scene.q0, scene.v0, np.zeros(scene.n_actuated), 1e-3, kp, np.zeros_like(kp))
+
+
+def test_small_scenes_keep_the_dense_step_matrix() -> None:
+    """Two arms and a box (20 coordinates, a grasp reaches 13): the dense factor, as before."""
+    from coopdyn.dynamics import backend
+
+    if not backend.native_available():
+        pytest.skip("coopdyn._native is not built")
+    assert not cd.Dynamics(cd.scenes.facing_arms("panda"), "native")._kernel.sparse_step_matrix  # type: ignore[attr-defined]
 
 
 def test_beam_element_refuses_what_is_not_a_beam() -> None:

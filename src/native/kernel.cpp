@@ -171,7 +171,8 @@ BOOST_PYTHON_MODULE(_native) {
     .def("clear_rotation_alarm", &Kernel::clear_rotation_alarm, bp::args("self"))
     .add_property("last_dissipation", &Kernel::last_dissipation)
     .add_property("rotation_alarm", &Kernel::rotation_alarm)
-    .add_property("rotation_alarm_angle", &Kernel::rotation_alarm_angle);
+    .add_property("rotation_alarm_angle", &Kernel::rotation_alarm_angle)
+    .add_property("sparse_step_matrix", &Kernel::sparse_step_matrix, &Kernel::set_sparse_step_matrix);
   bp::class_<cn::Sensitivity, boost::noncopyable>(
     "Sensitivity", "Exact sensitivities of a method's steps, open loop or closed (see coopdyn.sensitivity).",
     bp::init<bp::object, bp::list, bp::list, bool, bp::tuple, bp::list, bp::list>(

@@ -14,6 +14,8 @@
 #include <pinocchio/algorithm/frames-derivatives.hpp>
 #include <pinocchio/algorithm/kinematics-derivatives.hpp>
 
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
 #include <eigenpy/eigenpy.hpp>
 #include <boost/python.hpp>
 
@@ -65,6 +67,9 @@ constexpr double ROTATION_ALARM = 0.9 * M_PI;
 struct Link {
   FrameIndex tip, grasp;
   std::unique_ptr<coopdyn::Element> element;
+  // The v indices its Jr can reach (the joints that carry T or G), when they are few enough for
+  // K̃ and D̃ to be assembled on them alone; empty: on every column (see Kernel::reach).
+  std::vector<Eigen::Index> cols;
 };
 
 inline void check_size(const RefVec & x, Eigen::Index n, const char * name) {
@@ -108,6 +113,7 @@ public:
       if (lk.tip >= model_.frames.size() || lk.grasp >= model_.frames.size())
         throw std::invalid_argument("link frame index out of range");
       lk.element = coopdyn::make_element(kind, bp::extract<bp::dict>(t[3]));
+      lk.cols = reach(lk);
       links_.push_back(std::move(lk));
     }
     has_damping_ = !damping_.isZero(0.0);
@@ -135,6 +141,7 @@ public:
       acc_.setZero(nv);
       tau_link_.setZero(nvl_);
     }
+    sparse_pattern();
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
@@ -312,6 +319,19 @@ public:
       factored_ = false;
       throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
     }
+    sparse_factored_ = false;
+    if (sparse_ && !check) {  // the kernel's own matrices: S has the pattern sparse_pattern() found
+      for (Eigen::Index j = 0; j < S_sp_.outerSize(); ++j)
+        for (SparseMatrix::InnerIterator it(S_sp_, j); it; ++it) it.valueRef() = S_(it.row(), j);
+      sllt_.factorize(S_sp_);
+      if (sllt_.info() != Eigen::Success) {
+        factored_ = false;
+        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+      }
+      eliminated_ = false;
+      sparse_factored_ = factored_ = true;
+      return;
+    }
     eliminated_ = eliminate_ && (!check || motors_decoupled());
     if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
       S_a_ = S_.topLeftCorner(nvl_, nvl_);
@@ -342,6 +362,10 @@ public:
   // x = S⁻¹ b with the last factor(): the full Cholesky factor, or (motors eliminated) the
   // links' Schur complement then each motor from its own row.
   void step_solve(const VectorXd & b, VectorXd & x) {
+    if (sparse_factored_) {
+      x = sllt_.solve(b);
+      return;
+    }
     if (!eliminated_) {
       x = llt_.solve(b);
       return;
@@ -602,6 +626,15 @@ public:
   // Index of the first link whose rotation deformation passed 0.9π since the last clear, or −1.
   int rotation_alarm() const { return rotation_alarm_; }
   double rotation_alarm_angle() const { return rotation_alarm_angle_; }
+  // Whether factor() takes the sparse Cholesky factor on the kernel's own matrices (sparse_pattern());
+  // set False to take the dense one (benchmarks/beam_scale.py compares them), True to go back to
+  // it — a scene without the pattern stays dense.
+  bool sparse_step_matrix() const { return sparse_; }
+  void set_sparse_step_matrix(bool on) {
+    if (on && !sparse_available_) return;
+    sparse_ = on;
+    sparse_factored_ = factored_ = false;
+  }
   void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
 
   // Q = Σ Jrᵀ G_f_G at (q, v) after kinematics(q, v, false), without the Jacobians: the elements'
@@ -739,7 +772,10 @@ private:
       Q_.head(nvl_).noalias() += J_G_.transpose() * ev_.f;
       p_diss += ev_.power;
       watch_rotation(i);
-      if (matrices) {  // (over the links' columns: Jr is zero in the motors')
+      if (matrices && !lk.cols.empty()) {  // on the columns Jr reaches: O(1) per element of a beam
+        add_on_columns(lk.cols, ev_.SK, K_t_);
+        if (lk.element->damped()) add_on_columns(lk.cols, ev_.SD, D_t_);
+      } else if (matrices) {  // (over the links' columns: Jr is zero in the motors')
         SJ_ = ev_.SK.lazyProduct(J_G_);
         K_t_.topLeftCorner(nvl_, nvl_) += J_G_.transpose().lazyProduct(SJ_);
         if (lk.element->damped()) {
@@ -757,6 +793,70 @@ private:
     tau_full_ = Q_;
     joint_torques(v, tau, p_diss);
     if (matrices) springs_.add_matrices(K_t_, D_t_);
+  }
+
+  // Whether the step matrix S = M + γh (D̃ + Kd) + (γh)² (K̃ + Kp) is sparse enough for a sparse
+  // Cholesky factor (sparse_, and its pattern in S_sp_, analysed once): M couples a joint's
+  // coordinates with its ancestors' only (CRBA), each link's K̃ and D̃ its Link::cols, the gains
+  // and the joints' damping the diagonal. A beam's nodes hang on the world and its elements join
+  // neighbours: S is block-tridiagonal but for the arms and the grasps, and AMD ordering keeps its
+  // factor O(n) where the dense one is O(n³). Dense when the pattern fills more than a third of
+  // S, below 48 coordinates, with motors (they are eliminated instead) or a link that reaches
+  // every column.
+  void sparse_pattern() {
+    sparse_ = sparse_available_ = false;
+    const Eigen::Index nv = nv_;
+    if (eliminate_ || nv < 48) return;
+    for (const Link & lk : links_)
+      if (lk.cols.empty()) return;
+    using Pattern = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
+    Pattern on = Pattern::Zero(nv, nv);
+    on.diagonal().setConstant(true);
+    for (pinocchio::JointIndex jb = 1; jb < model_.joints.size(); ++jb)
+      for (auto ja = jb; ja > 0; ja = model_.parents[ja])
+        for (int a = 0; a < model_.joints[ja].nv(); ++a)
+          for (int b = 0; b < model_.joints[jb].nv(); ++b) {
+            const auto i = model_.joints[ja].idx_v() + a, j = model_.joints[jb].idx_v() + b;
+            on(i, j) = on(j, i) = true;
+          }
+    for (const Link & lk : links_)
+      for (const auto i : lk.cols)
+        for (const auto j : lk.cols) on(i, j) = true;
+    std::vector<Eigen::Triplet<double>> lower;
+    for (Eigen::Index j = 0; j < nv; ++j)
+      for (Eigen::Index i = j; i < nv; ++i)
+        if (on(i, j)) lower.emplace_back(i, j, 1.0);
+    if (3 * (2 * static_cast<Eigen::Index>(lower.size()) - nv) > nv * nv) return;
+    S_sp_.resize(nv, nv);
+    S_sp_.setFromTriplets(lower.begin(), lower.end());
+    S_sp_.makeCompressed();
+    sllt_.analyzePattern(S_sp_);
+    sparse_ = sparse_available_ = sllt_.info() == Eigen::Success;
+  }
+
+  // The v indices of the joints that carry a link's frames T and G and of their ancestors — the
+  // only columns its Jr = J_G − Ad J_T can fill — when they are at most half of the links' model's
+  // (a beam element reaches its two nodes' 12 of 6 per node; two arms and a box, 13 of 20: dense
+  // products are cheaper there); empty otherwise, or with mimic joints (their columns are shared).
+  std::vector<Eigen::Index> reach(const Link & lk) const {
+    std::vector<Eigen::Index> cols;
+    if (!model_.mimicking_joints.empty()) return cols;
+    for (const FrameIndex f : {lk.tip, lk.grasp})
+      for (auto j = model_.frames[f].parentJoint; j > 0; j = model_.parents[j])
+        for (int k = 0; k < model_.joints[j].nv(); ++k) cols.push_back(model_.joints[j].idx_v() + k);
+    std::sort(cols.begin(), cols.end());
+    cols.erase(std::unique(cols.begin(), cols.end()), cols.end());
+    if (2 * static_cast<Eigen::Index>(cols.size()) > nvl_) cols.clear();
+    return cols;
+  }
+
+  // out(c, c) += Jr(:, c)ᵀ S Jr(:, c) for Jr in J_G_, on the columns c it reaches (Link::cols).
+  void add_on_columns(const std::vector<Eigen::Index> & c, const Matrix6 & S, MatrixXd & out) {
+    const auto m = static_cast<Eigen::Index>(c.size());
+    for (Eigen::Index a = 0; a < m; ++a) J_T_.col(a) = J_G_.col(c[a]);  // (J_T_ is free after Jr)
+    SJ_.leftCols(m).noalias() = S * J_T_.leftCols(m);
+    for (Eigen::Index b = 0; b < m; ++b)
+      for (Eigen::Index a = 0; a < m; ++a) out(c[a], c[b]) += J_T_.col(a).dot(SJ_.col(b));
   }
 
   // A world-axes wrench at the object frame, in the object frame's axes (updates its placement).
@@ -867,6 +967,12 @@ private:
   double gh_ = 0.0;
   bool factored_ = false;
   Eigen::LLT<MatrixXd> llt_;
+  // the step matrix's sparse Cholesky factor (sparse_pattern()): its pattern, S's lower triangle
+  // gathered into it at each factor(), and whether the last factor() took it
+  using SparseMatrix = Eigen::SparseMatrix<double>;
+  bool sparse_ = false, sparse_available_ = false, sparse_factored_ = false;
+  SparseMatrix S_sp_;
+  Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower, Eigen::AMDOrdering<SparseMatrix::StorageIndex>> sllt_;
   // the motors (the coordinates after the links' model's): whether the scene has any and whether
   // the last factor() eliminated them; their inertias B; M = diag(M_links, B); q̈ and the links' τ
   bool eliminate_ = false, eliminated_ = false;
