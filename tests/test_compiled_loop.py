@@ -482,3 +482,18 @@ def test_the_kernel_and_python_name_the_statuses_alike() -> None:
     from coopdyn.dynamics.backend import kernel_module
 
     assert tuple(kernel_module().STATUSES) == cd.compiled.STATUS_NAMES
+
+
+def test_a_controller_run_compiled_makes_no_pinocchio_data() -> None:
+    """A built-in controller makes its Pinocchio Data (nv³ derivative tensors: gigabytes on a
+    long beam) only when its Python law runs: a compiled run leaves it unmade; the Python law,
+    called, gives the torque its compiled twin applied."""
+    scene = cd.scenes.held_beam(n_elements=4)
+    pd = GravityCompensationPD(scene)
+    result = cd.simulate(scene, 2e-3, controller=pd, integrator="implicit_euler", dt=1e-3, accuracy_check="off")
+    if result.loop != "compiled":
+        pytest.skip("coopdyn._native is not built")
+    assert "_scratch_data" not in vars(pd)
+    tau = pd(0.0, result.q[0], result.v[0])
+    assert "_scratch_data" in vars(pd)
+    np.testing.assert_allclose(tau, result.tau[0], rtol=0, atol=1e-9 * np.abs(tau).max())

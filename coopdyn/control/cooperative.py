@@ -34,6 +34,7 @@ from .._spec import GripLiftOscillateTaskSpec, HoldTaskSpec, ObjectImpedanceSpec
 from ..errors import SceneError, SceneWarning
 from ..grasp import squeeze_directions
 from ..model.scene import Scene
+from .joint import ScratchData
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: where ObjectImpedance reads the object's pose and velocity (its ``measure``)
@@ -328,6 +329,8 @@ class ObjectImpedance:
             then move as rigid ones with the motor inertia added (docs/physics.md).
     """
 
+    _data = ScratchData()
+
     def __init__(
         self,
         scene: Scene,
@@ -354,7 +357,6 @@ class ObjectImpedance:
             )
         self.scene = scene
         model = scene.model
-        self._data = model.createData()
         self.Kp, self.Kr = _pair(stiffness, "stiffness", ("N/m", "N·m/rad"))
         self.Dp, self.Dr = _pair(damping, "damping", ("N·s/m", "N·m·s/rad"))
         #: the internal rotational stiffness and damping (3,) [N·m/rad], [N·m·s/rad] (``measure="tips"``)

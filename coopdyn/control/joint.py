@@ -34,6 +34,20 @@ class _Gain:
         setattr(obj, self.slot, _validate.gain(value, who, obj.scene.n_actuated, self.unit))
 
 
+class ScratchData:
+    """A controller's Pinocchio ``Data`` of its scene's model (``self._data``), made at its first
+    use: a controller that runs compiled never computes in Python, and a beam scene's ``Data``
+    is large (Pinocchio sizes its derivative tensors nv × nv × nv: 2 GB at 64 elements)."""
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        data = obj.__dict__.get("_scratch_data")
+        if data is None:
+            data = obj.__dict__["_scratch_data"] = obj.scene.model.createData()
+        return data
+
+
 def _scene(scene: Any, who: str, elastic: bool = False) -> Scene:
     if not isinstance(scene, Scene):
         raise SceneError(f"{who}: scene must be a coopdyn.Scene, got {type(scene).__name__}")
@@ -66,6 +80,8 @@ class GravityCompensationPD:
         q_des: desired arm configuration (n_actuated,) for 1-DOF joints; default the scene's q0.
     """
 
+    _data = ScratchData()
+
     kp = _Gain("N·m/rad")
     kd = _Gain("N·m·s/rad")
 
@@ -79,7 +95,6 @@ class GravityCompensationPD:
             if self._q_index.size != n:
                 raise SceneError("q_des is per joint coordinate; give it only for arms of 1-DOF joints (nq = nv)")
             self.q_des[self._q_index] = _validate.finite_array(q_des, "q_des", (n,))
-        self._data = scene.model.createData()
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         """(Kp, Kd) (n_actuated,) [N·m/rad], [N·m·s/rad]: the stiffness and damping the controller
@@ -111,6 +126,8 @@ class ComputedTorque:
         reference: ``reference(t) -> (q_d, q̇_d, q̈_d)`` each (n_actuated,); default: hold q0.
     """
 
+    _data = ScratchData()
+
     kp = _Gain("1/s²")
     kd = _Gain("1/s")
 
@@ -134,7 +151,6 @@ class ComputedTorque:
 
         self._hold_reference = hold
         self.reference = reference if reference is not None else hold
-        self._data = scene.model.createData()
 
     def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         model, data, act = self.scene.model, self._data, self.scene.actuated
@@ -179,6 +195,8 @@ class MotorPD:
         gravity: ``"online"`` (default) or ``"constant"``.
     """
 
+    _data = ScratchData()
+
     GRAVITY = ("online", "constant")
     kp = _Gain("N·m/rad")
     kd = _Gain("N·m·s/rad")
@@ -189,7 +207,7 @@ class MotorPD:
             raise SceneError(f"MotorPD: gravity must be one of {self.GRAVITY}, got {_validate._short(gravity)}")
         self.scene, self.gravity = scene, gravity
         self.kp, self.kd = kp, kd
-        model, self._data = scene.model, scene.model.createData()
+        model = scene.model
         link_q = np.concatenate([a.q_index for a in scene.arms])
         q_ref = scene.q0.copy()
         if q_des is not None:
