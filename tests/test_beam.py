@@ -217,6 +217,22 @@ def test_the_kernel_factors_a_beam_scene_s_step_matrix_sparse_as_the_dense_solve
     assert not kernel.sparse_step_matrix
 
 
+def test_switching_the_factor_takes_effect_at_the_next_factorisation() -> None:
+    """Setting ``sparse_step_matrix`` leaves the last factor and its solves as they were (a run in
+    another thread keeps a consistent factor and solve); the next factorisation takes it."""
+    scene, native, _ = _native_beam(7)
+    kernel = native._kernel  # type: ignore[attr-defined]
+    q, v, tau = scene.q0, np.full(scene.nv, 0.1), np.zeros(scene.n_actuated)
+    kp = kd = np.zeros(scene.n_actuated)
+    f, M, K, D = native.implicit_terms(q, v, tau)
+    native.factor(M, K, D, 1e-3, kp, kd)
+    before = native.solve(v, f)
+    kernel.sparse_step_matrix = False
+    kernel.sparse_step_matrix = True
+    for x, y in zip(native.solve(v, f), before, strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
 def test_the_sparse_step_matrix_says_when_it_is_not_positive_definite() -> None:
     """A gain that makes the beam scene's step matrix indefinite is a StepMatrixError from the
     sparse factor, as from the dense one."""

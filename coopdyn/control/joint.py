@@ -36,8 +36,9 @@ class _Gain:
 
 class ScratchData:
     """A controller's Pinocchio ``Data`` of its scene's model (``self._data``), made at its first
-    use: a controller that runs compiled never computes in Python, and a beam scene's ``Data``
-    is large (Pinocchio sizes its derivative tensors nv × nv × nv: 2 GB at 64 elements)."""
+    use: a controller whose law runs compiled may never compute in Python (GravityCompensationPD
+    does not), and a beam scene's ``Data`` is large (Pinocchio sizes its derivative tensors
+    nv × nv × nv: 2 GB at 64 elements)."""
 
     def __get__(self, obj: Any, owner: type | None = None) -> Any:
         if obj is None:

@@ -24,6 +24,7 @@
 #include "elements/joint_springs.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -304,6 +305,7 @@ public:
               double gh2, bool check = false) {
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
+    sparse_factored_ = false;
     const auto nv = nv_;
     if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
       throw std::invalid_argument("factor: M, K and D must be nv x nv");
@@ -319,7 +321,6 @@ public:
       factored_ = false;
       throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
     }
-    sparse_factored_ = false;
     if (sparse_ && !check) {  // the kernel's own matrices: S has the pattern sparse_pattern() found
       for (Eigen::Index j = 0; j < S_sp_.outerSize(); ++j)
         for (SparseMatrix::InnerIterator it(S_sp_, j); it; ++it) it.valueRef() = S_(it.row(), j);
@@ -628,13 +629,10 @@ public:
   double rotation_alarm_angle() const { return rotation_alarm_angle_; }
   // Whether factor() takes the sparse Cholesky factor on the kernel's own matrices (sparse_pattern());
   // set False to take the dense one (benchmarks/beam_scale.py compares them), True to go back to
-  // it — a scene without the pattern stays dense.
+  // it — a scene without the pattern stays dense. The next factor() takes the change: a factor
+  // and the solves that use it always agree, even when a run in another thread is under way.
   bool sparse_step_matrix() const { return sparse_; }
-  void set_sparse_step_matrix(bool on) {
-    if (on && !sparse_available_) return;
-    sparse_ = on;
-    sparse_factored_ = factored_ = false;
-  }
+  void set_sparse_step_matrix(bool on) { sparse_ = on && sparse_available_; }
   void clear_rotation_alarm() { rotation_alarm_ = -1; rotation_alarm_angle_ = 0.0; }
 
   // Q = Σ Jrᵀ G_f_G at (q, v) after kinematics(q, v, false), without the Jacobians: the elements'
@@ -970,7 +968,8 @@ private:
   // the step matrix's sparse Cholesky factor (sparse_pattern()): its pattern, S's lower triangle
   // gathered into it at each factor(), and whether the last factor() took it
   using SparseMatrix = Eigen::SparseMatrix<double>;
-  bool sparse_ = false, sparse_available_ = false, sparse_factored_ = false;
+  std::atomic<bool> sparse_{false};  // (set from Python while a loop may run in another thread)
+  bool sparse_available_ = false, sparse_factored_ = false;
   SparseMatrix S_sp_;
   Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower, Eigen::AMDOrdering<SparseMatrix::StorageIndex>> sllt_;
   // the motors (the coordinates after the links' model's): whether the scene has any and whether
