@@ -206,7 +206,6 @@ def measure_peer(n_elements: int, rounds: int, seconds: float) -> dict[str, floa
             it = mbs.sys["dynamicSolver"].it
             times["Exudyn"].append((time.perf_counter() - t) / it.currentStepIndex * 1e3 if it.currentStepIndex else math.nan)
             newton.append(it.newtonStepsCount / max(it.currentStepIndex, 1))
-            out["Exudyn steps"] = it.currentStepIndex
     out |= {f"{k} [ms]": statistics.median(v) if v else math.nan for k, v in times.items()}
     out["Newton per step"] = statistics.median(newton) if newton else math.nan
     return out
@@ -223,7 +222,7 @@ def main() -> None:
     parser.add_argument("--peer", action="store_true", help="the strip on world springs, coopdyn against Exudyn")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)  # (a child process: one size, JSON out)
     args = parser.parse_args()
-    if args.rounds < 1 or args.seconds <= 0:
+    if args.rounds < 1 or not args.seconds > 0:  # (not > 0: NaN too)
         parser.error("--rounds must be at least 1 and --seconds positive")
     if args.one is not None:
         print(json.dumps((measure_peer if args.peer else measure)(args.one, args.rounds, args.seconds)))
