@@ -168,15 +168,28 @@ def same(a: Any, b: Any) -> bool:
     kind = type(a)
     if kind is not type(b):
         return False
-    if kind is float or kind is int or kind is str or kind is bool:
-        return a == b
+    if kind in _SCALARS:
+        return bool(a == b)
     if kind is np.ndarray:
         return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
-    if kind is dict:
-        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if kind is dict:  # (loops, not all() over a generator: 1.5 µs less a run, benchmarks/fixed_cost.py)
+        if a.keys() != b.keys():
+            return False
+        for k, x in a.items():
+            if not same(x, b[k]):
+                return False
+        return True
     if kind is list or kind is tuple:
-        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+        if len(a) != len(b):
+            return False
+        for x, y in zip(a, b, strict=True):
+            if not same(x, y):
+                return False
+        return True
     return a is b
+
+
+_SCALARS = frozenset((float, int, str, bool))
 
 
 def controller_settings(scene: Scene, system: System) -> dict[str, Any]:

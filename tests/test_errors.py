@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -91,3 +92,25 @@ def test_saving_is_atomic(tmp_path: Path, book: cd.Scene, monkeypatch: pytest.Mo
     with pytest.raises(cd.SimulationError, match=r"unknown result format '.txt': use .npz \(reloads\) or .csv"):
         res.save(tmp_path / "run.txt")
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["run.npz"]
+
+
+@pytest.mark.parametrize("entry", [1e6, -1e6])
+def test_a_state_at_the_bound_is_a_state(pandas: cd.Scene, entry: float) -> None:
+    v = np.full(pandas.nv, entry)
+    assert np.array_equal(pandas.check_state(pandas.q0, v)[1], v)
+
+
+@pytest.mark.parametrize(
+    ("entry", "said"),
+    [
+        (1.0000001e6, r"v has an entry of 1e\+06"),
+        (1e300, r"v has an entry of 1e\+300"),
+        (np.nan, "v .a velocity. must be finite"),
+    ],
+)
+def test_a_state_past_the_bound_is_refused_by_name_without_a_numpy_warning(pandas: cd.Scene, entry: float, said: str) -> None:
+    v = np.r_[np.zeros(pandas.nv - 1), entry]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(cd.SceneError, match=said):
+            pandas.check_state(pandas.q0, v)

@@ -1032,6 +1032,24 @@ def test_gains_that_raise_or_come_as_one_array(pandas: cd.Scene) -> None:
     assert cd.simulate(pandas, 0.01, controller=Stacked(), integrator="implicit_euler").status == "completed"
 
 
+@pytest.mark.parametrize(("bad", "gain"), [(np.nan, "Kp"), (np.inf, "Kd"), (-np.inf, "Kp"), (1e200, None)])
+def test_gains_that_are_not_finite_are_named(pandas: cd.Scene, bad: float, gain: str | None) -> None:
+    """A NaN or infinite gain is named; a huge finite one (its squares overflow the quick check)
+    is a gain like any other, which the step matrix then judges; no numpy warning on the way."""
+    from coopdyn.closed_loop import _checked_gains
+
+    n = pandas.n_actuated
+    kp, kd = np.full(n, 50.0), np.full(n, 5.0)
+    (kd if gain == "Kd" else kp)[3] = bad
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        if gain is None:
+            assert _checked_gains((kp, kd), n)[0][3] == bad
+        else:
+            with pytest.raises(cd.ControllerError, match=rf"gains\(\) {gain} \[.*\] must be finite"):
+                _checked_gains((kp, kd), n)
+
+
 def test_the_viewer_refuses_ipv6_hosts_up_front() -> None:
     from coopdyn.viz.meshcat_server import check_host
 

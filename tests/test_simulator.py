@@ -214,3 +214,27 @@ def test_after_a_failed_run_and_a_retuning_the_next_run_is_still_simulates(panda
         energy_check="off",
     )  # fmt: skip
     _same(mine, theirs)
+
+
+_SETTINGS = {"kind": "gravity_pd", "kp": np.ones(3), "rtol": 1e-6, "steps": (1, 2.0, "x")}
+
+
+@pytest.mark.parametrize(
+    ("other", "same"),
+    [
+        ({"kind": "gravity_pd", "kp": np.ones(3), "rtol": 1e-6, "steps": (1, 2.0, "x")}, True),
+        ({**_SETTINGS, "kp": np.r_[1.0, 1.0, np.nextafter(1.0, 2.0)]}, False),
+        ({**_SETTINGS, "kp": np.ones(3, dtype=np.float32)}, False),
+        ({**_SETTINGS, "kp": np.ones((3, 1))}, False),
+        ({**_SETTINGS, "rtol": 1e-7}, False),
+        ({**_SETTINGS, "steps": (1, 2.0)}, False),
+        ({**_SETTINGS, "steps": [1, 2.0, "x"]}, False),
+        ({**_SETTINGS, "steps": (1.0, 2.0, "x")}, False),
+        ({k: v for k, v in _SETTINGS.items() if k != "rtol"}, False),
+    ],
+)
+def test_a_loop_is_restarted_only_under_settings_equal_to_the_bit(other: dict[str, object], same: bool) -> None:
+    from coopdyn import compiled
+
+    assert compiled.same(_SETTINGS, other) is same
+    assert compiled.same(other, _SETTINGS) is same
