@@ -10,7 +10,9 @@ import pytest
 import scipy.linalg
 
 import coopdyn as cd
+from coopdyn.control import GravityCompensationPD
 from coopdyn.errors import StepMatrixError
+from coopdyn.integrators import GeneralizedAlpha, LinearlyImplicitEuler
 from coopdyn.model.elements.beam import tip_stiffness
 
 STEEL = {"E": 210e9, "rho": 7850.0}
@@ -241,6 +243,53 @@ def test_the_sparse_step_matrix_says_when_it_is_not_positive_definite() -> None:
     kp = np.full(scene.n_actuated, -1e12)
     with pytest.raises(StepMatrixError, match="not positive definite"):
         native.implicit_euler_velocity(scene.q0, scene.v0, np.zeros(scene.n_actuated), 1e-3, kp, np.zeros_like(kp))
+
+
+@pytest.mark.parametrize(
+    "method",
+    [
+        "implicit_euler",
+        LinearlyImplicitEuler(jacobian_every=3),
+        "trapezoid",
+        GeneralizedAlpha(rho_inf=0.3),
+        "ros2",
+        "ros2_adaptive",
+    ],
+    ids=str,
+)
+def test_a_compiled_run_on_the_sparse_pattern_is_the_python_loops(method: object) -> None:
+    """Every implicit method's compiled run on a damped beam held by two Pandas (its step matrix,
+    mass products and the energy monitor's D̃ on the sparse pattern) gives the Python loop's dense
+    result to round-off, controller and energy monitor on."""
+    scene, native, _ = _native_beam(7)
+    assert native._kernel.sparse_step_matrix  # type: ignore[attr-defined]
+    v0 = 0.05 * np.random.default_rng(3).normal(size=scene.nv)
+    kwargs = dict(controller=GravityCompensationPD(scene), integrator=method, dt=1e-3, v0=v0, energy_check="warn")
+    py = cd.simulate(scene, 0.03, loop="python", accuracy_check="off", **kwargs)  # type: ignore[arg-type]
+    co = cd.simulate(scene, 0.03, loop="compiled", accuracy_check="off", **kwargs)  # type: ignore[arg-type]
+    assert (py.loop, co.loop) == ("python", "compiled")
+    for name in ("q", "v", "tau"):
+        a, b = getattr(py, name), getattr(co, name)
+        assert np.max(np.abs(a - b)) <= 1e-9 * max(1.0, np.max(np.abs(a))), name
+    assert (co.n_steps, co.n_factor, co.n_rejected) == (py.n_steps, py.n_factor, py.n_rejected)
+
+
+@pytest.mark.parametrize("scene", ["beam", "box"])
+def test_the_damping_form_is_the_quadratic_form_of_the_damping_matrix(scene: str) -> None:
+    """Δq̇ᵀ D̃ Δq̇ (the energy monitor's dissipation of a linearly implicit step), summed on the
+    sparse pattern of a beam scene and densely for two arms and a box, is the product with the
+    D̃ the kernel returns."""
+    from coopdyn.dynamics import backend
+
+    if not backend.native_available():
+        pytest.skip("coopdyn._native is not built")
+    built = cd.scenes.held_beam(n_elements=7, damping=0.002) if scene == "beam" else cd.scenes.facing_arms("panda", damping=0.002)
+    native = cd.Dynamics(built, "native")
+    rng = np.random.default_rng(8)
+    v, dv = rng.normal(size=built.nv), rng.normal(size=built.nv)
+    D = native.implicit_terms(built.q0, v, np.zeros(built.n_actuated))[3]
+    expected = dv @ D @ dv
+    assert native._kernel.damping_form(dv) == pytest.approx(expected, rel=1e-12)  # type: ignore[attr-defined]
 
 
 def test_small_scenes_keep_the_dense_step_matrix() -> None:

@@ -169,6 +169,7 @@ BOOST_PYTHON_MODULE(_native) {
     .def("readouts", &Kernel::readouts, bp::args("self", "Q", "V"))
     .def("derivatives", &Kernel::derivatives, bp::args("self", "q", "v", "tau", "wrench"))
     .def("clear_rotation_alarm", &Kernel::clear_rotation_alarm, bp::args("self"))
+    .def("damping_form", &Kernel::damping_form_given, bp::args("self", "dv"))
     .add_property("last_dissipation", &Kernel::last_dissipation)
     .add_property("rotation_alarm", &Kernel::rotation_alarm)
     .add_property("rotation_alarm_angle", &Kernel::rotation_alarm_angle)

@@ -48,6 +48,7 @@ using Eigen::MatrixXd;
 using Eigen::VectorXd;
 using RefVec = Eigen::Ref<const VectorXd>;
 using RefMat = Eigen::Ref<const MatrixXd>;
+using SparseMatrix = Eigen::SparseMatrix<double>;
 
 namespace coopdyn_native {
 
@@ -143,6 +144,8 @@ public:
       tau_link_.setZero(nvl_);
     }
     sparse_pattern();
+    blockwise_ = springs_.empty() &&
+                 std::all_of(links_.begin(), links_.end(), [](const Link & lk) { return !lk.cols.empty(); });
   }
 
   VectorXd acceleration(const RefVec & q, const RefVec & v, const RefVec & tau, bp::object wrench) {
@@ -257,9 +260,36 @@ public:
   const MatrixXd & mass() const { return eliminate_ ? M_ : data_.M; }
   const MatrixXd & stiffness() const { return K_t_; }
   const MatrixXd & damping_matrix() const { return D_t_; }
+  // M of the last terms() on the step matrix's sparse pattern (both triangles), when the scene has
+  // one (a beam's: sparse_pattern()); mass() holds the same values.
+  bool has_sparse_mass() const { return sparse_available_; }
+  const SparseMatrix & sparse_mass() const { return M_sp_; }
+  // Δq̇ᵀ D̃ Δq̇ [W] with the D̃ of the last terms(), for Δq̇ [m/s, rad/s]: on the pattern when
+  // the scene has one (O(nnz), not O(nv²)); `scratch` for the dense product.
+  double damping_form(const VectorXd & dv, VectorXd & scratch) const {
+    if (!sparse_available_) {
+      scratch.noalias() = D_t_ * dv;
+      return dv.dot(scratch);
+    }
+    const auto * outer = M_sp_.outerIndexPtr();
+    const auto * inner = M_sp_.innerIndexPtr();
+    double sum = 0.0;
+    for (Eigen::Index j = 0; j < nv_; ++j) {
+      double col = 0.0;
+      for (auto p = outer[j]; p < outer[j + 1]; ++p) col += D_t_(inner[p], j) * dv[inner[p]];
+      sum += col * dv[j];
+    }
+    return sum;
+  }
+  // damping_form for Python: Δq̇ᵀ D̃ Δq̇ [W] with the D̃ of the last implicit_terms().
+  double damping_form_given(const RefVec & dv) const {
+    check_size(dv, nv_, "dv");
+    VectorXd scratch;
+    return damping_form(VectorXd(dv), scratch);
+  }
   // k_v, k_q of the last factor() (see solve()).
   void solve_into(const VectorXd & f_q, const VectorXd & Mf_v, VectorXd & k_q, VectorXd & k_v) {
-    rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
+    step_rhs(Mf_v, gh_, f_q);
     step_solve(rhs_, k_v);
     k_q = f_q + gh_ * k_v;
   }
@@ -269,7 +299,7 @@ public:
     check_kinematics_at(q, "ie_velocity");
     implicit_parts(q, v, tau, nullptr);
     factor(mass(), K_t_, D_t_, h, kp, kd, h * h);
-    rhs_.noalias() = tau_full_ - h * (Kg_ * v);
+    step_rhs(tau_full_, h, v);
     step_solve(rhs_, x_);
     v_new = v + h * x_;
   }
@@ -309,6 +339,21 @@ public:
     const auto nv = nv_;
     if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
       throw std::invalid_argument("factor: M, K and D must be nv x nv");
+    if (sparse_ && !check) {  // the kernel's own matrices: nonzero on the pattern sparse_pattern() found only
+      gh_ = gh;
+      if (!gather_step_matrix(M, K, D, gh, kp, kd, gh2)) {
+        factored_ = false;
+        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
+      }
+      sllt_.factorize(S_sp_);
+      if (sllt_.info() != Eigen::Success) {
+        factored_ = false;
+        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+      }
+      eliminated_ = false;
+      sparse_factored_ = factored_ = true;
+      return;
+    }
     Kg_ = K;
     S_ = M + gh * D;
     for (Eigen::Index i = 0; i < actuated_.size(); ++i) {
@@ -320,18 +365,6 @@ public:
     if (!S_.allFinite()) {  // LLT "succeeds" on NaN
       factored_ = false;
       throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
-    }
-    if (sparse_ && !check) {  // the kernel's own matrices: S has the pattern sparse_pattern() found
-      for (Eigen::Index j = 0; j < S_sp_.outerSize(); ++j)
-        for (SparseMatrix::InnerIterator it(S_sp_, j); it; ++it) it.valueRef() = S_(it.row(), j);
-      sllt_.factorize(S_sp_);
-      if (sllt_.info() != Eigen::Success) {
-        factored_ = false;
-        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
-      }
-      eliminated_ = false;
-      sparse_factored_ = factored_ = true;
-      return;
     }
     eliminated_ = eliminate_ && (!check || motors_decoupled());
     if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
@@ -386,7 +419,7 @@ public:
     if (!factored_) throw std::logic_error("solve before a successful factor");
     check_size(f_q, nv_, "f_q");
     check_size(Mf_v, nv_, "Mf_v");
-    rhs_.noalias() = Mf_v - gh_ * (Kg_ * f_q);
+    step_rhs(Mf_v, gh_, f_q);
     VectorXd k_v;
     step_solve(rhs_, k_v);
     return bp::make_tuple(VectorXd(f_q + gh_ * k_v), k_v);
@@ -400,7 +433,7 @@ public:
     kinematics(q, v, true);
     implicit_parts(q, v, tau, wrench.is_none() ? nullptr : &w);
     factor(mass(), K_t_, D_t_, h, kp, kd, h * h);
-    rhs_.noalias() = tau_full_ - h * (Kg_ * v);
+    step_rhs(tau_full_, h, v);
     step_solve(rhs_, x_);
     return v + h * x_;
   }
@@ -735,7 +768,18 @@ private:
     generalized_force(v, tau, wrench, true);
     tau_full_.head(nvl_) -= pinocchio::nonLinearEffects(model_, data_, q.head(nql_), v.head(nvl_));
     pinocchio::crba(model_, data_, RefVec(q.head(nql_)));  // (a Ref: the type Pinocchio's compiled crba takes)
-    data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    if (sparse_available_) {  // M is nonzero on the pattern only (crba writes each joint's row over its subtree)
+      const auto * outer = M_sp_.outerIndexPtr();
+      const auto * inner = M_sp_.innerIndexPtr();
+      double * m = M_sp_.valuePtr();
+      for (Eigen::Index j = 0; j < nv_; ++j)
+        for (auto p = outer[j]; p < outer[j + 1]; ++p) {
+          const Eigen::Index i = inner[p];
+          m[p] = i > j ? (data_.M(i, j) = data_.M(j, i)) : data_.M(i, j);
+        }
+    } else {
+      data_.M.triangularView<Eigen::StrictlyLower>() = data_.M.transpose().triangularView<Eigen::StrictlyLower>();
+    }
     if (eliminate_) {  // M = diag(M_links, B)
       M_.topLeftCorner(nvl_, nvl_) = data_.M;
       M_.diagonal().tail(nv_ - nvl_) = B_;
@@ -750,7 +794,12 @@ private:
     check_size(tau, actuated_.size(), "tau");
     Q_.setZero();
     double p_diss = 0.0;
-    if (matrices) {
+    if (matrices && blockwise_) {  // K̃ and D̃ are nonzero on the links' blocks and the diagonal only
+      for (const Link & lk : links_)
+        for (const auto b : lk.cols)
+          for (const auto a : lk.cols) K_t_(a, b) = D_t_(a, b) = 0.0;
+      D_t_.diagonal() = damping_;
+    } else if (matrices) {
       K_t_.setZero();
       D_t_.setZero();
       D_t_.diagonal() = damping_;
@@ -760,14 +809,33 @@ private:
       const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
       const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
       const SE3 T_M_G = oMT.actInv(oMG);
-      J_G_.setZero();
-      J_T_.setZero();
-      pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
-      pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
-      J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // Jr; lazy: cheaper than GEMM at 6 × nv
-      const Vector6 xi = J_G_ * v.head(nvl_);
+      Vector6 xi;
+      if (lk.cols.empty()) {
+        J_G_.setZero();
+        J_T_.setZero();
+        pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
+        pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
+        J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // Jr; lazy: cheaper than GEMM at 6 × nv
+        xi.noalias() = J_G_ * v.head(nvl_);
+      } else {  // Jr on the columns it reaches (Pinocchio writes a frame's supporting columns only): O(1) per beam element
+        for (const auto c : lk.cols) {
+          J_G_.col(c).setZero();
+          J_T_.col(c).setZero();
+        }
+        pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
+        pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
+        const Matrix6 Ad = T_M_G.toActionMatrixInverse();
+        xi.setZero();
+        for (const auto c : lk.cols) {
+          J_G_.col(c) -= Ad.lazyProduct(J_T_.col(c));
+          xi += J_G_.col(c) * v[c];
+        }
+      }
       lk.element->evaluate(T_M_G, xi, matrices, ev_);
-      Q_.head(nvl_).noalias() += J_G_.transpose() * ev_.f;
+      if (lk.cols.empty())
+        Q_.head(nvl_).noalias() += J_G_.transpose() * ev_.f;
+      else
+        for (const auto c : lk.cols) Q_[c] += J_G_.col(c).dot(ev_.f);
       p_diss += ev_.power;
       watch_rotation(i);
       if (matrices && !lk.cols.empty()) {  // on the columns Jr reaches: O(1) per element of a beam
@@ -829,7 +897,64 @@ private:
     S_sp_.setFromTriplets(lower.begin(), lower.end());
     S_sp_.makeCompressed();
     sllt_.analyzePattern(S_sp_);
-    sparse_ = sparse_available_ = sllt_.info() == Eigen::Success;
+    if (sllt_.info() != Eigen::Success) return;
+    std::vector<Eigen::Triplet<double>> full;
+    for (Eigen::Index j = 0; j < nv; ++j)
+      for (Eigen::Index i = 0; i < nv; ++i)
+        if (on(i, j)) full.emplace_back(i, j, 0.0);
+    Kg_sp_.resize(nv, nv);
+    Kg_sp_.setFromTriplets(full.begin(), full.end());
+    Kg_sp_.makeCompressed();
+    M_sp_ = Kg_sp_;
+    s_diag_.resize(actuated_.size());
+    kg_diag_.resize(actuated_.size());
+    for (Eigen::Index a = 0; a < actuated_.size(); ++a) {
+      const auto c = actuated_[a];
+      s_diag_[a] = S_sp_.outerIndexPtr()[c];  // (a column's lower triangle starts at its diagonal)
+      kg_diag_[a] = Kg_sp_.outerIndexPtr()[c + 1] - (S_sp_.outerIndexPtr()[c + 1] - S_sp_.outerIndexPtr()[c]);
+    }
+    sparse_ = sparse_available_ = true;
+  }
+
+  // S_sp_ = the lower triangle of M + γh (D̃ + Kd) + (γh)² (K̃ + Kp) and Kg_sp_ = K̃ + Kp on the
+  // pattern (the same operations, in the same order, as the dense S_ and Kg_); false if not finite.
+  // Column j of the full pattern ends with the entries of its lower triangle, S_sp_'s column j.
+  bool gather_step_matrix(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp,
+                          const RefVec & kd, double gh2) {
+    const auto * s_outer = S_sp_.outerIndexPtr();
+    const auto * s_inner = S_sp_.innerIndexPtr();
+    const auto * k_outer = Kg_sp_.outerIndexPtr();
+    const auto * k_inner = Kg_sp_.innerIndexPtr();
+    double * s = S_sp_.valuePtr();
+    double * kg = Kg_sp_.valuePtr();
+    for (Eigen::Index j = 0; j < nv_; ++j) {
+      for (auto p = k_outer[j]; p < k_outer[j + 1]; ++p) kg[p] = K(k_inner[p], j);
+      for (auto p = s_outer[j]; p < s_outer[j + 1]; ++p) s[p] = M(s_inner[p], j) + gh * D(s_inner[p], j);
+    }
+    for (Eigen::Index a = 0; a < actuated_.size(); ++a) {
+      kg[kg_diag_[a]] += kp[a];
+      s[s_diag_[a]] += gh * kd[a];
+    }
+    bool finite = true;
+    for (Eigen::Index j = 0; j < nv_; ++j) {
+      const auto shift = k_outer[j + 1] - s_outer[j + 1];  // S's entry p is K_g's p + shift
+      for (auto p = s_outer[j]; p < s_outer[j + 1]; ++p) {
+        s[p] += gh2 * kg[p + shift];
+        finite = finite && std::isfinite(s[p]);
+      }
+    }
+    for (Eigen::Index p = 0; p < Kg_sp_.nonZeros(); ++p) finite = finite && std::isfinite(kg[p]);
+    return finite;
+  }
+
+  // rhs_ = a − c K_g x with the last factor()'s K_g (K̃ + Kp): sparse after a sparse factor.
+  void step_rhs(const VectorXd & a, double c, const VectorXd & x) {
+    if (sparse_factored_) {
+      rhs_ = a;
+      rhs_.noalias() -= c * (Kg_sp_ * x);
+    } else {
+      rhs_.noalias() = a - c * (Kg_ * x);
+    }
   }
 
   // The v indices of the joints that carry a link's frames T and G and of their ancestors — the
@@ -967,10 +1092,15 @@ private:
   Eigen::LLT<MatrixXd> llt_;
   // the step matrix's sparse Cholesky factor (sparse_pattern()): its pattern, S's lower triangle
   // gathered into it at each factor(), and whether the last factor() took it
-  using SparseMatrix = Eigen::SparseMatrix<double>;
   std::atomic<bool> sparse_{false};  // (set from Python while a loop may run in another thread)
   bool sparse_available_ = false, sparse_factored_ = false;
   SparseMatrix S_sp_;
+  // With the pattern: K_g of the last sparse factor() and M of the last implicit terms on the full
+  // pattern (both triangles), the actuated coordinates' diagonal entries in S_sp_ and Kg_sp_, and
+  // whether K̃ and D̃ are zeroed on the links' blocks alone (every link's columns known, no motors)
+  SparseMatrix Kg_sp_, M_sp_;
+  std::vector<Eigen::Index> s_diag_, kg_diag_;
+  bool blockwise_ = false;
   Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower, Eigen::AMDOrdering<SparseMatrix::StorageIndex>> sllt_;
   // the motors (the coordinates after the links' model's): whether the scene has any and whether
   // the last factor() eliminated them; their inertias B; M = diag(M_links, B); q̈ and the links' τ
@@ -993,6 +1123,38 @@ private:
   double motor_energy(const VectorXd & v) const {
     return eliminate_ ? 0.5 * (B_.array() * v.tail(nv_ - nvl_).array().square()).sum() : 0.0;
   }
+};
+
+// A method's copy of M(q) from the kernel's last terms(), for its products M x between the
+// kernel's evaluations (implicit Euler keeps one over several steps): sparse on the step matrix's
+// pattern when the scene has one (a beam's: O(nnz) per product, not O(nv²)), dense otherwise.
+class MassCopy {
+public:
+  void take(const Kernel & k) {
+    sparse_ = k.has_sparse_mass();
+    if (sparse_)
+      sparse_M_ = k.sparse_mass();
+    else
+      dense_M_ = k.mass();
+  }
+  // out = M x
+  void times(const VectorXd & x, VectorXd & out) const {
+    if (sparse_)
+      out.noalias() = sparse_M_ * x;
+    else
+      out.noalias() = dense_M_ * x;
+  }
+  // M⁻¹ b (a fresh factor each call: a method's first step only)
+  VectorXd solve(const VectorXd & b) const {
+    if (!sparse_) return dense_M_.llt().solve(b);
+    Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower, Eigen::AMDOrdering<SparseMatrix::StorageIndex>> llt(sparse_M_);
+    return llt.solve(b);
+  }
+
+private:
+  bool sparse_ = false;
+  MatrixXd dense_M_;
+  SparseMatrix sparse_M_;
 };
 
 }  // namespace coopdyn_native

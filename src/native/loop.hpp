@@ -502,9 +502,8 @@ private:
     Monitor & m = monitor_;
     if (step_damping_) {  // (a linearly implicit step's D̃; the other methods' work is the point rule's)
       dv_.noalias() = v1 - v0;
-      Ddv_.noalias() = k_.damping_matrix() * dv_;  // (scratch: no allocation after the first step)
       m.open_h = h;
-      m.open_dissipation = dv_.dot(Ddv_);
+      m.open_dissipation = k_.damping_form(dv_, Ddv_);  // (Ddv_: scratch, no allocation after the first step)
       m.open_dv.resize(na_);
       for (Eigen::Index i = 0; i < na_; ++i) m.open_dv[i] = dv_[act_[i]];
       m.open_tau = tau;

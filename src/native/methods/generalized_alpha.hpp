@@ -21,20 +21,20 @@ public:
     Kernel & k = L.kernel();
     L.implicit_terms(t, q, v);
     f1_ = k.f_terms();
-    M_ = k.mass();
+    M_.take(k);
     // The run's steps follow one another, so a carries over from the previous step (Python
     // checks that the state is the one it left; here it always is).
     if (!ready_) {  // a fresh start: a = q̈
-      a_ = M_.llt().solve(f1_);
+      a_ = M_.solve(f1_);
       ready_ = true;
     }
     const AlphaCoefficients co = alpha_coefficients(am, af, g, b, h);
     const double c = co.c, gp = co.gp, bp = co.bp;
     dv0_ = co.dv_a * a_;
     dq0_ = h * v + co.dq_a * a_;
-    L.factor(M_, k.stiffness(), k.damping_matrix(), gp, bp);
+    L.factor(k.mass(), k.stiffness(), k.damping_matrix(), gp, bp);
     kq1_ = (1.0 - af) * (dq0_ - (bp / gp) * dv0_);
-    tmp_.noalias() = M_ * dv0_;
+    M_.times(dv0_, tmp_);
     tmp_ = (1.0 - af) * tmp_ + gp * f1_;
     k.solve_into(kq1_, tmp_, kq2_, kv1_);
     xh_ = (kv1_ - (1.0 - af) * dv0_) / gp;
@@ -42,7 +42,7 @@ public:
     vs_ = v + dv0_ + (g * c) * xh_;
     L.acceleration(t + h, qs_, vs_, tmp_);  // the Newton correction's residual
     tmp_ = (1.0 - af) * tmp_ - xh_;
-    kv2_.noalias() = M_ * tmp_;
+    M_.times(tmp_, kv2_);
     kv2_ += af * f1_;
     kq1_.setZero(v.size());
     k.solve_into(kq1_, kv2_, kq2_, kv1_);
@@ -68,7 +68,7 @@ public:
 private:
   double am_, af_, g_, b_;
   bool ready_ = false;
-  MatrixXd M_;
+  MassCopy M_;
   VectorXd a_, xh_;      // the algorithmic acceleration, carried between steps, and x̂
   VectorXd dv0_, dq0_;  // the parts of v⁺ − v and q⁺ ⊖ q known at the step's start
   VectorXd f1_, kq1_, kv1_, kq2_, kv2_, qs_, vs_, tmp_;

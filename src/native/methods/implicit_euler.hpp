@@ -21,14 +21,14 @@ public:
     if (!ready_ || count_ >= jacobian_every_ || h_ != h) {
       L.implicit_terms(t, q, v);
       f1_ = k.f_terms();
-      M_ = k.mass();
-      L.factor(M_, k.stiffness(), k.damping_matrix(), h, h * h);
+      M_.take(k);
+      L.factor(k.mass(), k.stiffness(), k.damping_matrix(), h, h * h);
       count_ = 0;
       h_ = h;
       ready_ = true;
     } else {
       L.acceleration(t, q, v, tmp_);
-      f1_.noalias() = M_ * tmp_;
+      M_.times(tmp_, f1_);
     }
     ++count_;
     k.solve_into(v, f1_, kq_, kv_);
@@ -54,7 +54,7 @@ private:
   bool ready_ = false;  // a step matrix is factored, for steps of size h_, used count_ times
   int count_ = 0;
   double h_ = 0.0;
-  MatrixXd M_;
+  MassCopy M_;
   VectorXd f1_, tmp_, kq_, kv_;
 };
 

@@ -16,8 +16,8 @@ public:
     Kernel & k = L.kernel();
     L.implicit_terms(t, q, v);
     f1_ = k.f_terms();
-    M_ = k.mass();
-    L.factor(M_, k.stiffness(), k.damping_matrix(), gamma_ * h, (gamma_ * h) * (gamma_ * h));
+    M_.take(k);
+    L.factor(k.mass(), k.stiffness(), k.damping_matrix(), gamma_ * h, (gamma_ * h) * (gamma_ * h));
     k.solve_into(v, f1_, kq1_, kv1_);
     delta_ = h * kq1_;
     vs_ = v + h * kv1_;
@@ -26,7 +26,7 @@ public:
     L.chart_velocity(q, delta_, vs_, tmp2_);
     tmp2_ -= 2.0 * kq1_;
     tmp_ -= 2.0 * kv1_;
-    f1_.noalias() = M_ * tmp_;
+    M_.times(tmp_, f1_);
     k.solve_into(tmp2_, f1_, kq2_, kv2_);
     L.integrate(q, h * (1.5 * kq1_ + 0.5 * kq2_), q_new);
     v_new = v + h * (1.5 * kv1_ + 0.5 * kv2_);
@@ -45,7 +45,7 @@ public:
 private:
   double gamma_;
   bool adaptive_;
-  MatrixXd M_;
+  MassCopy M_;
   VectorXd f1_, kq1_, kv1_, kq2_, kv2_, delta_, vs_, qs_, tmp_, tmp2_, e_d_, e_v_;
 };
 
