@@ -444,3 +444,19 @@ def test_the_compiled_lie_algebra_matches_lie_py_from_tiny_angles_to_pi(angle: f
     for a, b in zip(nat.element_states(q, v), py.element_states(q, v), strict=True):
         for x, y in zip(a, b, strict=True):
             _close(np.asarray(x), np.asarray(y))
+
+
+@pytest.mark.parametrize("backend", ["python", "native"])
+@pytest.mark.parametrize("fault", ["a wrong size", "not finite"])
+def test_a_failed_factor_leaves_nothing_to_solve_with(pandas: cd.Scene, backend: str, fault: str) -> None:
+    """After a good factor, one that fails (M of the wrong size, or NaN in it) is refused, and a
+    solve then says it needs a successful factor instead of solving with the old one."""
+    dynamics = cd.Dynamics(pandas, backend)
+    nv, zero = pandas.nv, np.zeros(pandas.n_actuated)
+    f, M, K, D = dynamics.implicit_terms(pandas.q0, pandas.v0, zero)
+    dynamics.factor(M, K, D, 1e-3, zero, zero)
+    bad = M[:-1, :-1] if fault == "a wrong size" else np.where(np.eye(nv) > 0, np.nan, M)
+    with pytest.raises((KernelError, StepMatrixError), match=r"nv x nv|not finite"):
+        dynamics.factor(bad, K, D, 1e-3, zero, zero)
+    with pytest.raises(KernelError, match="successful factor"):
+        dynamics.solve(np.zeros(nv), f)

@@ -352,17 +352,19 @@ class PythonDynamics(Dynamics):
     def factor(
         self, M: np.ndarray, K: np.ndarray, D: np.ndarray, gh: float, kp: np.ndarray, kd: np.ndarray, gh2: float | None = None
     ) -> None:
+        self._step = None  # (until this factor succeeds: a failed one leaves nothing to solve with)
+        nv = self.scene.nv
+        if not all(np.shape(x) == (nv, nv) for x in (M, K, D)):
+            raise KernelError(f"factor: M, K and D must be nv x nv ({nv} x {nv})")
         gh, gh2 = step_coefficients(gh, gh2)
         K_g, D_g = K.copy(), D.copy()
         self.add_joint_gains(K_g, D_g, kp, kd)
         S = M + gh * D_g + gh2 * K_g
         if not np.all(np.isfinite(S)):  # numpy's Cholesky "succeeds" on NaN
-            self._step = None
             raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite")
         try:
             L = np.linalg.cholesky(S)
         except np.linalg.LinAlgError:
-            self._step = None
             raise StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite") from None
         # For the small S of a few arms (nv ≲ 50) an explicit inverse from the Cholesky factor and a
         # matrix–vector product per solve cost less than LAPACK's triangular solves through numpy.

@@ -333,9 +333,9 @@ public:
   // their structure by construction (`check`: matrices from elsewhere are checked first).
   void factor(const RefMat & M, const RefMat & K, const RefMat & D, double gh, const RefVec & kp, const RefVec & kd,
               double gh2, bool check = false) {
+    sparse_factored_ = factored_ = false;  // (until this factor succeeds: a failed one leaves nothing to solve with)
     check_size(kp, actuated_.size(), "kp");
     check_size(kd, actuated_.size(), "kd");
-    sparse_factored_ = false;
     const auto nv = nv_;
     if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
       throw std::invalid_argument("factor: M, K and D must be nv x nv");
@@ -809,28 +809,7 @@ private:
       const SE3 & oMT = pinocchio::updateFramePlacement(model_, data_, lk.tip);
       const SE3 & oMG = pinocchio::updateFramePlacement(model_, data_, lk.grasp);
       const SE3 T_M_G = oMT.actInv(oMG);
-      Vector6 xi;
-      if (lk.cols.empty()) {
-        J_G_.setZero();
-        J_T_.setZero();
-        pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
-        pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
-        J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);  // Jr; lazy: cheaper than GEMM at 6 × nv
-        xi.noalias() = J_G_ * v.head(nvl_);
-      } else {  // Jr on the columns it reaches (Pinocchio writes a frame's supporting columns only): O(1) per beam element
-        for (const auto c : lk.cols) {
-          J_G_.col(c).setZero();
-          J_T_.col(c).setZero();
-        }
-        pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
-        pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
-        const Matrix6 Ad = T_M_G.toActionMatrixInverse();
-        xi.setZero();
-        for (const auto c : lk.cols) {
-          J_G_.col(c) -= Ad.lazyProduct(J_T_.col(c));
-          xi += J_G_.col(c) * v[c];
-        }
-      }
+      const Vector6 xi = relative_jacobian(lk, T_M_G, v);
       lk.element->evaluate(T_M_G, xi, matrices, ev_);
       if (lk.cols.empty())
         Q_.head(nvl_).noalias() += J_G_.transpose() * ev_.f;
@@ -859,6 +838,34 @@ private:
     tau_full_ = Q_;
     joint_torques(v, tau, p_diss);
     if (matrices) springs_.add_matrices(K_t_, D_t_);
+  }
+
+  // Jr = J_G − Ad(T_M_G⁻¹) J_T of link `lk` into J_G_ (after kinematics(q, v, true)), and ξ = Jr q̇:
+  // on its Link::cols when it has them (Pinocchio writes a frame's supporting columns only; the
+  // other columns of J_G_ and J_T_ are left as they were and never read: O(1) per beam element),
+  // on every column otherwise (lazy products: cheaper than GEMM at 6 × nv).
+  Vector6 relative_jacobian(const Link & lk, const SE3 & T_M_G, const RefVec & v) {
+    if (lk.cols.empty()) {
+      J_G_.setZero();
+      J_T_.setZero();
+      pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
+      pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
+      J_G_ -= T_M_G.toActionMatrixInverse().lazyProduct(J_T_);
+      return J_G_ * v.head(nvl_);
+    }
+    for (const auto c : lk.cols) {
+      J_G_.col(c).setZero();
+      J_T_.col(c).setZero();
+    }
+    pinocchio::getFrameJacobian(model_, data_, lk.grasp, pinocchio::LOCAL, J_G_);
+    pinocchio::getFrameJacobian(model_, data_, lk.tip, pinocchio::LOCAL, J_T_);
+    const Matrix6 Ad = T_M_G.toActionMatrixInverse();
+    Vector6 xi = Vector6::Zero();
+    for (const auto c : lk.cols) {
+      J_G_.col(c) -= Ad.lazyProduct(J_T_.col(c));
+      xi += J_G_.col(c) * v[c];
+    }
+    return xi;
   }
 
   // Whether the step matrix S = M + γh (D̃ + Kd) + (γh)² (K̃ + Kp) is sparse enough for a sparse
@@ -1123,38 +1130,6 @@ private:
   double motor_energy(const VectorXd & v) const {
     return eliminate_ ? 0.5 * (B_.array() * v.tail(nv_ - nvl_).array().square()).sum() : 0.0;
   }
-};
-
-// A method's copy of M(q) from the kernel's last terms(), for its products M x between the
-// kernel's evaluations (implicit Euler keeps one over several steps): sparse on the step matrix's
-// pattern when the scene has one (a beam's: O(nnz) per product, not O(nv²)), dense otherwise.
-class MassCopy {
-public:
-  void take(const Kernel & k) {
-    sparse_ = k.has_sparse_mass();
-    if (sparse_)
-      sparse_M_ = k.sparse_mass();
-    else
-      dense_M_ = k.mass();
-  }
-  // out = M x
-  void times(const VectorXd & x, VectorXd & out) const {
-    if (sparse_)
-      out.noalias() = sparse_M_ * x;
-    else
-      out.noalias() = dense_M_ * x;
-  }
-  // M⁻¹ b (a fresh factor each call: a method's first step only)
-  VectorXd solve(const VectorXd & b) const {
-    if (!sparse_) return dense_M_.llt().solve(b);
-    Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower, Eigen::AMDOrdering<SparseMatrix::StorageIndex>> llt(sparse_M_);
-    return llt.solve(b);
-  }
-
-private:
-  bool sparse_ = false;
-  MatrixXd dense_M_;
-  SparseMatrix sparse_M_;
 };
 
 }  // namespace coopdyn_native

@@ -4,6 +4,7 @@
 
 #include "../alpha.hpp"
 #include "../loop.hpp"
+#include "../mass_copy.hpp"
 
 #include <vector>
 

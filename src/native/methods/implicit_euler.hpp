@@ -3,6 +3,7 @@
 #pragma once
 
 #include "../loop.hpp"
+#include "../mass_copy.hpp"
 
 namespace coopdyn_native {
 
