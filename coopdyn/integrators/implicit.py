@@ -332,7 +332,11 @@ class GeneralizedAlpha(_RhoInf, Integrator):
     average acceleration: |R(iω)| = 1); smaller ρ∞ damp modes far above 1/h by ρ∞ per step
     (ρ∞ = 0: gone within three steps), and a mode well resolved by the step is damped only at
     third order in ωh. Like every generalized-α, a displaced mode far above 1/h overshoots in
-    velocity for a step or two before it decays (by up to ~ωh/4 of its displacement at ρ∞ = 0).
+    velocity for a step or two before it decays (by up to ~ωh/4 of its displacement at ρ∞ = 0),
+    and stiff overdamped modes (a stiff spring with a stiff damper, as a beam's
+    stiffness-proportional damping makes every fast element mode) amplify a start velocity by
+    hundreds to 1e5 on a held strip at 1 ms (docs/physics.md): on beam scenes use the trapezoid
+    or implicit Euler.
 
     The implicit equation for ``x̂ = (1 − α_m)a⁺ + α_m a`` is solved by one linearised solve
     about the step's start (with the Jacobian of ``implicit_terms``: ``S = M + γ' D̃ + β' K̃``,
