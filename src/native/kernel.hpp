@@ -328,6 +328,12 @@ public:
     factor(M, K, D, gh, kp, kd, gh2, true);
   }
 
+  // What factor() raises when the step matrix is not finite, or not positive definite.
+  static StepMatrixError not_finite() { return StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite"); }
+  static StepMatrixError not_positive_definite() {
+    return StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
+  }
+
   // Factorise S = M + gh (D̃ + Kd) + gh2 (K̃ + Kp) from the last implicit_terms (or given matrices);
   // gh2 = gh² but for generalized-α. The motors are eliminated: the kernel's own matrices have
   // their structure by construction (`check`: matrices from elsewhere are checked first).
@@ -339,17 +345,11 @@ public:
     const auto nv = nv_;
     if (M.rows() != nv || M.cols() != nv || K.rows() != nv || K.cols() != nv || D.rows() != nv || D.cols() != nv)
       throw std::invalid_argument("factor: M, K and D must be nv x nv");
+    gh_ = gh;
     if (sparse_ && !check) {  // the kernel's own matrices: nonzero on the pattern sparse_pattern() found only
-      gh_ = gh;
-      if (!gather_step_matrix(M, K, D, gh, kp, kd, gh2)) {
-        factored_ = false;
-        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
-      }
+      if (!gather_step_matrix(M, K, D, gh, kp, kd, gh2)) throw not_finite();
       sllt_.factorize(S_sp_);
-      if (sllt_.info() != Eigen::Success) {
-        factored_ = false;
-        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
-      }
+      if (sllt_.info() != Eigen::Success) throw not_positive_definite();
       eliminated_ = false;
       sparse_factored_ = factored_ = true;
       return;
@@ -361,35 +361,22 @@ public:
       S_(actuated_[i], actuated_[i]) += gh * kd[i];
     }
     S_.noalias() += gh2 * Kg_;
-    gh_ = gh;
-    if (!S_.allFinite()) {  // LLT "succeeds" on NaN
-      factored_ = false;
-      throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not finite");
-    }
+    if (!S_.allFinite()) throw not_finite();  // (LLT "succeeds" on NaN)
     eliminated_ = eliminate_ && (!check || motors_decoupled());
     if (eliminated_) {  // S = [S_ll S_lm; S_ml diag]: factor the links' Schur complement
       S_a_ = S_.topLeftCorner(nvl_, nvl_);
       for (const auto & sp : springs_.springs) {
         const double d = S_(sp.motor_v, sp.motor_v);
-        if (!(d > 0.0)) {
-          factored_ = false;
-          throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
-        }
+        if (!(d > 0.0)) throw not_positive_definite();
         S_a_(sp.link_v, sp.link_v) -= S_(sp.link_v, sp.motor_v) * S_(sp.motor_v, sp.link_v) / d;
       }
       llt_a_.compute(S_a_);
-      if (llt_a_.info() != Eigen::Success) {
-        factored_ = false;
-        throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
-      }
+      if (llt_a_.info() != Eigen::Success) throw not_positive_definite();
       factored_ = true;
       return;
     }
     llt_.compute(S_);  // reads the lower triangle
-    if (llt_.info() != Eigen::Success) {
-      factored_ = false;
-      throw StepMatrixError("the step matrix M + γh·D̃ + (γh)²·K̃ is not positive definite");
-    }
+    if (llt_.info() != Eigen::Success) throw not_positive_definite();
     factored_ = true;
   }
 
