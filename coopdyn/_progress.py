@@ -8,6 +8,7 @@ what ``tqdm.write`` does for ``print``.
 from __future__ import annotations
 
 import contextlib
+import sys
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -28,9 +29,14 @@ def showing(bar: Any) -> Iterator[None]:
         _shown.remove(bar)
 
 
-def warn(message: str, category: type[Warning], stacklevel: int = 1) -> None:
+def warn(message: str, category: type[Warning], stacklevel: int | None = 1) -> None:
     """``warnings.warn(message, category, stacklevel)`` (the level counted from the caller of
-    this function), clearing the bar on screen first and redrawing it after."""
+    this function; ``None``: the first frame outside coopdyn, the user's call however deep in
+    coopdyn the warning arose), clearing the bar on screen first and redrawing it after."""
+    if stacklevel is None:
+        stacklevel, frame = 1, sys._getframe(1)
+        while frame.f_back is not None and frame.f_globals.get("__name__", "").partition(".")[0] == "coopdyn":
+            stacklevel, frame = stacklevel + 1, frame.f_back
     bar = _shown[-1] if _shown else None
     if bar is not None:
         bar.clear()

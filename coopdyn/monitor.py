@@ -141,9 +141,7 @@ class EnergyMonitor:
             msg = violation_message(t, e.total - self.E0, self.work, excess, self.rtol, self.scale, self.method)
             if self.mode == "raise":
                 raise EnergyBalanceError(msg)
-            _progress.warn(
-                msg, EnergyBalanceWarning, stacklevel=5
-            )  # _check, after_step or finish, the loop, simulate, its caller
+            _progress.warn(msg, EnergyBalanceWarning, stacklevel=None)  # (at the user's call, however deep the loop)
 
 
 #: what the energy warning suggests instead of a method that is not one of them: stable at any

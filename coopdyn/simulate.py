@@ -1002,7 +1002,7 @@ class _Run:
             self._warned_links.add(link)
             self.warn_rotation(link, theta, t)
 
-    def warn_rotation(self, link: int, theta: float, t: float, stacklevel: int = 5) -> None:
+    def warn_rotation(self, link: int, theta: float, t: float) -> None:
         """The log-map warning of :meth:`after_step`, attributed to the caller of ``simulate``."""
         name = self.scene.elements[link].name
         _progress.warn(
@@ -1011,7 +1011,7 @@ class _Run:
             "with an anisotropic or coupled K, the elastic energy jumps too. A real grasp twisted this far has "
             "let go; check the scene (stiffness, controller) or use an isotropic rotational K",
             LogMapWarning,
-            stacklevel=stacklevel,
+            stacklevel=None,
         )
 
     def step_failed(self, exc: StepMatrixError, t: float, h: float) -> StepMatrixError:
@@ -1117,12 +1117,12 @@ def _compiled_loop(
             chunk = compiled.next_chunk(chunk, time.perf_counter() - wall)
             for kind, a, b, c, d, e in events:
                 if kind == compiled.ROTATION_ALARM:  # (link, θ, t)
-                    run.warn_rotation(int(a), b, c, stacklevel=4)
+                    run.warn_rotation(int(a), b, c)
                 else:  # energy balance: (t, growth, work, excess, scale)
                     message = violation_message(a, b, c, d, ENERGY_RTOL, e, run.method.name)
                     if status == compiled.ENERGY:
                         raise EnergyBalanceError(message)
-                    _progress.warn(message, EnergyBalanceWarning, stacklevel=3)
+                    _progress.warn(message, EnergyBalanceWarning, stacklevel=None)
             if bar is not None:
                 bar.update(native.t - bar.n)
             if run.stream is not None:
