@@ -130,7 +130,7 @@ def _parts(n: int) -> None:
     built is restarted."""
     from coopdyn import compiled
     from coopdyn.budget import check_budget
-    from coopdyn.simulate import _check_samples, _checked_duration, _Run
+    from coopdyn.stepping import _check_samples, _checked_duration, _Run
 
     scene = cd.scenes.facing_arms("panda", stiffness=1e4)
     sim = cd.Simulator(scene, GravityCompensationPD(scene), "rk4", 1e-3)

@@ -13,7 +13,8 @@ from .errors import DivergenceError, SimulationError, SimulationInterrupted, Ste
 from .metrics import metric_lines, run_metrics
 from .outputs import check_folder, save_partial, write_outputs
 from .problems.facing_arms import facing_arms, object_start
-from .simulate import MIN_DT, simulate
+from .simulate import simulate
+from .stepping import MIN_DT
 from .viz.plotting import cooperative_figure
 
 STIFFNESS = 1e4  #: interconnection stiffness [N/m]; rotational 1e2 [N·m/rad]

@@ -20,7 +20,8 @@ from .errors import SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
 from .result import Result
-from .simulate import (
+from .simulate import simulate
+from .stepping import (
     ENERGY_CHECKS,
     _check_samples,
     _checked_choice,
@@ -29,7 +30,6 @@ from .simulate import (
     _compiled_loop,
     _control_period,
     _Run,
-    simulate,
 )
 
 __all__ = ["Simulator"]

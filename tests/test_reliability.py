@@ -467,7 +467,7 @@ def test_ctrl_c_at_random_moments_always_gives_a_consistent_result(book: cd.Scen
 
 
 def test_a_ctrl_c_after_the_last_step_keeps_the_completed_run(book: cd.Scene) -> None:
-    module = sys.modules["coopdyn.simulate"]
+    module = sys.modules["coopdyn.stepping"]
 
     original = module._Run.result
     calls = []

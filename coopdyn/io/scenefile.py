@@ -286,7 +286,7 @@ def from_document(doc: dict[str, Any], f: _File) -> Run:
         if not control_dt >= 1e-12:
             raise f.error(f"the controller's sample period must be >= 1e-12 [s], got {control_dt:g}", "simulation", "control_dt")
         from ..integrators import get_integrator
-        from ..simulate import _control_period  # (the run's own check: a fixed-step method's steps land on every sample)
+        from ..stepping import _control_period  # (the run's own check: a fixed-step method's steps land on every sample)
 
         try:
             fixed = "trapezoid" if integrator == "auto" else integrator  # ("auto": dt, dt/2, … or dopri5, which lands on samples)

@@ -151,7 +151,8 @@ def _settings(
     duration: Any, integrator: Any, dt: Any, save_every: Any, max_steps: Any, energy_check: Any, accuracy_check: Any = "auto"
 ) -> Settings:
     from ..integrators import INTEGRATORS
-    from ..simulate import ACCURACY_CHECKS, ENERGY_CHECKS, MIN_DT
+    from ..simulate import ACCURACY_CHECKS
+    from ..stepping import ENERGY_CHECKS, MIN_DT
 
     # the checks simulate() makes, up front: a bad setting refused once, not as a failed row per run
     if duration is not None and (
