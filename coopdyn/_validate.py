@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import decimal
+import math
 import numbers
 import os
 import reprlib
@@ -62,6 +63,8 @@ def finite_array(
 
 def number(value: Any, name: str, unit: str, error: type[CoopdynError] = SceneError) -> float:
     """``value`` as a finite float (a real number: not text, bool, complex or an array)."""
+    if type(value) is float and math.isfinite(value):  # the common case, without the general checks (25 µs a run)
+        return value
     return float(finite_array(value, f"{name} [{unit}]", (), error))
 
 

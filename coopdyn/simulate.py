@@ -7,6 +7,7 @@ import functools
 import math
 import os
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable
@@ -36,9 +37,10 @@ from .errors import (
     UnstableLoopWarning,
 )
 from .integrators import DormandPrince, EmbeddedRungeKutta, Integrator, get_integrator
-from .model.scene import Scene
+from .model.scene import Scene, data_bytes
 from .monitor import EnergyMonitor
 from .result import Result, SampleFiles
+from .simulator import Simulator
 from .statics import rest_pose
 from .stepping import (
     ENERGY_CHECKS,
@@ -54,6 +56,9 @@ from .stepping import (
 
 LOOPS = ("auto", "compiled", "python")
 ACCURACY_CHECKS = ("auto", "screen", "off")
+#: a scene whose Pinocchio data is larger than this [bytes] is not kept between calls (see _reused)
+REUSE_MAX_BYTES = 64e6
+_kept = threading.local()  #: per thread: the Simulator of the last call without checks, and its key
 
 
 def simulate(
@@ -129,7 +134,14 @@ def simulate(
             error found (``Result.force_error_estimate`` [N]); a reference that runs out of that
             budget or diverges is compared as far as it got (and one that diverges or grows to
             dwarf the run's forces is reported as an unstable loop the run's step hides).
-            ``"screen"``: the screen alone (no second run). ``"off"``: no judgement.
+            ``"screen"``: the screen alone (no second run). ``"off"``: no judgement; and such a
+            call (without ``object_wrench``, ``stream_to``, ``progress`` or a ``loop`` named) is a
+            :class:`coopdyn.Simulator` run whose set-up — the compiled kernel and loop — this
+            thread keeps for its next such call: on the same scene and controller (the same
+            objects) with the same settings, only the start state and duration may differ, that
+            call restarts the loop instead of building one (``benchmarks/fixed_cost.py``; scenes
+            above :data:`REUSE_MAX_BYTES` of Pinocchio data are not kept). The result is the same
+            to the last bit.
             Not for ``dopri5`` or ``dop853`` (error-controlled), ``exponential`` (exact) or rigid
             grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
@@ -213,6 +225,12 @@ def simulate(
     q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
     budget = check_budget(scene, t_final, dt, save_every, max_steps, None if stream_to is not None else max_memory)
     _check_samples(t_final, control_dt, budget)
+    if accuracy_check == "off" and object_wrench is None and stream_to is None and not progress and loop == "auto":
+        settings = dict(
+            dt=dt, save_every=save_every, max_speed=max_speed, energy_check=energy_check, control_dt=control_dt,
+            backend=backend, max_steps=max_steps, max_memory=max_memory,
+        )  # fmt: skip
+        return _reused(scene, controller, method, settings, t_final, q, v, budget)
 
     system = System(Dynamics(scene, backend), controller, object_wrench, control_dt)
     system.max_speed = max_speed
@@ -262,6 +280,39 @@ def simulate(
         controller=controller, q0=q, v0=v, object_wrench=object_wrench, backend=backend, progress=progress, control_dt=control_dt
     )
     return _judge_forces(result, system, method, accuracy_check, stream_to is not None, rerun)
+
+
+def _reused(
+    scene: Scene,
+    controller: Any,
+    method: Integrator,
+    settings: dict[str, Any],
+    t_final: float,
+    q: np.ndarray,
+    v: np.ndarray,
+    budget: int | None,
+) -> Result:
+    """The run on the Simulator this thread kept from its last call without checks when that
+    call had the same scene, controller and settings (a controller retuned since is run as it is
+    now: Simulator.run reads it), else on a new one, kept in turn. It is taken while it runs: a
+    controller that calls simulate gets one of its own, and a run that raises keeps none."""
+    objects = (scene, controller, type(method))  # (the same objects: compared by identity)
+    values = (settings, os.environ.get("COOPDYN_BACKEND"))  # (numbers, text and None: compared by value)
+    key = (objects, values, dict(vars(method)))  # (the method's settings: to the bit, arrays too)
+    sim: Simulator | None = getattr(_kept, "simulator", None)
+    kept: Any = getattr(_kept, "key", None)
+    _kept.simulator = _kept.key = None
+    if (
+        sim is None
+        or any(a is not b for a, b in zip(objects, kept[0], strict=True))
+        or values != kept[1]
+        or not compiled.same(key[2], kept[2])
+    ):
+        sim = Simulator(scene, controller, method, **settings)
+    result = sim._run(t_final, q, v, budget)  # (the arguments checked by simulate, as Simulator.run checks them)
+    if data_bytes(scene.nv) <= REUSE_MAX_BYTES:
+        _kept.simulator, _kept.key = sim, key
+    return result
 
 
 def _check_the_loop(result: Result, system: System, q: np.ndarray, v: np.ndarray, stacklevel: int = 3) -> None:

@@ -19,8 +19,8 @@ from .dynamics.constrained import check_integrator
 from .errors import SimulationError
 from .integrators import get_integrator
 from .model.scene import Scene
+from .monitor import EnergyMonitor
 from .result import Result
-from .simulate import simulate
 from .stepping import (
     ENERGY_CHECKS,
     _check_samples,
@@ -30,6 +30,7 @@ from .stepping import (
     _compiled_loop,
     _control_period,
     _Run,
+    execute,
 )
 
 __all__ = ["Simulator"]
@@ -53,7 +54,9 @@ class Simulator:
     (``accuracy_check``; the ``UnstableLoopWarning`` and ``ControlRateWarning``: judge one
     representative run with :func:`coopdyn.simulate` first), progress bars and
     ``stream_to``, and an ``object_wrench`` (not taken). A run that cannot go to the compiled
-    loop (the Python backend, a Python integrator) is an ordinary ``simulate`` call.
+    loop (the Python backend, a Python integrator, rigid grasps) runs in the Python loop, on the
+    dynamics set up once. ``simulate`` itself runs a call with ``accuracy_check="off"`` on a
+    Simulator it keeps for the thread's next such call.
 
     Args:
         scene: the scene.
@@ -107,10 +110,16 @@ class Simulator:
         :func:`coopdyn.simulate` returns it (its errors too: a DivergenceError with the partial
         run, a ControllerError …)."""
         t_final = _checked_duration(t_final)
-        scene, method, system = self.scene, self.method, self.system
+        scene = self.scene
         q, v = scene.check_state(scene.q0 if q0 is None else q0, scene.v0 if v0 is None else v0)
         budget = check_budget(scene, t_final, self.dt, self.save_every, self.max_steps, self.max_memory)
         _check_samples(t_final, self.control_dt, budget)
+        return self._run(t_final, q, v, budget)
+
+    def _run(self, t_final: float, q: np.ndarray, v: np.ndarray, budget: int | None) -> Result:
+        """:meth:`run` with its arguments checked (``budget``: ``check_budget``'s): simulate's
+        calls without checks come here, checked once."""
+        scene, method, system = self.scene, self.method, self.system
         system.restart()
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed, (q, v))
         run.budget = budget
@@ -136,24 +145,12 @@ class Simulator:
             energy_check=self._energy,
             controller=settings,
         )
-        if config is None:  # the Python loop: an ordinary simulate call
-            return simulate(
-                scene,
-                t_final,
-                controller=self.controller,
-                integrator=method,
-                dt=self.dt,
-                save_every=self.save_every,
-                q0=q,
-                v0=v,
-                max_speed=self.max_speed,
-                energy_check=self.energy_check,
-                backend=self.backend,
-                max_steps=self.max_steps,
-                max_memory=self.max_memory,
-                accuracy_check="off",
-                control_dt=self.control_dt,
-            )
+        if config is None:  # the Python loop, on the dynamics set up once
+            monitor = None
+            if self._energy != "off":
+                every = max(1, round(5e-3 / self.dt))
+                monitor = EnergyMonitor(system, 0.0, q, v, every=every, mode=self._energy, method=method.name)
+            return execute(run, None, monitor, None, time.process_time())
         native = system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
         return self._compiled(run, native, config, self._key(t_final, config["controller"]))
 

@@ -3,8 +3,11 @@ the last bit, with its own counters, and simulate's errors."""
 
 from __future__ import annotations
 
+import sys
 import warnings
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,6 +16,10 @@ import coopdyn as cd
 from coopdyn.control import GravityCompensationPD
 from coopdyn.errors import ControllerError, DivergenceError, SimulationError
 from coopdyn.integrators import AdaptiveROS2, DormandPrince, LinearlyImplicitEuler
+
+#: no judgement, no monitor; with a loop named, a simulate call is set up from nothing (it does not
+#: take the thread's kept Simulator: simulate's docstring)
+OFF: dict[str, Any] = {"accuracy_check": "off", "energy_check": "off"}
 
 
 def _warned(run: Callable[[], cd.Result]) -> tuple[cd.Result, list[str]]:
@@ -64,7 +71,7 @@ def test_every_run_is_simulates_run(pandas: cd.Scene, integrator: object, contro
         theirs, their_said = _warned(
             lambda: cd.simulate(
                 scene, 0.03, controller=pd, integrator=integrator, dt=5e-4, save_every=2, v0=v0,
-                control_dt=control_dt, accuracy_check="off", energy_check="warn",
+                control_dt=control_dt, accuracy_check="off", energy_check="warn", loop="compiled",
             )
         )  # fmt: skip
         assert mine.loop == "compiled"
@@ -89,7 +96,7 @@ def test_the_energy_monitor_starts_again() -> None:
         theirs, their_said = _warned(
             lambda: cd.simulate(
                 scene, 0.05, controller=pd, integrator="symplectic_euler", dt=dt, v0=v0,
-                accuracy_check="off", energy_check="warn",
+                accuracy_check="off", energy_check="warn", loop="compiled",
             )
         )  # fmt: skip
         _same(mine, theirs)
@@ -133,6 +140,7 @@ def test_a_python_controller_is_called_once_per_sample_even_when_the_run_warns()
                     v0=v0,
                     accuracy_check="off",
                     energy_check="warn",
+                    loop="compiled",
                 )
         runs.append((res, law.calls))
     (mine, my_calls), (theirs, their_calls) = runs
@@ -147,23 +155,23 @@ def test_a_run_after_a_failed_one_and_after_a_retuning(pandas: cd.Scene) -> None
     sim = cd.Simulator(pandas, pd, "rk4", 1e-3, max_speed=5.0)
     with pytest.raises(DivergenceError):
         sim.run(0.2, v0=np.full(pandas.nv, 4.9))
-    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"))
+    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, loop="compiled", **OFF))
     pd.kp = pd.kp * 2.0
     for t_final in (0.02, 0.013):
         _same(
             sim.run(t_final),
-            cd.simulate(pandas, t_final, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"),
+            cd.simulate(pandas, t_final, controller=pd, max_speed=5.0, loop="compiled", **OFF),
         )
     pd.kd = 8.0  # a scalar, as the constructor takes it: one value per joint (it once broke the compiled spec)
     assert pd.kd.shape == (pandas.n_actuated,)
-    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, accuracy_check="off", energy_check="off"))
+    _same(sim.run(0.02), cd.simulate(pandas, 0.02, controller=pd, max_speed=5.0, loop="compiled", **OFF))
     with pytest.raises(cd.SceneError, match=r"GravityCompensationPD: kp must be a scalar or one value per actuated joint"):
         pd.kp = [1.0, 2.0]
 
 
 def test_a_python_controller_and_the_python_backend(pandas: cd.Scene) -> None:
-    """A user's Python controller is called back as in simulate; on the Python backend a run is an
-    ordinary simulate call."""
+    """A user's Python controller is called back as in simulate; on the Python backend a run goes
+    through the Python loop, as simulate's."""
 
     def law(t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return -5.0 * v[pandas.actuated]
@@ -171,7 +179,8 @@ def test_a_python_controller_and_the_python_backend(pandas: cd.Scene) -> None:
     for backend in ("native", "python"):
         sim = cd.Simulator(pandas, law, "rk4", 1e-3, backend=backend)
         mine = sim.run(0.02)
-        theirs = cd.simulate(pandas, 0.02, controller=law, dt=1e-3, backend=backend, accuracy_check="off", energy_check="off")
+        loop = "compiled" if backend == "native" else "python"
+        theirs = cd.simulate(pandas, 0.02, controller=law, dt=1e-3, backend=backend, loop=loop, **OFF)
         _same(mine, theirs)
         assert mine.loop == ("compiled" if backend == "native" else "python")
 
@@ -212,8 +221,7 @@ def test_after_a_failed_run_and_a_retuning_the_next_run_is_still_simulates(panda
     v0 = np.random.default_rng(3).normal(size=pandas.nv) * 0.3
     mine = sim.run(0.05, v0=v0)
     theirs = cd.simulate(
-        pandas, 0.05, controller=pd, integrator="implicit_euler", dt=1e-3, v0=v0, max_speed=5.0, accuracy_check="off",
-        energy_check="off",
+        pandas, 0.05, controller=pd, integrator="implicit_euler", dt=1e-3, v0=v0, max_speed=5.0, loop="compiled", **OFF
     )  # fmt: skip
     _same(mine, theirs)
 
@@ -240,3 +248,101 @@ def test_a_loop_is_restarted_only_under_settings_equal_to_the_bit(other: dict[st
 
     assert compiled.same(_SETTINGS, other) is same
     assert compiled.same(other, _SETTINGS) is same
+
+
+def _kept() -> tuple[Any, Any]:
+    """The thread's kept (Simulator, key) of simulate's calls without checks."""
+    kept = sys.modules["coopdyn.simulate"]._kept
+    return getattr(kept, "simulator", None), getattr(kept, "key", None)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "trapezoid", DormandPrince(rtol=1e-6), "implicit_euler"], ids=str)
+def test_simulate_without_checks_restarts_the_set_up_it_kept(pandas: cd.Scene, integrator: object) -> None:
+    """simulate with accuracy_check="off" (the energy monitor on), called again on the same scene
+    and controller from other states: the later calls run on the first call's Simulator, and
+    each equals simulate's set up from nothing bit for bit, warnings too."""
+    pd = GravityCompensationPD(pandas)
+    rng = np.random.default_rng(11)
+    kept = []
+    for kick in (0.3, 3.0, 0.0):
+        v0 = rng.normal(size=pandas.nv) * kick
+        args: dict[str, Any] = dict(controller=pd, integrator=integrator, dt=5e-4, v0=v0, accuracy_check="off")
+        mine, mine_said = _warned(lambda: cd.simulate(pandas, 0.03, **args))
+        kept.append(_kept()[0])
+        theirs, their_said = _warned(lambda: cd.simulate(pandas, 0.03, loop="compiled", **args))
+        _same(mine, theirs)
+        assert mine_said == their_said
+    assert kept[0] is not None and kept[1] is kept[0] and kept[2] is kept[0]
+
+
+def test_simulate_keeps_one_set_up_per_thread_for_equal_settings(pandas: cd.Scene) -> None:
+    """A controller retuned in place is run as it is now, on the kept set-up; another dt, another
+    controller object or another scene is set up anew and replaces it: one per thread."""
+    pd = GravityCompensationPD(pandas)
+    cd.simulate(pandas, 0.01, controller=pd, **OFF)
+    first = _kept()[0]
+    pd.kp = pd.kp * 2.0
+    _same(cd.simulate(pandas, 0.01, controller=pd, **OFF), cd.simulate(pandas, 0.01, controller=pd, loop="compiled", **OFF))
+    assert _kept()[0] is first
+    cd.simulate(pandas, 0.01, controller=pd, dt=5e-4, **OFF)
+    assert _kept()[0] is not first and _kept()[0].dt == 5e-4
+    cd.simulate(pandas, 0.01, controller=GravityCompensationPD(pandas), dt=5e-4, **OFF)
+    assert _kept()[0].controller is not pd
+    book = cd.problems.linear_book()
+    cd.simulate(book, 0.01, **OFF)
+    assert _kept()[0].scene is book
+
+
+def test_threads_keep_their_own_set_up(pandas: cd.Scene) -> None:
+    """Two threads calling simulate without checks, each from its own states: every result equals
+    that of a call set up from nothing."""
+    pd = GravityCompensationPD(pandas)
+    v0s = np.random.default_rng(5).normal(size=(2, 4, pandas.nv)) * 0.3
+
+    def calls(starts: np.ndarray) -> list[cd.Result]:
+        return [cd.simulate(pandas, 0.02, controller=pd, v0=v0, **OFF) for v0 in starts]
+
+    with ThreadPoolExecutor(2) as pool:
+        mine = [r for results in pool.map(calls, v0s) for r in results]
+    theirs = [cd.simulate(pandas, 0.02, controller=pd, v0=v0, loop="compiled", **OFF) for v0 in v0s.reshape(-1, pandas.nv)]
+    for a, b in zip(mine, theirs, strict=True):
+        _same(a, b)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", LinearlyImplicitEuler(jacobian_every=4)], ids=str)
+def test_a_controller_that_calls_simulate_gets_a_set_up_of_its_own(pandas: cd.Scene, integrator: object) -> None:
+    """A planner-like Python controller that, at each of its samples, simulates the scene ahead
+    under itself (without checks, as a planner would): the inner calls have the outer call's
+    settings but cannot take its set-up while it runs — the second outer call, on the set-up the
+    first kept, equals one set up from nothing, and so do all the inner runs. (Sharing it would
+    break a method that keeps its step matrix's factor across steps: the inner runs would
+    factor their own into the kernel in between.)"""
+    pd = GravityCompensationPD(pandas)
+
+    class Planner:
+        def __init__(self, loop: str) -> None:
+            self.loop, self.inner, self.planning = loop, [], False
+
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            if not self.planning:
+                self.planning = True
+                try:
+                    self.inner.append(self.run(0.005, q, v))
+                finally:
+                    self.planning = False
+            return pd(t, q, v)
+
+        def run(self, t_final: float, q: np.ndarray, v: np.ndarray) -> cd.Result:
+            return cd.simulate(
+                pandas, t_final, controller=self, integrator=integrator, q0=q, v0=v, control_dt=5e-3, loop=self.loop, **OFF
+            )
+
+    kept, fresh = Planner("auto"), Planner("compiled")
+    v0 = np.random.default_rng(2).normal(size=pandas.nv) * 0.3
+    for planner in (kept, fresh):
+        planner.run(0.02, pandas.q0, -v0)
+    assert _kept()[0].controller is kept  # (the first outer call's, kept last)
+    _same(kept.run(0.02, pandas.q0, v0), fresh.run(0.02, pandas.q0, v0))
+    assert len(kept.inner) == len(fresh.inner) >= 8
+    for a, b in zip(kept.inner, fresh.inner, strict=True):
+        _same(a, b)
