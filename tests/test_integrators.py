@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -545,9 +546,10 @@ def test_generalized_alpha_overshoot_on_a_stiff_damper_is_the_linear_methods(rho
     relaxation rate 1e4 1/s, ten times 1/dt), a start velocity's effect over ten 1 ms steps is
     the linear generalized-α step matrix's from (0, v0, q̈(0, v0)) — the consistent start
     acceleration, carried as the algorithmic one: the overshoot docs/physics.md documents
-    (6.2× the start velocity at ρ∞ = 0.5) is the method's, not the implementation's."""
+    (6.2× the start velocity at ρ∞ = 0.5) is the method's, not the implementation's; and
+    ``stability.start_transient``, what ``advise`` reports, is the runs' own figure."""
     from coopdyn.integrators.implicit import alpha_amplification
-    from coopdyn.stability import linearize
+    from coopdyn.stability import linearize, start_transient
 
     scene = cd.scenes.linear_book(c_p=1e10, c_k=1e10, d_p=1e6, d_k=1e6)
     v0 = 1e-5 * np.random.default_rng(0).standard_normal(scene.nv)
@@ -562,3 +564,40 @@ def test_generalized_alpha_overshoot_on_a_stiff_damper_is_the_linear_methods(rho
         predicted.append(x[n : 2 * n])
     simulated = moved.v - rest.v
     np.testing.assert_allclose(simulated, np.array(predicted), rtol=0, atol=1e-6 * np.abs(simulated).max())
+    measured = np.abs(simulated[1:]).max() / np.abs(v0).max()
+    assert start_transient(A, 1e-3, rho_inf, v0[:, None]) == pytest.approx(measured, rel=1e-6)
+
+
+def test_advise_names_generalized_alphas_start_transient() -> None:
+    """``advise(dt=1 ms)`` on the 16-element held strip with the beam's damping (β = 1e-4 s, its
+    fast element modes stiff and overdamped): generalized-α's start transient is ~24× the
+    trapezoid's, past TRANSIENT_LIMIT: the recommendation, the method's note and the
+    divergence diagnosis say so and point to the trapezoid."""
+    from coopdyn.stability import TRANSIENT_LIMIT
+
+    scene = cd.scenes.held_beam(n_elements=16, damping=0.002, beam_damping=1e-4)
+    advice = cd.advise(scene, dt=1e-3)
+    diagnosis = advice.diagnosis("generalized_alpha", 1e-3)
+    assert advice.alpha_transient is not None
+    dt, own, undamped, rho_inf = advice.alpha_transient
+    assert (dt, rho_inf) == (1e-3, 0.9) and own > TRANSIENT_LIMIT * undamped and 300 < own < 450
+    said = f"at ρ∞ = 0.9 it amplifies a start velocity {own:.3g}× within 10 steps at dt = 1 ms"
+    assert said in advice.recommendation and said in diagnosis and "prefer 'trapezoid'" in diagnosis
+    assert "the blow-up is nonlinear" not in diagnosis
+    assert "start transient at dt = 1 ms" in next(m.note for m in advice.methods if m.name == "generalized_alpha")
+    assert cd.advise(scene, dt=1e-3, methods=["trapezoid"]).alpha_transient is None  # (not asked about)
+
+
+@pytest.mark.parametrize(
+    "scene",
+    [
+        pytest.param(lambda: cd.scenes.held_beam(n_elements=16, damping=0.002, beam_damping=0.0), id="strip, β = 0"),
+        pytest.param(lambda: cd.scenes.linear_book(c_p=1e10, c_k=1e10, d_p=1e6, d_k=1e6), id="book, stiff damper"),
+    ],
+)
+def test_advise_says_nothing_of_a_transient_the_trapezoid_shares(scene: Callable[[], cd.Scene]) -> None:
+    """Without the beam's damping generalized-α's start transient is level with the trapezoid's
+    (0.93×), and on the book's stiff damper 1.2×: nothing is said of it."""
+    advice = cd.advise(scene(), dt=1e-3)
+    diagnosis = advice.diagnosis("generalized_alpha", 1e-3)
+    assert advice.alpha_transient is None and "amplifies" not in advice.recommendation + diagnosis
