@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import math
@@ -56,8 +57,9 @@ from .stepping import (
 
 LOOPS = ("auto", "compiled", "python")
 ACCURACY_CHECKS = ("auto", "screen", "off")
-#: a scene whose Pinocchio data is larger than this [bytes] is not kept between calls (see _reused)
-REUSE_MAX_BYTES = 64e6
+#: a set-up whose two Pinocchio data (the Python dynamics' and the kernel's) and last run's samples
+#: would hold more than this [bytes] is not kept between calls (see _reused)
+REUSE_MAX_BYTES = 16e6
 _kept = threading.local()  #: per thread: the Simulator of the last call without checks, and its key
 
 
@@ -139,9 +141,10 @@ def simulate(
             :class:`coopdyn.Simulator` run whose set-up — the compiled kernel and loop — this
             thread keeps for its next such call: on the same scene and controller (the same
             objects) with the same settings, only the start state and duration may differ, that
-            call restarts the loop instead of building one (``benchmarks/fixed_cost.py``; scenes
-            above :data:`REUSE_MAX_BYTES` of Pinocchio data are not kept). The result is the same
-            to the last bit.
+            call restarts the loop instead of building one (``benchmarks/fixed_cost.py``). The
+            result is the same to the last bit. What the thread keeps — its Pinocchio data and
+            the last run's samples, at most :data:`REUSE_MAX_BYTES`, and the scene and
+            controller — is released by its next such call with other settings.
             Not for ``dopri5`` or ``dop853`` (error-controlled), ``exponential`` (exact) or rigid
             grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
@@ -308,9 +311,11 @@ def _reused(
         or values != kept[1]
         or not compiled.same(key[2], kept[2])
     ):
-        sim = Simulator(scene, controller, method, **settings)
+        # its own copy of the method: one the user retunes later must not run under these settings' key
+        sim = Simulator(scene, controller, copy.deepcopy(method), **settings)
     result = sim._run(t_final, q, v, budget)  # (the arguments checked by simulate, as Simulator.run checks them)
-    if data_bytes(scene.nv) <= REUSE_MAX_BYTES:
+    samples = result.t.size * (1 + scene.nq + scene.nv + scene.n_actuated) * 8.0  # (the loop keeps them)
+    if 2.0 * data_bytes(scene.nv) + samples <= REUSE_MAX_BYTES:
         _kept.simulator, _kept.key = sim, key
     return result
 

@@ -16,7 +16,7 @@ from .budget import check_budget
 from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .dynamics.constrained import check_integrator
-from .errors import SimulationError
+from .errors import SimulationError, SimulationInterrupted
 from .integrators import get_integrator
 from .model.scene import Scene
 from .monitor import EnergyMonitor
@@ -31,6 +31,8 @@ from .stepping import (
     _control_period,
     _Run,
     execute,
+    interruption,
+    take_samples,
 )
 
 __all__ = ["Simulator"]
@@ -104,6 +106,9 @@ class Simulator:
         self._loop: Any = None
         self._loop_config: dict[str, Any] = {}
         self._loop_key: tuple[Any, ...] = ()
+        self._fresh = True  # (the system just built: its first run need not restart it, nor read the gains twice)
+        # Python code inside the compiled loop besides a Python controller: an element without a C++ twin
+        self._python_elements = any(lk.native is None for lk in scene.elements)
 
     def run(self, t_final: float, q0: Any = None, v0: Any = None) -> Result:
         """Simulate from (q0 (nq,), v0 (nv,)) (default: the scene's) over ``t_final`` [s]; the result as
@@ -119,8 +124,12 @@ class Simulator:
     def _run(self, t_final: float, q: np.ndarray, v: np.ndarray, budget: int | None) -> Result:
         """:meth:`run` with its arguments checked (``budget``: ``check_budget``'s): simulate's
         calls without checks come here, checked once."""
+        cpu0 = time.process_time()  # (a new loop's preparation counts, as in simulate)
         scene, method, system = self.scene, self.method, self.system
-        system.restart()
+        if self._fresh:
+            self._fresh = False
+        else:
+            system.restart()
         run = _Run(scene, system, method, self.dt, self.save_every, t_final, self.max_speed, (q, v))
         run.budget = budget
         native, self._loop = self._loop, None  # (not kept while it runs: a run that raises leaves none)
@@ -130,7 +139,7 @@ class Simulator:
             key = self._key(t_final, settings)
             if compiled.same(key, self._loop_key):
                 native.restart(q, v)
-                return self._compiled(run, native, self._loop_config, key)
+                return self._compiled(run, native, self._loop_config, key, cpu0)
         config, _ = compiled.plan(
             scene,
             system,
@@ -150,9 +159,9 @@ class Simulator:
             if self._energy != "off":
                 every = max(1, round(5e-3 / self.dt))
                 monitor = EnergyMonitor(system, 0.0, q, v, every=every, mode=self._energy, method=method.name)
-            return execute(run, None, monitor, None, time.process_time())
+            return execute(run, None, monitor, None, cpu0)
         native = system.dynamics.compiled_loop(config)  # type: ignore[attr-defined]
-        return self._compiled(run, native, config, self._key(t_final, config["controller"]))
+        return self._compiled(run, native, config, self._key(t_final, config["controller"]), cpu0)
 
     def _key(self, t_final: float, controller: dict[str, Any]) -> tuple[Any, ...]:
         """What a run's compiled loop depends on besides the Simulator's own settings and the
@@ -160,21 +169,29 @@ class Simulator:
         controller's compiled settings and its gains (retuned between runs)."""
         return (t_final, dict(vars(self.method)), controller, *self.system.matrix_gains)
 
-    def _compiled(self, run: _Run, native: Any, config: dict[str, Any], key: tuple[Any, ...]) -> Result:
-        """The run in ``native`` (at its start); the loop kept for the next run."""
+    def _compiled(self, run: _Run, native: Any, config: dict[str, Any], key: tuple[Any, ...], cpu0: float) -> Result:
+        """The run in ``native`` (at its start); the loop kept for the next run. A Ctrl-C is a
+        :class:`SimulationInterrupted` with the samples so far, as in simulate."""
         run.loop = "compiled"
-        cpu0 = time.process_time()
         # a blow-up's overflow is a DivergenceError, not a numpy warning; only Python code needs the
-        # errstate (1 µs of a one-step run's fixed cost): a controller called back, the general path
-        python = config["controller"]["kind"] == PythonControllerSpec.name
-        with np.errstate(over="ignore", invalid="ignore") if python else contextlib.nullcontext():
-            first = self._first_chunk(run, native)
-        result = self._short(run, native, cpu0, first)
-        if result is None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                _compiled_loop(run, config, None, native, first)
-            run.cpu_time = time.process_time() - cpu0
-            result = run.result()
+        # errstate (1 µs of a one-step run's fixed cost): a controller called back, an element
+        # without a C++ twin, the general path
+        python = self._python_elements or config["controller"]["kind"] == PythonControllerSpec.name
+        try:
+            with np.errstate(over="ignore", invalid="ignore") if python else contextlib.nullcontext():
+                first = self._first_chunk(run, native)
+            result = self._short(run, native, cpu0, first)
+            if result is None:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    _compiled_loop(run, config, None, native, first)
+                run.cpu_time = time.process_time() - cpu0
+                result = run.result()
+        except KeyboardInterrupt as exc:
+            if isinstance(exc, SimulationInterrupted):
+                raise
+            if not run.t:  # (in the first chunk: the general path has not taken the loop's samples)
+                take_samples(run, native)
+            raise interruption(run, cpu0) from None
         self._loop, self._loop_config, self._loop_key = native, config, key
         return result
 

@@ -363,15 +363,7 @@ def execute(run: _Run, config: dict[str, Any] | None, monitor: EnergyMonitor | N
     except KeyboardInterrupt as exc:
         if isinstance(exc, SimulationInterrupted):
             raise
-        with _signals.interrupts_deferred(reraise=False):  # a second Ctrl-C cannot cut the partial result
-            run.cpu_time = time.process_time() - cpu0
-            done = bool(run.t) and run.t[-1] >= run.t_final and len(run.t) == len(run.q) == len(run.v) == len(run.tau)
-            partial = run.result("completed" if done else "interrupted")
-        reached = f"at t = {partial.t[-1]:.6g} s" if len(partial.t) else "before the first sample"
-        raise SimulationInterrupted(
-            f"interrupted {reached} of {run.t_final:g} s",
-            result=partial,
-        ) from None
+        raise interruption(run, cpu0) from None
     except BaseException:
         if run.stream is not None:  # any other stop: the files are cut to the samples made
             with contextlib.suppress(Exception):
@@ -380,6 +372,29 @@ def execute(run: _Run, config: dict[str, Any] | None, monitor: EnergyMonitor | N
     finally:
         if bar is not None:
             bar.close()
+
+
+def interruption(run: _Run, cpu0: float) -> SimulationInterrupted:
+    """What a Ctrl-C during ``run`` raises: a :class:`SimulationInterrupted` carrying the samples
+    saved so far (``cpu0``: the process time its CPU time counts from)."""
+    with _signals.interrupts_deferred(reraise=False):  # a second Ctrl-C cannot cut the partial result
+        run.cpu_time = time.process_time() - cpu0
+        done = bool(run.t) and run.t[-1] >= run.t_final and len(run.t) == len(run.q) == len(run.v) == len(run.tau)
+        partial = run.result("completed" if done else "interrupted")
+    reached = f"at t = {partial.t[-1]:.6g} s" if len(partial.t) else "before the first sample"
+    return SimulationInterrupted(f"interrupted {reached} of {run.t_final:g} s", result=partial)
+
+
+def take_samples(run: _Run, native: Any) -> None:
+    """A compiled run's samples so far and its counters, from its loop ``native`` into ``run``."""
+    samples = compiled.samples(native, run.scene)
+    run.t, run.q, run.v = samples.t.tolist(), list(samples.q), list(samples.v)
+    run.tau = list(samples.tau)
+    if samples.pending:
+        run.tau[-1] = None
+    s = run.system
+    s.n_rhs, s.n_jac, s.n_factor = samples.n_rhs, samples.n_jac, samples.n_factor
+    run.n_accepted, run.n_rejected = samples.n_accepted, samples.n_rejected
 
 
 def _fixed_loop(run: _Run, q: np.ndarray, v: np.ndarray, monitor: EnergyMonitor | None, bar: Any) -> None:
@@ -451,14 +466,7 @@ def _compiled_loop(
                     status = compiled.BUDGET
                     break
     finally:  # also on Ctrl-C between chunks: the samples so far make the partial result
-        samples = compiled.samples(native, run.scene)
-        run.t, run.q, run.v = samples.t.tolist(), list(samples.q), list(samples.v)
-        run.tau = list(samples.tau)
-        if samples.pending:
-            run.tau[-1] = None
-        s = run.system
-        s.n_rhs, s.n_jac, s.n_factor = samples.n_rhs, samples.n_jac, samples.n_factor
-        run.n_accepted, run.n_rejected = samples.n_accepted, samples.n_rejected
+        take_samples(run, native)
     if status == compiled.DONE:
         return
     run.system.dynamics.reraise_python_error()  # a Python-only element raised inside the loop (a Ctrl-C too)

@@ -14,6 +14,7 @@ import pinocchio as pin
 import pytest
 
 import coopdyn as cd
+from coopdyn.errors import NativeBackendWarning
 from coopdyn.model.elements import (
     ELEMENTS,
     BallSpring,
@@ -281,6 +282,27 @@ def test_a_toy_element_without_a_cpp_twin_runs_in_the_compiled_loop() -> None:
             ]
             assert runs[0].n_steps == runs[1].n_steps
             np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0.0, atol=1e-12)
+    finally:
+        ELEMENTS.pop("toy_vertical", None)
+
+
+def test_a_python_element_overflowing_in_a_short_run_leaks_no_numpy_warning() -> None:
+    """The toy spring at k = 1e9 N/m, far beyond rk4's limit at 1 ms, with max_speed 1e300: its
+    Python evaluate overflows inside the compiled loop's first chunk. A run without checks (on
+    simulate's kept set-up) ends as the one set up from nothing, and numpy's overflow warnings
+    stay inside (they once leaked: the short path entered numpy's errstate only for a Python
+    controller)."""
+    register(ToyVerticalSpring)
+    try:
+        box = cd.RigidObject.box(2.0, (0.1, 0.1, 0.1), pose=[0.0, 0.0, 1.0], joint="prismatic", axis="z")
+        scene = cd.Scene([], box, [cd.Interconnection(None, stiffness=1e9, element="toy_vertical")])
+        settings: dict[str, Any] = dict(integrator="rk4", dt=1e-3, accuracy_check="off", energy_check="off", max_speed=1e300)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NativeBackendWarning)  # (the toy has no C++ twin: said once)
+            warnings.simplefilter("error", RuntimeWarning)
+            kept = cd.simulate(scene, 0.05, **settings)
+            fresh = cd.simulate(scene, 0.05, loop="compiled", **settings)
+        assert kept.status == fresh.status and np.array_equal(kept.q, fresh.q, equal_nan=True)
     finally:
         ELEMENTS.pop("toy_vertical", None)
 

@@ -346,3 +346,84 @@ def test_a_controller_that_calls_simulate_gets_a_set_up_of_its_own(pandas: cd.Sc
     assert len(kept.inner) == len(fresh.inner) >= 8
     for a, b in zip(kept.inner, fresh.inner, strict=True):
         _same(a, b)
+
+
+class _StopAfter:
+    """A controller that lets go after ``t_stop`` [s] the way Ctrl-C does: KeyboardInterrupt."""
+
+    def __init__(self, n_actuated: int, t_stop: float = 5e-3) -> None:
+        self.zero, self.t_stop = np.zeros(n_actuated), t_stop
+
+    def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        if t > self.t_stop:
+            raise KeyboardInterrupt
+        return self.zero
+
+
+@pytest.mark.parametrize("t_final", [0.01, 0.2], ids=["within the first chunk", "past it"])
+@pytest.mark.parametrize("how", ["simulate", "Simulator"])
+def test_a_ctrl_c_gives_the_partial_run_as_simulate_set_up_from_nothing(pandas: cd.Scene, how: str, t_final: float) -> None:
+    """A Ctrl-C 5 ms into a run without checks — on simulate's kept set-up or a Simulator's run, in
+    the compiled loop's first chunk or past it: a SimulationInterrupted carrying the samples so
+    far, the same as a simulate call set up from nothing raises (it once escaped as a bare
+    KeyboardInterrupt, the run lost)."""
+    with pytest.raises(cd.SimulationInterrupted) as theirs:
+        cd.simulate(pandas, t_final, controller=_StopAfter(pandas.n_actuated), loop="compiled", **OFF)
+    with pytest.raises(cd.SimulationInterrupted) as mine:
+        if how == "simulate":
+            cd.simulate(pandas, t_final, controller=_StopAfter(pandas.n_actuated), **OFF)
+        else:
+            cd.Simulator(pandas, _StopAfter(pandas.n_actuated)).run(t_final)
+    assert str(mine.value) == str(theirs.value) and mine.value.result.status == "interrupted"
+    _same(mine.value.result, theirs.value.result)
+
+
+def test_an_integrator_retuned_after_a_call_does_not_run_under_its_old_settings(pandas: cd.Scene) -> None:
+    """The kept set-up runs its own copy of the integrator: one the user retunes after the call
+    that built it (rtol 1e-6 → 1e-2) neither changes what a later call with the old settings
+    runs nor is run under the old settings' key."""
+    pd = GravityCompensationPD(pandas)
+    v0 = np.random.default_rng(4).normal(size=pandas.nv) * 0.3
+    method = DormandPrince()
+    cd.simulate(pandas, 0.05, controller=pd, integrator=method, v0=v0, **OFF)
+    method.rtol = 1e-2
+    for integrator in ("dopri5", method):
+        _same(
+            cd.simulate(pandas, 0.05, controller=pd, integrator=integrator, v0=v0, **OFF),
+            cd.simulate(pandas, 0.05, controller=pd, integrator=integrator, v0=v0, loop="compiled", **OFF),
+        )
+
+
+def test_a_large_set_up_or_a_long_run_is_not_kept(pandas: cd.Scene) -> None:
+    """What a thread keeps stays under REUSE_MAX_BYTES (16 MB): not after a run of 40 001 samples
+    (18 MB in the loop), nor a 16-element beam's two Pinocchio data (2 × 55 MB)."""
+    pd = GravityCompensationPD(pandas)
+    cd.simulate(pandas, 0.01, controller=pd, **OFF)
+    assert _kept()[0] is not None
+    cd.simulate(pandas, 4.0, controller=pd, dt=1e-4, **OFF)
+    assert _kept()[0] is None
+    cd.simulate(pandas, 0.01, controller=pd, **OFF)
+    cd.simulate(cd.scenes.held_beam(n_elements=16, damping=0.002), 1e-3, integrator="implicit_euler", **OFF)
+    assert _kept()[0] is None
+
+
+def test_gains_are_read_once_a_call(pandas: cd.Scene) -> None:
+    """A controller's gains() (which may have side effects: logging, adaptation) is read once per
+    simulate call without checks, as by a call set up from nothing."""
+
+    class Counting:
+        def __init__(self) -> None:
+            self.reads = 0
+
+        def __call__(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return -2.0 * v[pandas.actuated]
+
+        def gains(self) -> tuple[np.ndarray, np.ndarray]:
+            self.reads += 1
+            return np.zeros(pandas.n_actuated), np.full(pandas.n_actuated, 2.0)
+
+    kept, fresh = Counting(), Counting()
+    for _ in range(3):
+        cd.simulate(pandas, 0.01, kept, integrator="implicit_euler", **OFF)
+        cd.simulate(pandas, 0.01, fresh, integrator="implicit_euler", loop="compiled", **OFF)
+    assert kept.reads == fresh.reads == 3

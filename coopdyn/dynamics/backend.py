@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import importlib
 import os
-import warnings
 from functools import cache
 from types import ModuleType
 
 import pinocchio as pin
 
-from .. import _validate
+from .. import _progress, _validate
 from ..errors import BackendError, NativeBackendWarning
 from ..model.scene import Scene
 
@@ -106,14 +105,14 @@ def kernel_module() -> ModuleType:
 
 @cache
 def _warn_python_elements(kinds: tuple[str, ...]) -> None:
-    warnings.warn(
+    _progress.warn(
         f"the interconnection element(s) {list(kinds)} have no C++ twin: the compiled kernel calls their Python "
         "evaluate once per evaluation (the rest of the scene and the step loop stay compiled)",
         NativeBackendWarning,
-        stacklevel=4,
+        stacklevel=None,
     )
 
 
 @cache
 def _warn_once(why: str) -> None:
-    warnings.warn(f"using the Python dynamics (several times slower): {why}", NativeBackendWarning, stacklevel=3)
+    _progress.warn(f"using the Python dynamics (several times slower): {why}", NativeBackendWarning, stacklevel=None)
