@@ -20,8 +20,9 @@ from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import SimulationError
 from .integrators import INTEGRATORS, Integrator, get_integrator
-from .integrators.implicit import alpha_amplification
+from .integrators.implicit import GeneralizedAlpha
 from .model.scene import Scene
+from .transient import AlphaTransient, judge
 
 #: |λ|·dt above which a step does not resolve an oscillatory mode (fewer than 2π steps per
 #: period). Measured on the book's system with undamped interconnections (``.venv/bin/python
@@ -31,14 +32,6 @@ from .model.scene import Scene
 #: below it the trapezoid's error falls fast (1.4 N at |λ|·dt = 0.10, 0.16 N at 0.03) while
 #: implicit Euler's stays large (45 N and 22 N there).
 RESOLVE_LIMIT = 1.0
-
-#: generalized-α's start transient (:func:`start_transient`) this many times that of its undamped
-#: member (ρ∞ = 1, Newmark's average acceleration, which the trapezoid matches on linear
-#: problems) is reported by :func:`advise` at the user's ``dt``. On the 16-element held strip at
-#: 1 ms (β = 1e-4 s) the ratio is 21 at ρ∞ = 0.9 and 370 at 0.5; without the beam's damping 0.93;
-#: on the book's stiff damped system 1.2 and 5.1 (``benchmarks/alpha_overshoot.py``).
-TRANSIENT_LIMIT = 10.0
-TRANSIENT_STEPS = 10  #: the steps :func:`start_transient` follows
 
 #: the methods ``advise`` reports on by default: the registry's ``advised`` ones, in its order
 ADVISED = tuple(name for name, cls in INTEGRATORS.items() if cls.advised)
@@ -101,9 +94,8 @@ class Advice:
     oscillation: Oscillation | None = None  #: the fastest oscillatory mode (accuracy: see ``max_resolved_dt``)
     eigenvalues: np.ndarray | None = field(default=None, repr=False)  #: of the linearised system [1/s]
     #: generalized-α's start transient at the ``dt`` given to :func:`advise`, when it is more than
-    #: :data:`TRANSIENT_LIMIT` times its undamped member's: (dt [s], its amplification, the undamped
-    #: one's, the ρ∞ of ``generalized_alpha``'s default that it was computed for)
-    alpha_transient: tuple[float, float, float, float] | None = None
+    #: :data:`coopdyn.transient.LIMIT` times the trapezoid's (:mod:`coopdyn.transient`)
+    alpha_transient: AlphaTransient | None = None
 
     @property
     def max_resolved_dt(self) -> float:
@@ -157,8 +149,12 @@ class Advice:
                     f"the mode that limits {name}'s step has |λ| = {rate:.4g} 1/s ({kind}); {name} is stable while "
                     f"|λ|·dt ≤ {rate * h:.3g}, i.e. dt ≤ {ms(h)}, and dt = {dt * 1e3:.4g} ms gives |λ|·dt = {rate * dt:.3g}"
                 )
-            elif name == "generalized_alpha" and self.alpha_transient is not None and self.alpha_transient[0] == dt:
-                parts.append(f"generalized_alpha is stable at any dt here, but {_transient_text(*self.alpha_transient)}")
+            elif (
+                name == "generalized_alpha"
+                and self.alpha_transient is not None
+                and math.isclose(self.alpha_transient.dt, dt, rel_tol=1e-12)
+            ):
+                parts.append(f"generalized_alpha is stable at any dt here, but {self.alpha_transient.text()}")
             else:
                 parts.append(
                     f"{name} is predicted stable at any dt here (the blow-up is nonlinear: a larger motion, or the controller)"
@@ -206,37 +202,6 @@ def state_matrix(M: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
     return np.block([[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(M, K), -np.linalg.solve(M, D)]])
 
 
-def start_transient(A: np.ndarray, h: float, rho_inf: float, v0: np.ndarray | None = None) -> float:
-    """How much generalized-α at step ``h`` [s] and ``rho_inf`` amplifies a start velocity on the
-    linear system ``x' = A x`` (:func:`state_matrix`): the largest velocity entry over its first
-    :data:`TRANSIENT_STEPS` steps per unit of the largest start-velocity entry, the worst of the
-    start velocities v0 (columns of ``v0``, (n, p); default four seeded random ones), each from
-    the consistent start (q, v, a) = (0, v0, q̈(0, v0))
-    (:func:`coopdyn.integrators.implicit.alpha_amplification`).
-
-    On stiff, overdamped modes (a stiff spring with a stiff damper: a beam's stiffness-proportional
-    damping makes every fast element mode one) q̈(0, v0) = −M⁻¹D v0 is huge and the method carries
-    it as its algorithmic acceleration, which decays only by −ρ∞ per step (docs/physics.md)."""
-    n = A.shape[0] // 2
-    T = alpha_amplification(A[n:, :n], A[n:, n:], h, rho_inf)
-    v0 = np.random.default_rng(0).standard_normal((n, 4)) if v0 is None else np.asarray(v0, dtype=float)
-    x = np.concatenate([np.zeros_like(v0), v0, A[n:, n:] @ v0])
-    worst = np.zeros(v0.shape[1])
-    for _ in range(TRANSIENT_STEPS):
-        x = T @ x
-        worst = np.maximum(worst, np.abs(x[n : 2 * n]).max(axis=0))
-    return float(np.max(worst / np.abs(v0).max(axis=0)))
-
-
-def _transient_text(dt: float, own: float, undamped: float, rho_inf: float) -> str:
-    """What :func:`start_transient` found, and what to do (the text after generalized-α's name)."""
-    return (
-        f"at ρ∞ = {rho_inf:g} it amplifies a start velocity {own:.3g}× within {TRANSIENT_STEPS} steps at dt = {dt * 1e3:.4g} ms, "
-        f"{own / undamped:.3g}× as much as the trapezoid (stiff, overdamped modes, which a beam's damping makes: "
-        "docs/physics.md): prefer 'trapezoid' or 'implicit_euler' here"
-    )
-
-
 def predicted_stable_dt(method: Integrator, A: np.ndarray, *, h_max: float = 10.0, rel_tol: float = 1e-3) -> float:
     """Largest h with spectral radius of the step map ≤ 1 (+1e-9), by bisection; ``inf`` when
     the method is stable up to ``h_max`` [s]."""
@@ -262,6 +227,8 @@ def advise(
     controller: Controller | None = None,
     methods: Sequence[str] = ADVISED,
     dt: float | None = None,
+    *,
+    rho_inf: float | None = None,
 ) -> Advice:
     """Linearise ``scene`` at (q, v) (default: its initial state) and advise on integrators.
 
@@ -270,7 +237,11 @@ def advise(
         controller: its PD gains (``controller.gains()``) enter the linearisation when it has them.
         methods: names of the methods to report on, from :data:`ADVISED` (the methods with a
             stability function).
-        dt: the step the user intends [s]; the recommendation then says which methods are stable at it.
+        dt: the step the user intends [s]; the recommendation then says which methods are stable at it
+            and, when generalized_alpha is among ``methods``, whether its start transient
+            (:mod:`coopdyn.transient`) is far worse than the trapezoid's there.
+        rho_inf: the ρ∞ of the generalized-α that transient is judged for; default its default
+            instance's (0.9).
     """
     from ._validate import _short, positive
 
@@ -324,29 +295,23 @@ def advise(
     if dt is not None:
         ok = [a.name for a in advice if a.applicable and dt <= a.max_stable_dt]
         rec += f". At dt = {dt * 1e3:.4g} ms these are stable: {ok}"
-        if "generalized_alpha" in methods:
-            rho_inf = getattr(get_integrator("generalized_alpha"), "rho_inf", 1.0)
-            own, undamped = start_transient(A, dt, rho_inf), start_transient(A, dt, 1.0)
-            if own > TRANSIENT_LIMIT * undamped:
-                transient = (dt, own, undamped, rho_inf)
-                rec += f"; generalized_alpha is stable, but {_transient_text(*transient)}"
-                advice = [
-                    dataclasses.replace(a, note=f"{a.note}; its start transient at dt = {dt * 1e3:.4g} ms: ×{own:.3g} (below)")
-                    if a.name == "generalized_alpha"
-                    else a
-                    for a in advice
-                ]
         if oscillation is not None and dt > oscillation.max_resolved_dt and why_nonlinear is not None:
             rec += (
                 f"; but dt > {oscillation.max_resolved_dt * 1e3:.4g} ms does not resolve the {oscillation.frequency:.4g} Hz mode"
             )
+        if "generalized_alpha" in methods:
+            rho = GeneralizedAlpha().rho_inf if rho_inf is None else positive(rho_inf, "rho_inf", "1", SimulationError)
+            transient = judge(A, dt, rho)
+        if transient is not None:
+            rec += f". generalized_alpha is stable, but {transient.text()}"
+            note = f"; a start velocity grows up to {transient.growth()} (see the recommendation)"
+            advice = [dataclasses.replace(a, note=a.note + note) if a.name == "generalized_alpha" else a for a in advice]
     return Advice(omega_max, zeta, lam_max, why_nonlinear is None, tuple(advice), rec, oscillation, lam, transient)
 
 
 __all__ = [
     "ADVISED",
     "RESOLVE_LIMIT",
-    "TRANSIENT_LIMIT",
     "Advice",
     "MethodAdvice",
     "Oscillation",
@@ -354,6 +319,5 @@ __all__ = [
     "fastest_oscillation",
     "linearize",
     "predicted_stable_dt",
-    "start_transient",
     "state_matrix",
 ]

@@ -236,7 +236,8 @@ class _Run:
         try:
             last_q, last_v = self.q[-1], self.v[-1]
             names = ADVISED if self.method.name in ADVISED else (*ADVISED, self.method.name)
-            advice = advise(self.scene, last_q, last_v, self.system.controller, names, dt=h)
+            rho_inf = getattr(self.method, "rho_inf", None) if self.method.name == "generalized_alpha" else None
+            advice = advise(self.scene, last_q, last_v, self.system.controller, names, dt=h, rho_inf=rho_inf)
             diagnosis = advice.diagnosis(self.method.name, h)
         except Exception as exc:  # the diagnosis must never hide the divergence itself
             advice, diagnosis = None, f"(no stability diagnosis: {exc})"
