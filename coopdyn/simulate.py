@@ -138,13 +138,13 @@ def simulate(
             dwarf the run's forces is reported as an unstable loop the run's step hides).
             ``"screen"``: the screen alone (no second run). ``"off"``: no judgement; and such a
             call (without ``object_wrench``, ``stream_to``, ``progress`` or a ``loop`` named) is a
-            :class:`coopdyn.Simulator` run whose set-up — the compiled kernel and loop — this
-            thread keeps for its next such call: on the same scene and controller (the same
-            objects) with the same settings, only the start state and duration may differ, that
-            call restarts the loop instead of building one (``benchmarks/fixed_cost.py``). The
-            result is the same to the last bit. What the thread keeps — its Pinocchio data and
-            the last run's samples, at most :data:`REUSE_MAX_BYTES`, and the scene and
-            controller — is released by its next such call with other settings.
+            :class:`coopdyn.Simulator` run whose set-up — the compiled kernel and loop — the
+            thread keeps: its next such call on the same scene and controller (the same objects)
+            with the same settings — only the start state and the duration may differ —
+            restarts that loop instead of building one (``benchmarks/fixed_cost.py``), with the
+            same result to the last bit. What the thread keeps (its Pinocchio data and the last
+            run's samples, at most :data:`REUSE_MAX_BYTES`, and the scene and controller) is
+            released by its next such call with other settings.
             Not for ``dopri5`` or ``dop853`` (error-controlled), ``exponential`` (exact) or rigid
             grasps.
             Whatever the method, a built-in controller's loop is also linearised exactly at the
