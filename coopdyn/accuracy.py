@@ -41,7 +41,7 @@ import scipy.linalg
 
 from .closed_loop import System
 from .integrators import AdaptiveIntegrator, AdaptiveROS2, DormandPrince, Integrator, Trapezoid
-from .linearize import controller_gain, linearize
+from .linearize import controller_gain, open_loop
 from .stability import state_matrix
 
 FORCE_ERROR_LIMIT = 0.1  #: a force error, relative to the peak force, above which a run is not trusted
@@ -309,7 +309,8 @@ class StartLoop:
 
 
 def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0, gain: np.ndarray | None = None) -> StartLoop | None:
-    """The system's loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`; the
+    """The system's loop linearised exactly at (t, q, v) (:func:`coopdyn.linearize`, on the
+    system's own dynamics; the
     controller's gain by central differences, calling it 4·nv more times, without the hold of a
     ``control_dt`` — or ``gain`` when given, e.g. its compiled twin's), or None: no controller,
     or a loop that cannot be linearised (rigid grasps, a joint without tangent coordinates, a
@@ -320,7 +321,7 @@ def start_loop(system: System, q: np.ndarray, v: np.ndarray, t: float = 0.0, gai
         wrench = None if system.object_wrench is None else system.object_wrench(t)
         continuous = System(system.dynamics, system.controller, system.object_wrench)  # (no hold: its gain)
         tau = continuous.torque(t, q, v)
-        lin = linearize(system.dynamics.scene, q, v, tau, t=t, object_wrench=wrench)
+        lin = open_loop(system.dynamics, q, v, tau, wrench, t)
         return StartLoop(lin.A, lin.B, controller_gain(continuous, t, q, v) if gain is None else gain)
     except Exception:  # (whatever the controller raises when probed, the run stands)
         return None

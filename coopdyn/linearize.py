@@ -18,7 +18,7 @@ element against finite differences.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -121,6 +121,28 @@ def linearize(
     system = None if controller is None else System(dynamics, controller)  # (its checked torque)
     if tau is None and system is not None:
         tau = system.torque(t, q, v)
+    lin = open_loop(dynamics, q, v, tau, object_wrench, t)
+    if system is None:
+        return lin
+    gain = controller_gain(system, t, q, v)
+    return replace(lin, A=lin.A + lin.B @ gain, exact=False, controller_gain=gain)
+
+
+def open_loop(
+    dynamics: Dynamics, q: np.ndarray, v: np.ndarray, tau: Any, object_wrench: Any = None, t: float = 0.0
+) -> Linearization:
+    """:func:`linearize`'s open loop on ``dynamics`` — a run's own, whose scene's Pinocchio data
+    (large for a beam) is then not built again — at a checked state (q, v); ``tau`` (default
+    zero) and ``object_wrench`` as there.
+
+    Raises:
+        SceneError: rigid grasps, a joint type without tangent coordinates here, a bad ``tau``
+            or ``object_wrench``.
+    """
+    scene = dynamics.scene
+    if scene.constraints:
+        raise SceneError("linearize: the scene has rigid grasps (constraints); linearise the elastic scene they stand for")
+    nv = scene.nv
     tau = np.zeros(scene.n_actuated) if tau is None else _validate.finite_array(tau, "tau [N·m or N]", (scene.n_actuated,))
     wrench = None if object_wrench is None else _validate.finite_array(object_wrench, "object_wrench [N, N·m]", (6,))
     omega = _omega(scene.model, v)
@@ -131,11 +153,7 @@ def linearize(
     B = np.zeros((2 * nv, scene.n_actuated))
     B[nv:] = d.da_dtau
     dW = np.concatenate([d.dwrench_dq, d.dwrench_dv], axis=2)
-    gain = None if system is None else controller_gain(system, t, q, v)
-    if gain is not None:
-        A += B @ gain
-    exact = d.exact and gain is None
-    return Linearization(A, B, d.acceleration, d.wrench, dW, exact, gain, q, v, np.array(tau, dtype=float), t)
+    return Linearization(A, B, d.acceleration, d.wrench, dW, d.exact, None, q, v, np.array(tau, dtype=float), t)
 
 
 def controller_gain(system: System, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:

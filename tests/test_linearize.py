@@ -432,3 +432,27 @@ def test_a_subclass_that_changes_the_se3_law_loses_its_exact_tangent() -> None:
     exact, _ = SE3Spring(cd.diagonal(1e4, 50.0)).tangent(X, np.zeros(6))
     assert not Stiffer.exact_tangent and HardeningSpring.exact_tangent and SE3Spring.exact_tangent
     np.testing.assert_allclose(F_d, 2.0 * exact, rtol=0.0, atol=1e-6 * np.max(np.abs(exact)))
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_a_runs_loop_diagnosis_linearises_on_its_own_dynamics_as_linearize_does(backend: str) -> None:
+    """The loop check and the divergence diagnosis (``accuracy.start_loop``) linearise on the run's
+    own dynamics (``linearize.open_loop``: a beam's Pinocchio data is not built once more); their
+    closed loop is ``cd.linearize(scene, q, v, controller=…)``'s to the last bit, after the
+    dynamics stepped elsewhere; rigid grasps still give no loop."""
+    from coopdyn.accuracy import start_loop
+    from coopdyn.closed_loop import System
+    from coopdyn.control import GravityCompensationPD
+
+    scene = cd.scenes.facing_arms("panda", stiffness=1e4, damping=0.002)
+    pd = GravityCompensationPD(scene, 60.0, 6.0)
+    q = pin.integrate(scene.model, scene.q0, 0.05 * np.random.default_rng(5).normal(size=scene.nv))
+    v = 0.3 * np.random.default_rng(6).normal(size=scene.nv)
+    system = System(Dynamics(scene, backend), pd)
+    system.dynamics.acceleration(scene.q0, np.zeros(scene.nv), np.zeros(scene.n_actuated))  # (elsewhere first)
+    loop = start_loop(system, q, v)
+    public = cd.linearize(scene, q, v, controller=pd, backend=backend)
+    assert loop is not None and public.controller_gain is not None
+    assert np.array_equal(loop.A + loop.B @ loop.G, public.A) and np.array_equal(loop.G, public.controller_gain)
+    rigid = cd.rigid_limit(scene)
+    assert start_loop(System(Dynamics(rigid, "python"), GravityCompensationPD(rigid)), rigid.q0, rigid.v0) is None
