@@ -20,7 +20,7 @@ from .closed_loop import Controller, System
 from .dynamics import Dynamics
 from .errors import SimulationError
 from .integrators import INTEGRATORS, Integrator, get_integrator
-from .integrators.implicit import GeneralizedAlpha
+from .integrators.implicit import GeneralizedAlpha, _check_rho
 from .model.scene import Scene
 from .transient import AlphaTransient, judge
 
@@ -300,7 +300,7 @@ def advise(
                 f"; but dt > {oscillation.max_resolved_dt * 1e3:.4g} ms does not resolve the {oscillation.frequency:.4g} Hz mode"
             )
         if "generalized_alpha" in methods:
-            rho = GeneralizedAlpha().rho_inf if rho_inf is None else positive(rho_inf, "rho_inf", "1", SimulationError)
+            rho = GeneralizedAlpha().rho_inf if rho_inf is None else _check_rho(rho_inf)
             transient = judge(A, dt, rho)
         if transient is not None:
             rec += f". generalized_alpha is stable, but {transient.text()}"

@@ -16,8 +16,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import _validate
 from .errors import SimulationError
-from .integrators.implicit import alpha_amplification
+from .integrators.implicit import _check_rho, alpha_amplification
 
 #: generalized-α's start transient this many times its undamped member's is reported. On the
 #: 16-element held strip at 1 ms (β = 1e-4 s) the ratio is ~23 at ρ∞ = 0.9; without the beam's
@@ -68,10 +69,7 @@ def start_transient(A: np.ndarray, h: float, rho_inf: float, v0: np.ndarray | No
     A = np.asarray(A, dtype=float)
     if A.ndim != 2 or A.shape[0] != A.shape[1] or A.shape[0] % 2 or not np.all(np.isfinite(A)):
         raise SimulationError(f"start_transient: A must be a finite (2n, 2n) state matrix, got shape {A.shape}")
-    if not (isinstance(h, int | float) and math.isfinite(h) and h > 0):
-        raise SimulationError(f"start_transient: the step h must be > 0 [s], got {h!r}")
-    if not (isinstance(rho_inf, int | float) and 0.0 <= rho_inf <= 1.0):
-        raise SimulationError(f"start_transient: rho_inf must be in [0, 1], got {rho_inf!r}")
+    h, rho_inf = _validate.positive(h, "start_transient: the step h", "s", SimulationError), _check_rho(rho_inf)
     n = A.shape[0] // 2
     v0 = np.random.default_rng(0).standard_normal((n, PROBES)) if v0 is None else np.asarray(v0, dtype=float)
     v0 = v0.reshape(n, -1) if v0.ndim == 1 and v0.size == n else v0

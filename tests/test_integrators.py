@@ -593,6 +593,9 @@ def test_advise_names_generalized_alphas_start_transient() -> None:
     lower = cd.advise(scene, dt=1e-3, rho_inf=0.5).alpha_transient
     assert lower is not None and lower.rho_inf == 0.5 and lower.amplification > 10 * found.amplification
     assert cd.advise(scene, dt=1e-3, rho_inf=1.0).alpha_transient is None
+    assert cd.advise(scene, dt=1e-3, rho_inf=0.0).alpha_transient is not None  # (ρ∞ = 0 is generalized-α's too)
+    with pytest.raises(cd.SimulationError, match=r"rho_inf must be a number in \[0, 1\], got 1.5"):
+        cd.advise(scene, dt=1e-3, rho_inf=1.5)  # (it once said nothing: the transient's own check was swallowed)
 
 
 @pytest.mark.parametrize(
@@ -621,7 +624,8 @@ def test_advise_says_nothing_of_a_transient_the_trapezoid_shares(scene: Callable
         ((np.zeros((3, 3)), 1e-3, 0.9), "finite \\(2n, 2n\\)"),
         ((np.full((4, 4), np.nan), 1e-3, 0.9), "finite \\(2n, 2n\\)"),
         ((np.zeros((4, 4)), 0.0, 0.9), "step h must be > 0"),
-        ((np.zeros((4, 4)), 1e-3, 1.5), "rho_inf must be in \\[0, 1\\]"),
+        ((np.zeros((4, 4)), math.nan, 0.9), "step h must be finite"),
+        ((np.zeros((4, 4)), 1e-3, 1.5), "rho_inf must be a number in \\[0, 1\\]"),
         ((np.zeros((4, 4)), 1e-3, 0.9, np.zeros(2)), "non-zero finite start velocities"),
         ((np.zeros((4, 4)), 1e-3, 0.9, np.ones(3)), "non-zero finite start velocities"),
     ],
